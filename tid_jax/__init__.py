@@ -1,0 +1,22 @@
+"""Design of tuned inerter dampers (TIDs) whose inerter has dry friction."""
+
+from ._linear import (
+    LinearReceptance as LinearReceptance,
+    den_hartog as den_hartog,
+    den_hartog_tuning as den_hartog_tuning,
+    linear_receptance as linear_receptance,
+    paper_system as paper_system,
+    stuck_receptance as stuck_receptance,
+)
+from ._response import (
+    FrequencyResponse as FrequencyResponse,
+    frequency_response as frequency_response,
+)
+from ._steady_state import SolverSettings as SolverSettings
+from ._system import (
+    PAPER_AMPLITUDES as PAPER_AMPLITUDES,
+    PAPER_STROKE as PAPER_STROKE,
+    TIDSystem as TIDSystem,
+)
+
+__version__ = "0.1.0"

@@ -1,0 +1,136 @@
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
+
+from ._dynamics import parameter_vector
+from ._steady_state import SolverSettings, refined_peak, solve_orbit
+from ._system import TIDSystem
+
+
+class FrequencyResponse(eqx.Module):
+    """Steady-state response of the smoothed-friction model (eq. (12)) on a grid of forcing
+    amplitudes x frequencies. Arrays have shape `(n_amplitudes, n_frequencies)` (axes of
+    scalar inputs dropped). SI units.
+
+    - `omegas` (rad/s), `amplitudes` (N): the grid.
+    - `x_max`, `y_max`: peak |x| and |y| over one steady period, m.
+    - `converged`: the periodic orbit was found and verified (|Phi_T(z0) - z0| small).
+    - `stable`: all Floquet multipliers inside the unit circle (only meaningful if converged).
+    - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s.
+    - `residual`: periodicity residual, in units of the static displacement A / K.
+    - `newton_steps`: shooting iterations used.
+    - `floquet_multipliers`: eigenvalues of the monodromy matrix.
+    - `stick_fraction`: share of the period with |y'| below two friction widths.
+    """
+
+    omegas: Float[Array, "*freqs"]
+    amplitudes: Float[Array, "*amps"]
+    x_max: Float[Array, "*grid"]
+    y_max: Float[Array, "*grid"]
+    converged: Bool[Array, "*grid"]
+    stable: Bool[Array, "*grid"]
+    state: Float[Array, "*grid 4"]
+    residual: Float[Array, "*grid"]
+    newton_steps: Int[Array, "*grid"]
+    floquet_multipliers: Complex[Array, "*grid 4"]
+    stick_fraction: Float[Array, "*grid"]
+
+
+def check_grid(name: str, values: ArrayLike) -> np.ndarray:
+    """A 0- or 1-d grid of finite, positive values, else `ValueError` naming `name`."""
+    if isinstance(values, jax.core.Tracer):
+        raise ValueError(f"{name} must be concrete (not traced)")
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {values!r}") from None
+    if array.ndim > 1:
+        raise ValueError(f"{name} must be a scalar or 1-d, got shape {array.shape}")
+    if array.size == 0:
+        raise ValueError(f"{name} must not be empty")
+    bad = ~(np.isfinite(array) & (array > 0))
+    if np.any(bad):
+        raise ValueError(
+            f"{name} must be finite and positive, got {array.reshape(-1)[np.argmax(bad)]!r}"
+        )
+    return array
+
+
+def point_response(system: TIDSystem, omega, amplitude, settings: SolverSettings):
+    """Single (omega, amplitude) point: the orbit and its peaks in metres."""
+    p = parameter_vector(system, amplitude, omega)
+    orbit = solve_orbit(p, settings)
+    scale = amplitude / system.host_stiffness
+    x_max = refined_peak(orbit.x_samples) * scale
+    y_max = refined_peak(orbit.y_samples) * scale
+    return orbit, x_max, y_max
+
+
+@eqx.filter_jit
+def _grid_response(system, omegas, amplitudes, settings):
+    def one(omega, amplitude):
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
+        scale = amplitude / system.host_stiffness
+        state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
+        velocity = orbit.y_velocity_samples * omega * scale
+        stuck = jnp.abs(velocity) < 2 * system.friction_width
+        stable = jnp.max(jnp.abs(orbit.floquet_multipliers)) < 1
+        return dict(
+            x_max=x_max,
+            y_max=y_max,
+            converged=orbit.converged,
+            stable=stable,
+            state=state,
+            residual=orbit.residual,
+            newton_steps=orbit.newton_steps,
+            floquet_multipliers=orbit.floquet_multipliers,
+            stick_fraction=jnp.mean(stuck.astype(x_max.dtype)),
+        )
+
+    omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
+    flat = jax.vmap(one)(omega_grid.reshape(-1), amplitude_grid.reshape(-1))
+    shape = amplitude_grid.shape
+    return {key: value.reshape(shape + value.shape[1:]) for key, value in flat.items()}
+
+
+def frequency_response(
+    system: TIDSystem,
+    omegas: ArrayLike,
+    amplitudes: ArrayLike,
+    *,
+    settings: SolverSettings = SolverSettings(),
+) -> FrequencyResponse:
+    """Steady-state response of the smoothed-friction model at every (amplitude, frequency)
+    pair, found by shooting on the forcing period (all points solved in one batched call).
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`.
+    - `omegas`: forcing circular frequencies, rad/s (scalar or 1-d).
+    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
+    - `settings`: `SolverSettings` of the shooting solver.
+
+    **Returns:** a `FrequencyResponse`; arrays are `(n_amplitudes, n_frequencies)`, with the
+    axis of a scalar input dropped. Points that fail to converge are flagged in `converged`.
+    """
+    if not isinstance(system, TIDSystem):
+        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+    omega_array = check_grid("omegas", omegas)
+    amplitude_array = check_grid("amplitudes", amplitudes)
+    dtype = jnp.result_type(float)
+    out = _grid_response(
+        system,
+        jnp.asarray(np.atleast_1d(omega_array), dtype=dtype),
+        jnp.asarray(np.atleast_1d(amplitude_array), dtype=dtype),
+        settings,
+    )
+    index = (0 if amplitude_array.ndim == 0 else slice(None),
+             0 if omega_array.ndim == 0 else slice(None))
+    out = {key: value[index] for key, value in out.items()}
+    return FrequencyResponse(
+        omegas=jnp.asarray(omega_array, dtype=dtype),
+        amplitudes=jnp.asarray(amplitude_array, dtype=dtype),
+        **out,
+    )
