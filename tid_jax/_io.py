@@ -8,6 +8,12 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success it is renamed onto `path`, on any
@@ -18,6 +24,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     os.close(fd)
     tmp_path = Path(tmp)
     try:
+        tmp_path.chmod(0o666 & ~_umask())  # mkstemp's 0600 -> the mode `open` would give
         yield tmp_path
         os.replace(tmp_path, path)
     except BaseException:
@@ -32,9 +39,14 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
     return Path(path)
 
 
+def json_text(data) -> str:
+    """`data` as indented JSON text (no trailing newline)."""
+    return json.dumps(data, indent=2, sort_keys=False)
+
+
 def write_json(path: str | os.PathLike, data) -> Path:
     """Write `data` as indented JSON, atomically."""
-    return write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+    return write_text(path, json_text(data) + "\n")
 
 
 def write_csv(path: str | os.PathLike, header: Sequence[str], rows: Sequence[Sequence]) -> Path:
@@ -44,3 +56,41 @@ def write_csv(path: str | os.PathLike, header: Sequence[str], rows: Sequence[Seq
     writer.writerow(header)
     writer.writerows(rows)
     return write_text(path, buffer.getvalue())
+
+
+def check_writable_dir(path: str | os.PathLike) -> Path:
+    """Create the folder `path` if needed and check that files can be written in it;
+    raises `OSError` otherwise. Meant to be called before a long computation."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryFile(dir=path):
+        pass
+    return path
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    raise TypeError(f"cannot write {value!r} as TOML")
+
+
+def write_toml(path: str | os.PathLike, data: dict, *, comment: str = "") -> Path:
+    """Write a TOML file of numbers, strings and lists, with `dict` values as one level of
+    tables, atomically. `comment` becomes a leading `#` comment."""
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines += [
+        f"{key} = {_toml_value(value)}"
+        for key, value in data.items()
+        if not isinstance(value, dict)
+    ]
+    for key, table in data.items():
+        if isinstance(table, dict):
+            lines += ["", f"[{key}]"]
+            lines += [f"{name} = {_toml_value(value)}" for name, value in table.items()]
+    return write_text(path, "\n".join(lines) + "\n")

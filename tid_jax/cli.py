@@ -1,25 +1,748 @@
-"""The `tid-jax` command-line tool: argument parsing, configuration files, printing."""
+"""The `tid-jax` command-line tool: argument parsing, configuration files, printing.
+
+Each subcommand is a pair `_add_<name>_parser(subparsers)` / `_run_<name>(args) -> int`
+registered in `_COMMANDS`. The shared pieces are `_add_system_arguments` (the physical
+parameters, amplitudes, band and `--config`), `_add_output_arguments` (`--out`, `--json`,
+`--quiet`), `_inputs`/`_system`/`_settings`/`_frequencies` (from flags and TOML to library
+objects), `_Output` (output folder, progress, files written) and the error handling in
+`main`: any `CLIError`, `ValueError` or `OSError` becomes one line
+`tid-jax: error: <problem>` on stderr and exit status 2.
+"""
 
 import argparse
+import math
 import sys
+import time
+import tomllib
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from . import __version__, plot
+from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
+from ._linear import den_hartog_tuning, linear_receptance
+from ._response import check_grid, frequency_response
+from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
+from ._steady_state import SolverSettings
+from ._system import (
+    DEFAULT_FRICTION_WIDTH,
+    PAPER_AMPLITUDES,
+    PAPER_FRICTION_FORCE,
+    PAPER_HOST_DAMPING_RATIO,
+    PAPER_HOST_FREQUENCY_HZ,
+    PAPER_HOST_MASS,
+    PAPER_INERTANCE,
+    PAPER_STROKE,
+    TIDSystem,
+    check_values,
+)
+
+PROG = "tid-jax"
+EXIT_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+# Physical inputs: (key, unit, description, allowed values). The key is the TOML key and,
+# with '-' for '_', the flag. Frequencies are in Hz here; the library works in rad/s.
+PHYSICAL_INPUTS = (
+    ("host_mass", "kg", "modal mass M of the host structure", "positive"),
+    ("host_frequency_hz", "Hz", "natural frequency sqrt(K/M)/(2 pi) of the host", "positive"),
+    ("host_stiffness", "N/m", "host stiffness K (instead of host_frequency_hz)", "positive"),
+    ("host_damping_ratio", "-", "host damping ratio C/(2 sqrt(K M))", "non-negative"),
+    ("host_damping", "N s/m", "host damping C (instead of host_damping_ratio)", "non-negative"),
+    ("inertance", "kg", "inertance b of the inerter", "positive"),
+    ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
+    ("friction_width", "m/s", "velocity scale of the smoothed friction sign", "positive"),
+    ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
+    ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
+    ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
+)
+GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
+INPUT_KEYS = tuple(key for key, *_ in PHYSICAL_INPUTS) + GRID_INPUTS
+SOLVER_TABLE = "solver"
+# Pairs of which at most one may be given; the first is the default.
+ALTERNATIVES = (("host_frequency_hz", "host_stiffness"), ("host_damping_ratio", "host_damping"))
+DEFAULTS = {
+    "host_mass": PAPER_HOST_MASS,
+    "host_frequency_hz": PAPER_HOST_FREQUENCY_HZ,
+    "host_damping_ratio": PAPER_HOST_DAMPING_RATIO,
+    "inertance": PAPER_INERTANCE,
+    "friction_force": PAPER_FRICTION_FORCE,
+    "friction_width": DEFAULT_FRICTION_WIDTH,
+    "stroke_limit": PAPER_STROKE,
+    "amplitudes": list(PAPER_AMPLITUDES),
+    "n_frequencies": DEFAULT_FREQUENCIES,
+}
+MIN_FREQUENCIES = 5
+
+
+class CLIError(Exception):
+    """A problem with the user's input, reported as one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise CLIError(f"{message} (see '{self.prog} --help')")
+
+
+# --- shared arguments -------------------------------------------------------------------
+
+
+def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group(
+        "structure and device",
+        "SI units, frequencies in Hz. Defaults: the paper's system (1500 kg, 4 Hz, 2% "
+        "damping, b = 75 kg, ff = 20 N, Den Hartog k and c). Flags override --config.",
+    )
+    group.add_argument(
+        "--config",
+        metavar="FILE.toml",
+        help="TOML file with any of the keys below (flag names with '_' for "
+        "'-') and an optional [solver] table; see the README",
+    )
+    for key, unit, description, _ in PHYSICAL_INPUTS:
+        group.add_argument(
+            f"--{key.replace('_', '-')}",
+            dest=key,
+            type=float,
+            metavar=unit,
+            help=f"{description} [{unit}]",
+        )
+    grid = parser.add_argument_group("forcing and frequency band")
+    grid.add_argument(
+        "--amplitudes",
+        nargs="+",
+        type=float,
+        metavar="N",
+        help="forcing amplitudes A of A sin(wt) [N] (default: the paper's twelve, 100-3000 N)",
+    )
+    grid.add_argument(
+        "--band-hz",
+        dest="band_hz",
+        nargs=2,
+        type=float,
+        metavar=("LOW", "HIGH"),
+        help="forcing frequency band [Hz] (default: 0.65-1.4 times the host "
+        "frequency, both resonance peaks)",
+    )
+    grid.add_argument(
+        "--n-frequencies",
+        dest="n_frequencies",
+        type=int,
+        metavar="N",
+        help=f"frequencies in the band (default {DEFAULT_FREQUENCIES})",
+    )
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("output")
+    group.add_argument(
+        "--out",
+        default="tid-results",
+        metavar="DIR",
+        help="folder for the CSV, JSON, TOML and PNG files (default: ./tid-results/)",
+    )
+    group.add_argument(
+        "--json",
+        action="store_true",
+        help="print the machine-readable result (the saved JSON) on stdout instead of the table",
+    )
+    group.add_argument("--quiet", action="store_true", help="no progress messages")
+
+
+# --- from flags and TOML to library objects ---------------------------------------------
+
+
+def _read_config(path: str) -> dict:
+    try:
+        with open(path, "rb") as file:
+            config = tomllib.load(file)
+    except tomllib.TOMLDecodeError as error:
+        raise CLIError(f"config {path} is not valid TOML: {error}") from None
+    except OSError as error:
+        raise CLIError(f"cannot read config {path}: {error.strerror}") from None
+    unknown = [key for key in config if key not in INPUT_KEYS and key != SOLVER_TABLE]
+    if unknown:
+        raise CLIError(
+            f"config {path}: unknown key {unknown[0]!r}; "
+            f"allowed keys are {', '.join(INPUT_KEYS)} and a [{SOLVER_TABLE}] table"
+        )
+    solver = config.get(SOLVER_TABLE, {})
+    if not isinstance(solver, dict):
+        raise CLIError(f"config {path}: {SOLVER_TABLE} must be a table [{SOLVER_TABLE}]")
+    fields = tuple(SolverSettings.__dataclass_fields__)
+    unknown = [key for key in solver if key not in fields]
+    if unknown:
+        raise CLIError(
+            f"config {path}: unknown key {unknown[0]!r} in [{SOLVER_TABLE}]; "
+            f"allowed keys are {', '.join(fields)}"
+        )
+    return config
+
+
+def _inputs(args) -> dict:
+    """Config file, then flags, then defaults, checked: a dict of `INPUT_KEYS` (those
+    given) and the `solver` table."""
+    config = _read_config(args.config) if args.config else {}
+    flags = {key: getattr(args, key) for key in INPUT_KEYS if getattr(args, key) is not None}
+    for group in ALTERNATIVES:
+        if any(key in flags for key in group):
+            for key in group:
+                config.pop(key, None)
+    given = {**config, **flags}
+    for first, second in ALTERNATIVES:
+        if first in given and second in given:
+            raise CLIError(f"give {first} or {second}, not both")
+        if second not in given:
+            given.setdefault(first, DEFAULTS[first])
+    inputs = {key: given.get(key, DEFAULTS.get(key)) for key in INPUT_KEYS}
+    inputs = {key: value for key, value in inputs.items() if value is not None}
+    for key, _, _, allowed in PHYSICAL_INPUTS:
+        if key in inputs:
+            if np.ndim(inputs[key]) != 0:
+                raise CLIError(f"{key} must be a single number, got {inputs[key]!r}")
+            check_values(key, inputs[key], allowed)
+            inputs[key] = float(inputs[key])
+    inputs["amplitudes"] = [
+        float(a) for a in np.atleast_1d(check_grid("amplitudes", inputs["amplitudes"]))
+    ]
+    n = inputs["n_frequencies"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < MIN_FREQUENCIES:
+        raise CLIError(f"n_frequencies must be an integer >= {MIN_FREQUENCIES}, got {n!r}")
+    if "band_hz" in inputs:
+        band = inputs["band_hz"]
+        if np.shape(band) != (2,):
+            raise CLIError(f"band_hz must be two frequencies [LOW, HIGH] in Hz, got {band!r}")
+        low, high = (float(f) for f in check_grid("band_hz", band))
+        if not low < high:
+            raise CLIError(f"band_hz is empty: LOW must be below HIGH, got {low:g} to {high:g} Hz")
+        inputs["band_hz"] = [low, high]
+    inputs[SOLVER_TABLE] = dict(config.get(SOLVER_TABLE, {}))
+    return inputs
+
+
+def _system(inputs: dict) -> TIDSystem:
+    mass = inputs["host_mass"]
+    stiffness = inputs.get("host_stiffness")
+    if stiffness is None:
+        stiffness = mass * (2 * math.pi * inputs["host_frequency_hz"]) ** 2
+    damping = inputs.get("host_damping")
+    if damping is None:
+        damping = 2 * inputs["host_damping_ratio"] * math.sqrt(stiffness * mass)
+    k_dh, c_dh = den_hartog_tuning(mass, stiffness, inputs["inertance"])
+    return TIDSystem(
+        host_mass=mass,
+        host_stiffness=stiffness,
+        host_damping=damping,
+        inertance=inputs["inertance"],
+        friction_force=inputs["friction_force"],
+        tid_stiffness=inputs.get("tid_stiffness", k_dh),
+        tid_damping=inputs.get("tid_damping", c_dh),
+        friction_width=inputs["friction_width"],
+    )
+
+
+def _settings(inputs: dict) -> SolverSettings:
+    return SolverSettings(**inputs[SOLVER_TABLE])
+
+
+def _frequencies(inputs: dict, system: TIDSystem) -> tuple[np.ndarray, np.ndarray]:
+    """The forcing frequencies in Hz and in rad/s."""
+    n = inputs["n_frequencies"]
+    if "band_hz" not in inputs:
+        omegas = np.asarray(default_omegas(system, n))
+        return omegas / (2 * math.pi), omegas
+    frequencies_hz = np.linspace(*inputs["band_hz"], n)
+    return frequencies_hz, 2 * math.pi * frequencies_hz
+
+
+def _den_hartog(system: TIDSystem) -> tuple[float, float]:
+    k, c = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    return float(k), float(c)
+
+
+def _linear_normalised(system: TIDSystem, frequencies_hz) -> tuple[np.ndarray, np.ndarray]:
+    """|x| and |y| over A / K of the frictionless TID at `frequencies_hz`."""
+    receptance = linear_receptance(system, 2 * math.pi * np.asarray(frequencies_hz))
+    stiffness = float(system.host_stiffness)
+    return np.abs(np.asarray(receptance.host)) * stiffness, np.abs(
+        np.asarray(receptance.inerter)
+    ) * stiffness
+
+
+def _linear_curves(system: TIDSystem, frequencies_hz, points: int = 400):
+    """`(frequencies, x, y)` of the frictionless TID over A / K on a fine grid spanning
+    `frequencies_hz`, for plots."""
+    fine = np.linspace(frequencies_hz[0], frequencies_hz[-1], points)
+    return (fine, *_linear_normalised(system, fine))
+
+
+def _host_frequency_hz(system: TIDSystem) -> float:
+    return float(system.host_frequency) / (2 * math.pi)
+
+
+def _describe(system: TIDSystem) -> str:
+    f_n = _host_frequency_hz(system)
+    return (
+        f"M = {float(system.host_mass):g} kg, f_n = {f_n:.3g} Hz, "
+        f"C = {float(system.host_damping):.4g} N s/m, b = {float(system.inertance):g} kg, "
+        f"ff = {float(system.friction_force):g} N, k = {float(system.tid_stiffness):.5g} N/m, "
+        f"c = {float(system.tid_damping):.4g} N s/m"
+    )
+
+
+# --- output -------------------------------------------------------------------------------
+
+
+class _Output:
+    """Output folder (checked before computing), progress messages and the record of the
+    files written."""
+
+    def __init__(self, args):
+        self.args = args
+        self.folder = Path(args.out)
+        if self.folder.exists() and not self.folder.is_dir():
+            raise CLIError(f"output folder {self.folder} is a file, not a folder")
+        try:
+            check_writable_dir(self.folder)
+        except OSError as error:
+            reason = error.strerror or str(error)
+            raise CLIError(f"output folder {self.folder} is not writable: {reason}") from None
+        self.files: list[Path] = []
+        self.start = time.perf_counter()
+
+    def say(self, message: str) -> None:
+        if not self.args.quiet:
+            print(f"{PROG}: {message}", file=sys.stderr, flush=True)
+
+    def path(self, name: str) -> Path:
+        path = self.folder / name
+        self.files.append(path)
+        return path
+
+    def document(
+        self, command: str, inputs: dict, system: TIDSystem, settings, frequencies_hz, **results
+    ) -> dict:
+        """The JSON record of a run: inputs, system, solver settings, version, results."""
+        k_dh, c_dh = _den_hartog(system)
+        return {
+            "command": f"{PROG} {command}",
+            "version": __version__,
+            "inputs": inputs,
+            "system": system.to_dict(),
+            "den_hartog": {"tid_stiffness": k_dh, "tid_damping": c_dh},
+            "solver": settings.to_dict(),
+            "frequencies_hz": [float(f) for f in frequencies_hz],
+            **results,
+            "files": [str(path) for path in self.files],
+        }
+
+    def finish(self, data: dict, table: str) -> int:
+        if self.args.json:
+            print(json_text(data))
+        else:
+            print(table)
+        names = ", ".join(path.name for path in self.files)
+        self.say(
+            f"done in {time.perf_counter() - self.start:.0f} s; results in {self.folder}/: {names}"
+        )
+        return 0
+
+
+def _format_table(header: list[str], rows: list[list[str]]) -> str:
+    widths = [max(len(row[i]) for row in [header, *rows]) for i in range(len(header))]
+    lines = [
+        "  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
+        for row in [header, *rows]
+    ]
+    lines.insert(1, "  ".join("-" * width for width in widths))
+    return "\n".join(lines)
+
+
+def _config_comment(command: str) -> str:
+    return (
+        f"Inputs of `{PROG} {command}` (tid_jax {__version__}); rerun with\n"
+        f"{PROG} {command} --config THIS_FILE"
+    )
+
+
+def _config_data(inputs: dict) -> dict:
+    return {key: value for key, value in inputs.items() if value != {}}
+
+
+# --- tid-jax retune -------------------------------------------------------------------------
+
+RETUNE_COLUMNS = (
+    "amplitude_N",
+    "k_over_k_den_hartog",
+    "k_N_per_m",
+    "c_over_c_den_hartog",
+    "c_N_s_per_m",
+    "x_peak_before_over_A_K",
+    "x_peak_after_over_A_K",
+    "peak_frequency_after_Hz",
+    "stroke_before_m",
+    "stroke_after_m",
+    "stroke_limit_m",
+    "within_stroke_limit",
+    "iterations",
+    "converged",
+    "status",
+)
+
+
+def _add_retune_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "retune",
+        help="retune the TID's k and c for each forcing amplitude",
+        description="For each forcing amplitude, find the TID stiffness k and damping c that "
+        "minimise the peak steady-state host displacement over the frequency "
+        "band, starting from the given (default: Den Hartog) tuning. Prints a "
+        "table and saves retune.csv, retune.json, retune_config.toml, "
+        "retune_frequency_response.png and retune_summary.png to --out.",
+    )
+    _add_system_arguments(parser)
+    _add_output_arguments(parser)
+
+
+def _run_retune(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies, "
+        f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "
+        f"{_describe(system)}"
+    )
+    result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=output.say)
+
+    stiffness = float(system.host_stiffness)
+    x_before = np.empty((amplitudes.size, omegas.size))
+    x_after = np.empty_like(x_before)
+    for i, (amplitude, k, c) in enumerate(
+        zip(
+            amplitudes,
+            np.asarray(result.tid_stiffness),
+            np.asarray(result.tid_damping),
+            strict=True,
+        )
+    ):
+        static = amplitude / stiffness
+        x_before[i] = (
+            np.asarray(frequency_response(system, omegas, amplitude, settings=settings).x_max)
+            / static
+        )
+        retuned = system.replace(tid_stiffness=k, tid_damping=c)
+        x_after[i] = (
+            np.asarray(frequency_response(retuned, omegas, amplitude, settings=settings).x_max)
+            / static
+        )
+        output.say(
+            f"frequency responses before/after retuning: {i + 1}/{amplitudes.size} "
+            f"(A = {amplitude:g} N)"
+        )
+
+    k_dh, c_dh = _den_hartog(system)
+    stroke_limit = inputs["stroke_limit"]
+    static = amplitudes / stiffness
+    k_ratio = np.asarray(result.tid_stiffness) / k_dh
+    c_ratio = np.asarray(result.tid_damping) / c_dh
+    x_peak_before = np.asarray(result.x_peak_initial) / static
+    x_peak_after = np.asarray(result.x_peak) / static
+    y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
+    within = y_after <= stroke_limit
+    statuses = result.status_messages()
+    records = [
+        dict(
+            zip(
+                RETUNE_COLUMNS,
+                (
+                    float(amplitudes[i]),
+                    float(k_ratio[i]),
+                    float(result.tid_stiffness[i]),
+                    float(c_ratio[i]),
+                    float(result.tid_damping[i]),
+                    float(x_peak_before[i]),
+                    float(x_peak_after[i]),
+                    float(result.omega_peak[i]) / (2 * math.pi),
+                    float(y_before[i]),
+                    float(y_after[i]),
+                    stroke_limit,
+                    bool(within[i]),
+                    int(result.iterations[i]),
+                    bool(result.converged[i]),
+                    statuses[i] + ("" if within[i] else "; stroke over limit"),
+                ),
+                strict=True,
+            )
+        )
+        for i in range(amplitudes.size)
+    ]
+
+    write_csv(
+        output.path("retune.csv"),
+        RETUNE_COLUMNS,
+        [[record[key] for key in RETUNE_COLUMNS] for record in records],
+    )
+    write_toml(
+        output.path("retune_config.toml"), _config_data(inputs), comment=_config_comment("retune")
+    )
+    linear_hz, x_linear, _ = _linear_curves(system, frequencies_hz)
+    plot.save_figure(
+        plot.plot_retune_responses(
+            frequencies_hz,
+            amplitudes,
+            x_before,
+            x_after,
+            k_ratio,
+            c_ratio,
+            linear=(linear_hz, x_linear),
+            host_frequency_hz=_host_frequency_hz(system),
+        ),
+        output.path("retune_frequency_response.png"),
+    )
+    plot.save_figure(
+        plot.plot_retune_summary(
+            amplitudes,
+            k_ratio,
+            c_ratio,
+            x_peak_before,
+            x_peak_after,
+            y_before,
+            y_after,
+            stroke_limit=stroke_limit,
+        ),
+        output.path("retune_summary.png"),
+    )
+    json_path = output.path("retune.json")
+    data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
+    write_json(json_path, data)
+
+    header = [
+        "A [N]",
+        "k/k_DH",
+        "k [kN/m]",
+        "c/c_DH",
+        "c [N s/m]",
+        "x/(A/K) DH",
+        "x/(A/K) retuned",
+        "f_peak [Hz]",
+        f"stroke [cm] (limit {100 * stroke_limit:g})",
+        "status",
+    ]
+    rows = [
+        [
+            f"{r['amplitude_N']:g}",
+            f"{r['k_over_k_den_hartog']:.3f}",
+            f"{r['k_N_per_m'] / 1e3:.2f}",
+            f"{r['c_over_c_den_hartog']:.3f}",
+            f"{r['c_N_s_per_m']:.1f}",
+            f"{r['x_peak_before_over_A_K']:.2f}",
+            f"{r['x_peak_after_over_A_K']:.2f}",
+            f"{r['peak_frequency_after_Hz']:.3f}",
+            f"{100 * r['stroke_after_m']:.2f}",
+            r["status"],
+        ]
+        for r in records
+    ]
+    title = (
+        f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
+        f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows))
+
+
+# --- tid-jax frf ----------------------------------------------------------------------------
+
+FRF_COLUMNS = (
+    "amplitude_N",
+    "frequency_Hz",
+    "x_max_m",
+    "y_max_m",
+    "x_over_A_K",
+    "y_over_A_K",
+    "x_linear_over_A_K",
+    "y_linear_over_A_K",
+    "converged",
+    "stable",
+)
+
+
+def _add_frf_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "frf",
+        help="steady-state frequency response over a band and a list of amplitudes",
+        description="Peak steady-state host displacement x and inerter displacement y over "
+        "the frequency band for each forcing amplitude (the paper's Figure 5), "
+        "beside the linear (frictionless) TID. Saves frf.csv, frf.json, "
+        "frf_config.toml and frf.png to --out.",
+    )
+    _add_system_arguments(parser)
+    _add_output_arguments(parser)
+
+
+def _run_frf(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
+        f"frequencies; {_describe(system)}"
+    )
+    shape = (amplitudes.size, omegas.size)
+    x_max, y_max = np.empty(shape), np.empty(shape)
+    converged, stable = np.empty(shape, bool), np.empty(shape, bool)
+    for i, amplitude in enumerate(amplitudes):
+        response = frequency_response(system, omegas, amplitude, settings=settings)
+        x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
+        converged[i], stable[i] = np.asarray(response.converged), np.asarray(response.stable)
+        output.say(
+            f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
+            f"{converged[i].sum()}/{omegas.size} steady states converged"
+        )
+
+    static = (amplitudes / float(system.host_stiffness))[:, None]
+    x_norm, y_norm = x_max / static, y_max / static
+    x_linear, y_linear = _linear_normalised(system, frequencies_hz)
+    rows = [
+        [
+            float(amplitudes[i]),
+            float(frequencies_hz[j]),
+            float(x_max[i, j]),
+            float(y_max[i, j]),
+            float(x_norm[i, j]),
+            float(y_norm[i, j]),
+            float(x_linear[j]),
+            float(y_linear[j]),
+            bool(converged[i, j]),
+            bool(stable[i, j]),
+        ]
+        for i in range(amplitudes.size)
+        for j in range(omegas.size)
+    ]
+    peak = np.argmax(np.where(converged, x_max, -np.inf), axis=1)
+    summary = [
+        {
+            "amplitude_N": float(amplitudes[i]),
+            "x_peak_over_A_K": float(x_norm[i, peak[i]]),
+            "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
+            "stroke_m": float(np.max(np.where(converged[i], y_max[i], -np.inf))),
+            "converged_points": int(converged[i].sum()),
+            "unstable_points": int((converged[i] & ~stable[i]).sum()),
+        }
+        for i in range(amplitudes.size)
+    ]
+
+    write_csv(output.path("frf.csv"), FRF_COLUMNS, rows)
+    write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
+    plot.save_figure(
+        plot.plot_frequency_response(
+            frequencies_hz,
+            amplitudes,
+            x_norm,
+            y_norm,
+            linear=_linear_curves(system, frequencies_hz),
+            host_frequency_hz=_host_frequency_hz(system),
+        ),
+        output.path("frf.png"),
+    )
+    json_path = output.path("frf.json")
+    data = output.document(
+        "frf",
+        inputs,
+        system,
+        settings,
+        frequencies_hz,
+        amplitudes_N=[float(a) for a in amplitudes],
+        x_max_m=x_max.tolist(),
+        y_max_m=y_max.tolist(),
+        converged=converged.tolist(),
+        stable=stable.tolist(),
+        x_linear_over_A_K=x_linear.tolist(),
+        y_linear_over_A_K=y_linear.tolist(),
+        summary=summary,
+    )
+    write_json(json_path, data)
+
+    stroke_limit = inputs["stroke_limit"]
+    header = [
+        "A [N]",
+        "peak x/(A/K)",
+        "at f [Hz]",
+        f"stroke [cm] (limit {100 * stroke_limit:g})",
+        "converged",
+        "unstable",
+    ]
+    table_rows = [
+        [
+            f"{s['amplitude_N']:g}",
+            f"{s['x_peak_over_A_K']:.2f}",
+            f"{s['peak_frequency_Hz']:.3f}",
+            f"{100 * s['stroke_m']:.2f}",
+            f"{s['converged_points']}/{omegas.size}",
+            str(s["unstable_points"]),
+        ]
+        for s in summary
+    ]
+    title = (
+        f"Frequency response ({_describe(system)}); peaks on the grid, x normalised by "
+        f"the static displacement A/K"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, table_rows))
+
+
+# --- entry point ----------------------------------------------------------------------------
+
+_COMMANDS = {
+    "retune": (_add_retune_parser, _run_retune),
+    "frf": (_add_frf_parser, _run_frf),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="tid-jax",
+    parser = _Parser(
+        prog=PROG,
         description="Design tuned inerter dampers (TIDs) whose inerter has dry friction.",
+        epilog=f"Run '{PROG} COMMAND --help' for the options of each command.",
     )
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for add_parser, _ in _COMMANDS.values():
+        add_parser(subparsers)
     return parser
 
 
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split()) or type(error).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run `tid-jax` with the arguments `argv` (default `sys.argv[1:]`); returns the exit
+    status: 0 on success, 2 on bad input (one line on stderr), 130 if interrupted."""
+    jax.config.update("jax_enable_x64", True)
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return 0
-    return 0
+    try:
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exit_:  # --help and --version
+            return exit_.code if isinstance(exit_.code, int) else 0
+        if args.command is None:
+            parser.print_help()
+            return 0
+        return _COMMANDS[args.command][1](args)
+    except (CLIError, ValueError, OSError) as error:
+        print(f"{PROG}: error: {_one_line(error)}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(
+            f"{PROG}: interrupted; files already written are complete, none is partial",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,4 +1,9 @@
-"""Figures. The only module of tid_jax that imports matplotlib."""
+"""Figures. The only module of tid_jax that imports matplotlib.
+
+Every function takes plain arrays (SI units, frequencies in Hz, responses of the host `x`
+normalised by the static displacement A / K as in the paper) and returns a `Figure`;
+`save_figure` writes it as PNG atomically.
+"""
 
 import os
 
@@ -6,8 +11,13 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker as ticker  # noqa: E402
+import numpy as np  # noqa: E402
 
 from ._io import atomic_path  # noqa: E402
+
+LINEAR_STYLE = dict(color="black", linestyle="--", linewidth=2.0, label="linear TID (no friction)")
+HOST_FREQUENCY_STYLE = dict(color="0.5", linestyle=":", linewidth=1.2)
 
 
 def save_figure(fig, path: str | os.PathLike) -> None:
@@ -15,3 +25,243 @@ def save_figure(fig, path: str | os.PathLike) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
     plt.close(fig)
+
+
+def _amplitude_colours(amplitudes):
+    amplitudes = np.asarray(amplitudes, dtype=float)
+    span = np.log(amplitudes.max() / amplitudes.min()) if amplitudes.size > 1 else 0.0
+    fractions = (
+        np.log(amplitudes / amplitudes.min()) / span if span > 0 else np.zeros_like(amplitudes)
+    )
+    return plt.get_cmap("viridis")(0.9 * fractions)
+
+
+def _plain_log_axis(axis):
+    """Log-scaled axis labelled 100, 200, 1000 rather than 10^2, 2x10^2, 10^3."""
+    axis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+    axis.set_minor_formatter(ticker.FormatStrFormatter("%g"))
+
+
+def _mark_host_frequency(ax, host_frequency_hz):
+    if host_frequency_hz is not None:
+        ax.axvline(
+            host_frequency_hz,
+            **HOST_FREQUENCY_STYLE,
+            label=f"host frequency {host_frequency_hz:.3g} Hz",
+        )
+
+
+def plot_frequency_response(
+    frequencies_hz, amplitudes, x_norm, y_norm, *, linear=None, host_frequency_hz=None, title=None
+):
+    """The paper's Figure 5: peak host displacement (a) and inerter displacement (b) over
+    A / K against forcing frequency (Hz), one line per forcing amplitude (N); arrays
+    `x_norm`, `y_norm` are `(n_amplitudes, n_frequencies)`. `linear = (x, y)` on the same
+    frequencies adds the frictionless TID."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
+    colours = _amplitude_colours(amplitudes)
+    panels = (
+        ("(a) host structure", x_norm, "peak host displacement  x / (A/K)"),
+        ("(b) inerter", y_norm, "peak inerter displacement  y / (A/K)"),
+    )
+    for index, (ax, (name, values, ylabel)) in enumerate(zip(axes, panels, strict=True)):
+        for amplitude, colour, row in zip(amplitudes, colours, np.atleast_2d(values), strict=True):
+            ax.plot(frequencies_hz, row, color=colour, linewidth=1.0, label=f"A = {amplitude:g} N")
+        if linear is not None:
+            ax.plot(linear[0], linear[1 + index], **LINEAR_STYLE)
+        _mark_host_frequency(ax, host_frequency_hz)
+        ax.set(xlabel="forcing frequency [Hz]", ylabel=ylabel, title=name)
+        ax.set_xlim(frequencies_hz[0], frequencies_hz[-1])
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, ncol=2, loc="upper right")
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_retune_responses(
+    frequencies_hz,
+    amplitudes,
+    x_before,
+    x_after,
+    k_ratio,
+    c_ratio,
+    *,
+    linear=None,
+    host_frequency_hz=None,
+    title=None,
+):
+    """The paper's Figure 6: for each forcing amplitude (one panel each), the peak host
+    displacement over A / K against frequency (Hz) before retuning (`x_before`) and after
+    (`x_after`, arrays `(n_amplitudes, n_frequencies)`), with the retuned `k_ratio` and
+    `c_ratio` to Den Hartog's in the panel title; `linear = (frequencies_hz, x)` adds the
+    frictionless TID with the initial tuning."""
+    n = len(amplitudes)
+    columns = min(n, 4)
+    rows = -(-n // columns)
+    fig, axes = plt.subplots(
+        rows,
+        columns,
+        figsize=(3.6 * columns + 0.6, 3.0 * rows + 0.6),
+        layout="constrained",
+        sharex=True,
+        squeeze=False,
+    )
+    for i, ax in enumerate(axes.flat):
+        if i >= n:
+            ax.set_visible(False)
+            continue
+        ax.plot(
+            frequencies_hz,
+            x_before[i],
+            color="tab:red",
+            linestyle="-.",
+            label="before (initial tuning)",
+        )
+        ax.plot(frequencies_hz, x_after[i], color="tab:blue", linewidth=2.0, label="retuned")
+        if linear is not None:
+            ax.plot(
+                *linear,
+                color="black",
+                linestyle="--",
+                linewidth=1.0,
+                label="linear TID (no friction)",
+            )
+        _mark_host_frequency(ax, host_frequency_hz)
+        ax.set_title(
+            f"A = {amplitudes[i]:g} N: k = {k_ratio[i]:.3f} k_DH, c = {c_ratio[i]:.2f} c_DH",
+            fontsize=9,
+        )
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        if i % columns == 0:
+            ax.set_ylabel("peak host displacement x / (A/K)")
+        if i >= n - columns:
+            ax.set_xlabel("forcing frequency [Hz]")
+    axes.flat[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(title or "Host response before and after retuning the TID")
+    return fig
+
+
+def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None):
+    ax_k.plot(amplitudes, k_ratio, "o-", color="tab:blue", label="retuned (this package)")
+    ax_c.plot(amplitudes, c_ratio, "o-", color="tab:blue", label="retuned (this package)")
+    if paper is not None:
+        amps, k_paper, c_paper = paper
+        ax_k.plot(
+            amps,
+            k_paper,
+            "s",
+            color="tab:orange",
+            markersize=8,
+            fillstyle="none",
+            markeredgewidth=2,
+            label="paper, section 4.2",
+        )
+        ax_c.plot(
+            amps,
+            c_paper,
+            "s",
+            color="tab:orange",
+            markersize=8,
+            fillstyle="none",
+            markeredgewidth=2,
+            label="paper, section 4.2",
+        )
+    for ax, label in ((ax_k, "stiffness  k / k_DH"), (ax_c, "damping  c / c_DH")):
+        ax.axhline(1.0, color="black", linestyle="--", linewidth=1.0, label="Den Hartog")
+        ax.set(xscale="log", xlabel="forcing amplitude A [N]", ylabel=label)
+        _plain_log_axis(ax.xaxis)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    ax_k.set_title("(a) retuned stiffness")
+    ax_c.set_title("(b) retuned damping")
+    ax_c.set_ylim(bottom=0)
+
+
+def plot_tuning_ratios(amplitudes, k_ratio, c_ratio, *, paper=None, title=None):
+    """The paper's Figure 7: retuned stiffness and damping as ratios to Den Hartog's against
+    forcing amplitude (N). `paper = (amplitudes, k_ratio, c_ratio)` adds reference points."""
+    fig, (ax_k, ax_c) = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
+    _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def _draw_peaks(ax_x, ax_y, curves, stroke_limit):
+    for label, amplitudes, x_norm, y_peak, style in curves:
+        ax_x.plot(amplitudes, x_norm, label=label, **style)
+        ax_y.plot(amplitudes, 100 * np.asarray(y_peak), label=label, **style)
+    if stroke_limit is not None:
+        ax_y.axhline(
+            100 * stroke_limit,
+            color="tab:red",
+            linewidth=1.5,
+            label=f"stroke limit +-{100 * stroke_limit:g} cm",
+        )
+    ax_x.set(
+        xscale="log",
+        xlabel="forcing amplitude A [N]",
+        ylabel="peak host displacement  x / (A/K)",
+        title="(a) host structure",
+    )
+    ax_y.set(
+        xscale="log",
+        yscale="log",
+        xlabel="forcing amplitude A [N]",
+        ylabel="peak inerter stroke  |y| [cm]",
+        title="(b) inerter stroke",
+    )
+    ax_x.set_ylim(bottom=0)
+    _plain_log_axis(ax_y.yaxis)
+    for ax in (ax_x, ax_y):
+        _plain_log_axis(ax.xaxis)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+
+
+def plot_peaks_vs_amplitude(curves, *, stroke_limit=None, title=None):
+    """The paper's Figure 8: peak host displacement over A / K (a) and peak inerter stroke
+    in cm (b) against forcing amplitude (N). `curves` is a sequence of
+    `(label, amplitudes, x_norm, y_peak_m, style)` with `style` matplotlib line keywords;
+    `stroke_limit` (m) draws the stroke limit."""
+    fig, (ax_x, ax_y) = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
+    _draw_peaks(ax_x, ax_y, curves, stroke_limit)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_retune_summary(
+    amplitudes,
+    k_ratio,
+    c_ratio,
+    x_before,
+    x_after,
+    y_before,
+    y_after,
+    *,
+    stroke_limit=None,
+    title=None,
+):
+    """Retuning at a glance: k / k_DH and c / c_DH (top) and the peak host displacement over
+    A / K and inerter stroke (cm) before and after retuning (bottom) against amplitude (N)."""
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), layout="constrained")
+    _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio)
+    curves = (
+        (
+            "before (initial tuning)",
+            amplitudes,
+            x_before,
+            y_before,
+            dict(color="tab:red", linestyle="-.", marker="s"),
+        ),
+        ("retuned", amplitudes, x_after, y_after, dict(color="tab:blue", marker="o")),
+    )
+    _draw_peaks(axes[1, 0], axes[1, 1], curves, stroke_limit)
+    axes[1, 0].set_title("(c) host structure")
+    axes[1, 1].set_title("(d) inerter stroke")
+    fig.suptitle(title or "TID retuned for each forcing amplitude")
+    return fig
