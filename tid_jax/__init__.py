@@ -13,6 +13,12 @@ from ._response import (
     frequency_response as frequency_response,
 )
 from ._steady_state import SolverSettings as SolverSettings
+from ._substructuring import (
+    Substructuring as Substructuring,
+    SubstructuringStability as SubstructuringStability,
+    simulate_substructuring as simulate_substructuring,
+    substructuring_stability as substructuring_stability,
+)
 from ._system import (
     PAPER_AMPLITUDES as PAPER_AMPLITUDES,
     PAPER_STROKE as PAPER_STROKE,
