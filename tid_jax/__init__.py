@@ -12,6 +12,14 @@ from ._response import (
     FrequencyResponse as FrequencyResponse,
     frequency_response as frequency_response,
 )
+from ._retune import (
+    Peaks as Peaks,
+    RetuneResult as RetuneResult,
+    default_omegas as default_omegas,
+    peak_response as peak_response,
+    peaks as peaks,
+    retune as retune,
+)
 from ._steady_state import SolverSettings as SolverSettings
 from ._substructuring import (
     Substructuring as Substructuring,

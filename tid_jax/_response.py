@@ -58,10 +58,11 @@ def check_grid(name: str, values: ArrayLike) -> np.ndarray:
     return array
 
 
-def point_response(system: TIDSystem, omega, amplitude, settings: SolverSettings):
-    """Single (omega, amplitude) point: the orbit and its peaks in metres."""
+def point_response(system: TIDSystem, omega, amplitude, settings: SolverSettings, z_init=None):
+    """Single (omega, amplitude) point: the orbit (shooting from the scaled state `z_init`
+    if given) and its peaks |x|, |y| in metres."""
     p = parameter_vector(system, amplitude, omega)
-    orbit = solve_orbit(p, settings)
+    orbit = solve_orbit(p, settings, z_init)
     scale = amplitude / system.host_stiffness
     x_max = refined_peak(orbit.x_samples) * scale
     y_max = refined_peak(orbit.y_samples) * scale

@@ -5,7 +5,7 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._dynamics import vector_field
@@ -18,7 +18,6 @@ class SolverSettings(eqx.Module):
       the static displacement A / K.
     - `max_steps`: integration steps allowed per forcing period.
     - `transient_periods`: periods integrated from the initial guess before shooting.
-    - `newton_tol`: Newton stops when the periodicity update is below this (scaled).
     - `max_newton_steps`: Newton iterations allowed.
     - `periodicity_tol`: a point counts as converged only if |Phi_T(z0) - z0| is below this
       (scaled), checked by a separate integration of the final orbit.
@@ -30,13 +29,12 @@ class SolverSettings(eqx.Module):
     atol: float = 1e-8
     max_steps: int = 4096
     transient_periods: int = 2
-    newton_tol: float = 1e-6
-    max_newton_steps: int = 25
+    max_newton_steps: int = 10
     periodicity_tol: float = 1e-6
     samples: int = 128
 
     def __check_init__(self):
-        for name in ("rtol", "atol", "newton_tol", "periodicity_tol"):
+        for name in ("rtol", "atol", "periodicity_tol"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
@@ -120,81 +118,144 @@ def linear_initial_state(p) -> Float[Array, " 4"]:
     return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real])
 
 
-def _find_orbit(p, settings: SolverSettings):
-    z = linear_initial_state(p)
-    if settings.transient_periods > 0:
-        sol = _integrate(
-            z,
-            p,
-            2 * jnp.pi * settings.transient_periods,
-            settings,
-            dfx.SaveAt(t1=True),
-            settings.max_steps * settings.transient_periods,
+def _transient(z, p, settings: SolverSettings):
+    """Integrate `settings.transient_periods` periods from `z` (keeps `z` if that fails)."""
+    if settings.transient_periods == 0:
+        return z
+    sol = _integrate(
+        z,
+        p,
+        2 * jnp.pi * settings.transient_periods,
+        settings,
+        dfx.SaveAt(t1=True),
+        settings.max_steps * settings.transient_periods,
+    )
+    return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
+
+
+def _samples_and_jacobian(z, p, settings):
+    """One integration of a period from `z` with tangents along the four state directions:
+    `(xs, ys, ws, z_end)` and their Jacobians with respect to `z` (that of `z_end` is the
+    monodromy matrix)."""
+    fn = lambda z0: _period_samples(z0, p, settings)
+    basis = jnp.eye(4, dtype=z.dtype)
+    primal, tangents = jax.vmap(lambda t: jax.jvp(fn, (z,), (t,)), out_axes=(None, 0))(basis)
+    return primal, tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
+
+
+_MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
+
+
+def _shoot(z0, p, settings: SolverSettings):
+    """Newton shooting for z* = Phi_T(z*). Each iteration is one integration of a period
+    with four state tangents, giving the residual Phi_T(z) - z, the monodromy matrix and
+    the samples at once. Once the residual is within `settings.periodicity_tol`, the last
+    Newton update is applied to the state and, to first order, to the samples (their error
+    is then second order in the residual)."""
+    eye = jnp.eye(4, dtype=z0.dtype)
+
+    def evaluate(z):
+        (xs, ys, ws, z_end), (jx, jy, jw, monodromy) = _samples_and_jacobian(z, p, settings)
+        residual = z_end - z
+        update = jnp.linalg.solve(eye - monodromy, residual)
+        finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(xs))
+        finite = finite & jnp.all(jnp.isfinite(ys))
+        return dict(
+            z=z, xs=xs, ys=ys, ws=ws, jx=jx, jy=jy, jw=jw, monodromy=monodromy,
+            update=jnp.where(finite, update, 0.0),
+            residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
         )
-        z = jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
 
-    def residual(z0, p):
-        return _period_map(z0, p, settings) - z0
+    def cond(carry):
+        state, steps = carry
+        return (state["residual"] > settings.periodicity_tol) & (steps < settings.max_newton_steps)
 
-    solver = optx.Newton(rtol=settings.newton_tol, atol=settings.newton_tol)
-    sol = optx.root_find(residual, solver, z, args=p, max_steps=settings.max_newton_steps,
-                         throw=False)
-    z_star = jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, z)
-    return z_star, sol.stats["num_steps"]
+    def body(carry):
+        state, steps = carry
+        update = state["update"]
+        size = jnp.max(jnp.abs(update))
+        limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(state["z"])))
+        z_new = state["z"] + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300))
+        return evaluate(z_new), steps + 1
 
-
-def _samples_and_monodromy(z_star, p, settings):
-    """One integration of the orbit, with the four state tangents (the monodromy matrix)."""
-    fn = lambda z: _period_samples(z, p, settings)
-    basis = jnp.eye(4, dtype=z_star.dtype)
-    primal, tangents = jax.vmap(lambda t: jax.jvp(fn, (z_star,), (t,)), out_axes=(None, 0))(basis)
-    monodromy = tangents[3].T  # column j: d z_T / d z0_j
-    return primal, monodromy
-
-
-@ft.partial(jax.custom_jvp, nondiff_argnums=(2,))
-def _orbit_samples(z_star, p, settings):
-    (xs, ys, ws, z_end), monodromy = _samples_and_monodromy(z_star, p, settings)
-    return z_star, xs, ys, ws, z_end, monodromy
-
-
-@_orbit_samples.defjvp
-def _orbit_samples_jvp(settings, primals, tangents):
-    # Implicit differentiation through the periodic orbit: z* = Phi_T(z*, p) gives
-    # dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp. The Jacobians are formed from primals only, so
-    # the tangent map is an explicit matrix product and reverse mode can transpose it.
-    z_star, p = primals
-    _, p_dot = tangents
-    out = _orbit_samples(z_star, p, settings)
-    jac_z, jac_p = jax.jacfwd(lambda z, q: _period_samples(z, q, settings), argnums=(0, 1))(
-        z_star, p
+    state, steps = jax.lax.while_loop(cond, body, (evaluate(z0), jnp.array(1)))
+    dz = state["update"]
+    orbit = dict(
+        z=state["z"] + dz,
+        xs=state["xs"] + state["jx"] @ dz,
+        ys=state["ys"] + state["jy"] @ dz,
+        ws=state["ws"] + state["jw"] @ dz,
+        jx=state["jx"],
+        jy=state["jy"],
+        jw=state["jw"],
+        monodromy=state["monodromy"],
     )
-    monodromy = out[-1]
-    sensitivity = jnp.linalg.solve(jnp.eye(4, dtype=monodromy.dtype) - monodromy, jac_p[3])
-    z_dot = sensitivity @ p_dot
-    xs_dot, ys_dot, ws_dot = (jz @ z_dot + jp @ p_dot for jz, jp in zip(jac_z[:3], jac_p[:3]))
-    return out, (z_dot, xs_dot, ys_dot, ws_dot, z_dot, jnp.zeros_like(monodromy))
+    return orbit, state["residual"], steps
 
 
-def solve_orbit(p: Float[Array, " 10"], settings: SolverSettings) -> Orbit:
-    """The periodic orbit at one parameter vector `p` (see `_dynamics.PARAMETERS`).
-    Differentiable with respect to `p` by implicit differentiation."""
-    z_guess, steps = _find_orbit(jax.lax.stop_gradient(p), settings)
-    z_star, xs, ys, ws, z_end, monodromy = _orbit_samples(
-        jax.lax.stop_gradient(z_guess), p, settings
-    )
-    monodromy = jax.lax.stop_gradient(monodromy)
-    residual = jax.lax.stop_gradient(jnp.max(jnp.abs(z_end - z_star)))
-    multipliers = jnp.linalg.eigvals(monodromy)
-    finite = jnp.all(jnp.isfinite(xs)) & jnp.all(jnp.isfinite(ys)) & jnp.isfinite(residual)
-    converged = finite & (residual <= settings.periodicity_tol)
+@ft.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _with_orbit_derivatives(settings, orbit, *p):
+    """Identity on a converged `orbit`; its JVP is the implicit derivative of the orbit
+    with respect to the parameters `p`."""
+    del p
+    return orbit
+
+
+def _orbit_jvp(settings, primals, tangents):
+    # z* = Phi_T(z*, p) gives dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp, and the samples follow by
+    # the chain rule. Only parameters with non-zero tangents are differentiated, and every
+    # Jacobian is formed from primals alone: the tangent map is an explicit matrix product,
+    # which reverse mode can transpose.
+    orbit, *p = primals
+    _, *p_dot = tangents
+    active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
+    tangent_out = jax.tree.map(jnp.zeros_like, orbit)
+    if not active:
+        return orbit, tangent_out
+
+    def period(*values):
+        q = list(p)
+        for i, value in zip(active, values):
+            q[i] = value
+        return _period_samples(orbit["z"], jnp.stack(q), settings)
+
+    jac = jax.jacfwd(period, argnums=tuple(range(len(active))))(*(p[i] for i in active))
+    jx_p, jy_p, jw_p, jz_p = (jnp.stack(j, axis=-1) for j in jac)
+    p_active_dot = jnp.stack([p_dot[i] for i in active])
+    eye = jnp.eye(4, dtype=orbit["z"].dtype)
+    z_dot = jnp.linalg.solve(eye - orbit["monodromy"], jz_p) @ p_active_dot
+    tangent_out["z"] = z_dot
+    tangent_out["xs"] = orbit["jx"] @ z_dot + jx_p @ p_active_dot
+    tangent_out["ys"] = orbit["jy"] @ z_dot + jy_p @ p_active_dot
+    tangent_out["ws"] = orbit["jw"] @ z_dot + jw_p @ p_active_dot
+    return orbit, tangent_out
+
+
+_with_orbit_derivatives.defjvp(_orbit_jvp, symbolic_zeros=True)
+
+
+def solve_orbit(
+    p: Float[Array, " 10"],
+    settings: SolverSettings,
+    z_init: Float[Array, " 4"] | None = None,
+) -> Orbit:
+    """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`), by
+    shooting from `z_init` (scaled state; default the linear steady state followed by
+    `settings.transient_periods` periods). Differentiable with respect to `p` (implicit
+    differentiation), not with respect to `z_init`."""
+    p_const = jax.lax.stop_gradient(p)
+    if z_init is None:
+        z_init = _transient(linear_initial_state(p_const), p_const, settings)
+    orbit, residual, steps = _shoot(jax.lax.stop_gradient(z_init), p_const, settings)
+    orbit = _with_orbit_derivatives(settings, orbit, *(p[i] for i in range(p.shape[0])))
+    converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit["xs"]))
     return Orbit(
-        state=z_star,
-        x_samples=xs,
-        y_samples=ys,
-        y_velocity_samples=ws,
-        floquet_multipliers=multipliers,
-        residual=jnp.where(jnp.isfinite(residual), residual, jnp.inf),
+        state=orbit["z"],
+        x_samples=orbit["xs"],
+        y_samples=orbit["ys"],
+        y_velocity_samples=orbit["ws"],
+        floquet_multipliers=jnp.linalg.eigvals(jax.lax.stop_gradient(orbit["monodromy"])),
+        residual=residual,
         newton_steps=steps,
         converged=converged,
     )

@@ -60,7 +60,7 @@ PHYSICAL_INPUTS = (
 GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
 INPUT_KEYS = tuple(key for key, *_ in PHYSICAL_INPUTS) + GRID_INPUTS
 SOLVER_TABLE = "solver"
-# Pairs of which at most one may be given; the first is the default.
+# Pairs of which at most one may be given; the first has a default.
 ALTERNATIVES = (("host_frequency_hz", "host_stiffness"), ("host_damping_ratio", "host_damping"))
 DEFAULTS = {
     "host_mass": PAPER_HOST_MASS,
@@ -81,6 +81,10 @@ class CLIError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)  # a mistyped flag is an error, not a guess
+        super().__init__(*args, **kwargs)
+
     def error(self, message):
         raise CLIError(f"{message} (see '{self.prog} --help')")
 
@@ -190,13 +194,13 @@ def _inputs(args) -> dict:
             for key in group:
                 config.pop(key, None)
     given = {**config, **flags}
+    inputs = {**DEFAULTS, **given}
     for first, second in ALTERNATIVES:
         if first in given and second in given:
             raise CLIError(f"give {first} or {second}, not both")
-        if second not in given:
-            given.setdefault(first, DEFAULTS[first])
-    inputs = {key: given.get(key, DEFAULTS.get(key)) for key in INPUT_KEYS}
-    inputs = {key: value for key, value in inputs.items() if value is not None}
+        if second in given:
+            del inputs[first]
+    inputs = {key: inputs[key] for key in INPUT_KEYS if key in inputs}
     for key, _, _, allowed in PHYSICAL_INPUTS:
         if key in inputs:
             if np.ndim(inputs[key]) != 0:

@@ -1,0 +1,317 @@
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ._linear import den_hartog_tuning
+from ._response import check_grid, point_response
+from ._steady_state import SolverSettings
+from ._system import TIDSystem
+
+# Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
+# for TID frequencies from well below to 25% above Den Hartog's.
+BAND = (0.65, 1.4)
+DEFAULT_FREQUENCIES = 61
+# Sharpness of the smooth maximum (in log-peak units) at each continuation stage.
+SHARPNESS = (50.0, 1000.0)
+# Refinement of the final check: that many times more frequencies than the design grid.
+CHECK_REFINEMENT = 2
+
+STATUS_MESSAGES = {
+    0: "ok",
+    1: "optimiser did not converge",
+    2: "some steady states did not converge",
+    3: "peak at the edge of the frequency band",
+}
+
+
+def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Array, " freqs"]:
+    """`n` circular frequencies (rad/s) spanning 0.65-1.4 times the host frequency."""
+    if not (isinstance(n, int) and n >= 5):
+        raise ValueError(f"n must be an integer >= 5, got {n!r}")
+    return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
+
+
+def _local_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
+    """Parabolic refinement of every interior local maximum of `values` on the (possibly
+    non-uniform) grid `omegas`. Returns `(peak, omega_peak, is_peak)` per grid point: at
+    local maxima the vertex of the parabola through the point and its neighbours, else the
+    value itself with `is_peak` False."""
+    v0, v1, v2 = values[:-2], values[1:-1], values[2:]
+    w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
+    h0, h1 = w1 - w0, w2 - w1
+    d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
+    curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
+    is_peak = (v1 >= v0) & (v1 >= v2) & (curvature < 0)
+    safe = jnp.where(is_peak, curvature, -1.0)
+    slope = d0 + curvature * h0  # first derivative at w1
+    shift = jnp.clip(-slope / (2 * safe), -h0, h1)
+    vertex = v1 + slope * shift + safe * shift**2
+    peak = jnp.where(is_peak, jnp.maximum(vertex, v1), v1)
+    omega_peak = jnp.where(is_peak, w1 + shift, w1)
+    edge = lambda a, i: jnp.concatenate([a[:1], i, a[-1:]])
+    false = jnp.zeros(1, dtype=bool)
+    return edge(values, peak), edge(omegas, omega_peak), jnp.concatenate([false, is_peak, false])
+
+
+def grid_peak(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
+    """The maximum over frequency of `values` sampled on `omegas`, refined by a parabola
+    through the largest sample and its neighbours. Returns `(peak, omega_peak, at_edge)`."""
+    peaks, omega_peaks, _ = _local_peaks(values, omegas)
+    i = jnp.argmax(peaks)
+    return peaks[i], omega_peaks[i], (i == 0) | (i == values.shape[0] - 1)
+
+
+def smooth_log_peak(values: Float[Array, " freqs"], omegas, sharpness) -> Float[Array, ""]:
+    """Smooth maximum (log-sum-exp with `sharpness`) of the logarithms of the refined local
+    peaks of `values` (and of the band ends): it tends to log of `grid_peak` as the
+    sharpness grows, and stays differentiable where two peaks are equal."""
+    peaks, _, is_peak = _local_peaks(values, omegas)
+    candidates = is_peak.at[0].set(True).at[-1].set(True)
+    logs = jnp.where(candidates, jnp.log(peaks), -jnp.inf)
+    return jax.nn.logsumexp(sharpness * logs) / sharpness
+
+
+def _with_tuning(system: TIDSystem, k, c) -> TIDSystem:
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
+
+
+def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
+    """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
+    one amplitude, shooting from `z_init` (one state per frequency) if given."""
+
+    def one(omega, z0):
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z0)
+        return x_max, y_max, orbit.converged, orbit.state
+
+    if z_init is None:
+        return jax.vmap(lambda omega: one(omega, None))(omegas)
+    return jax.vmap(one)(omegas, z_init)
+
+
+class Peaks(eqx.Module):
+    """Peak steady-state responses over a frequency band, per amplitude (SI)."""
+
+    amplitudes: Float[Array, " amps"]
+    x_peak: Float[Array, " amps"]  # m
+    y_peak: Float[Array, " amps"]  # m
+    omega_x: Float[Array, " amps"]  # rad/s where the host peak occurs
+    omega_y: Float[Array, " amps"]
+    at_edge: Bool[Array, " amps"]  # host peak at an end of the band
+    converged: Bool[Array, " amps"]  # every steady state in the band converged
+
+
+def _peaks_one(system, amplitude, omegas, settings):
+    xs, ys, ok, _ = sweep(system, amplitude, omegas, settings)
+    x_peak, omega_x, at_edge = grid_peak(xs, omegas)
+    y_peak, omega_y, _ = grid_peak(ys, omegas)
+    return x_peak, y_peak, omega_x, omega_y, at_edge, jnp.all(ok)
+
+
+@eqx.filter_jit
+def _peaks_batch(system, amplitudes, stiffness, damping, omegas, settings):
+    def one(amplitude, k, c):
+        return _peaks_one(_with_tuning(system, k, c), amplitude, omegas, settings)
+
+    return jax.vmap(one)(amplitudes, stiffness, damping)
+
+
+def _check_system(system) -> None:
+    if not isinstance(system, TIDSystem):
+        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+
+
+def _band(system, omegas):
+    if omegas is None:
+        return default_omegas(system)
+    array = check_grid("omegas", omegas)
+    if array.ndim != 1 or array.size < 5:
+        raise ValueError(f"omegas must be a 1-d grid of at least 5 frequencies, got {array!r}")
+    if np.any(np.diff(array) <= 0):
+        raise ValueError("omegas must be strictly increasing")
+    return jnp.asarray(array, dtype=jnp.result_type(float))
+
+
+def peaks(
+    system: TIDSystem,
+    amplitudes: ArrayLike,
+    omegas: ArrayLike | None = None,
+    *,
+    settings: SolverSettings = SolverSettings(),
+) -> Peaks:
+    """Peak host and inerter displacement over the band `omegas` (rad/s; default
+    `default_omegas(system)`) for each amplitude (N), all in one batched call."""
+    _check_system(system)
+    band = _band(system, omegas)
+    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
+    k = jnp.broadcast_to(system.tid_stiffness, amps.shape)
+    c = jnp.broadcast_to(system.tid_damping, amps.shape)
+    out = _peaks_batch(system, amps, k, c, band, settings)
+    return Peaks(amps, *out)
+
+
+def peak_response(
+    system: TIDSystem,
+    amplitude: ArrayLike,
+    omegas: ArrayLike | None = None,
+    *,
+    response: str = "host",
+    settings: SolverSettings = SolverSettings(),
+) -> Float[Array, ""]:
+    """Peak steady-state displacement (m) over the frequency band `omegas` (rad/s; default
+    `default_omegas(system)`) at forcing amplitude `amplitude` (N): of the host
+    (`response="host"`, max |x|) or of the inerter terminal (`"inerter"`, max |y|, the
+    stroke). Differentiable with respect to every field of `system` and `amplitude`
+    (implicit differentiation through the periodic orbits; envelope theorem at the peak)."""
+    _check_system(system)
+    if response not in ("host", "inerter"):
+        raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
+    if not isinstance(amplitude, jax.core.Tracer):
+        check_grid("amplitude", amplitude)
+        if np.ndim(amplitude) != 0:
+            raise ValueError(f"amplitude must be a scalar, got shape {np.shape(amplitude)}")
+    band = _band(system, omegas)
+    return _peak_response(system, amplitude, band, response == "host", settings)
+
+
+@eqx.filter_jit
+def _peak_response(system, amplitude, omegas, host, settings):
+    xs, ys, _, _ = sweep(system, amplitude, omegas, settings)
+    return grid_peak(xs if host else ys, omegas)[0]
+
+
+class RetuneResult(eqx.Module):
+    """Per-amplitude retuned TID (SI units). `x_peak`/`x_peak_initial` and `y_peak`/
+    `y_peak_initial` are the peak host and inerter displacements over the band after and
+    before retuning, confirmed on a frequency grid `CHECK_REFINEMENT` times finer than the
+    design grid. `status` codes are explained by `status_messages()`."""
+
+    amplitudes: Float[Array, " amps"]
+    tid_stiffness: Float[Array, " amps"]
+    tid_damping: Float[Array, " amps"]
+    initial_stiffness: Float[Array, " amps"]
+    initial_damping: Float[Array, " amps"]
+    x_peak: Float[Array, " amps"]
+    x_peak_initial: Float[Array, " amps"]
+    y_peak: Float[Array, " amps"]
+    y_peak_initial: Float[Array, " amps"]
+    omega_peak: Float[Array, " amps"]
+    iterations: Int[Array, " amps"]
+    converged: Bool[Array, " amps"]
+    damping_at_bound: Bool[Array, " amps"]
+    status: Int[Array, " amps"]
+
+    def status_messages(self) -> list[str]:
+        messages = []
+        for code, at_bound in zip(np.asarray(self.status), np.asarray(self.damping_at_bound)):
+            text = STATUS_MESSAGES[int(code)]
+            messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
+        return messages
+
+
+# Damping ratio to Den Hartog's below which the bound c >= 0 is reported as active.
+DAMPING_BOUND_RATIO = 1e-3
+
+
+def _design_to_tuning(u, k_ref, c_ref):
+    # k > 0 through an exponential; c >= 0 through a square, so that the bound c = 0 is a
+    # stationary point of the unconstrained problem and can be reached exactly.
+    return k_ref * jnp.exp(u[0]), c_ref * u[1] ** 2
+
+
+@eqx.filter_jit
+def _optimise_stage(system, amplitudes, u0, omegas, sharpness, settings, max_steps, tol):
+    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+
+    def objective(u, args):
+        amplitude, z_warm = args
+        k, c = _design_to_tuning(u, k_ref, c_ref)
+        xs, _, _, _ = sweep(_with_tuning(system, k, c), amplitude, omegas, settings, z_warm)
+        static = amplitude / system.host_stiffness
+        return smooth_log_peak(xs / static, omegas, sharpness)
+
+    def one(amplitude, u_start):
+        # Orbits at the stage's starting tuning warm-start every shooting solve of the stage.
+        k, c = _design_to_tuning(u_start, k_ref, c_ref)
+        _, _, _, z_warm = sweep(_with_tuning(system, k, c), amplitude, omegas, settings)
+        solver = optx.BFGS(rtol=tol, atol=tol)
+        sol = optx.minimise(objective, solver, u_start, args=(amplitude, z_warm),
+                            max_steps=max_steps, throw=False)
+        return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+
+    return jax.vmap(one)(amplitudes, u0)
+
+
+def retune(
+    system: TIDSystem,
+    amplitudes: ArrayLike,
+    *,
+    omegas: ArrayLike | None = None,
+    settings: SolverSettings = SolverSettings(),
+    max_steps: int = 60,
+    tol: float = 1e-6,
+    progress: Callable[[str], None] | None = None,
+) -> RetuneResult:
+    """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
+    `tid_damping` c >= 0 minimising the peak steady-state host displacement over the band
+    `omegas` (rad/s; default `default_omegas(system)`).
+
+    All amplitudes are solved in one batched call. The non-smooth maximum over frequency is
+    replaced by a smooth maximum of the parabola-refined local peaks whose sharpness grows
+    over `SHARPNESS` (continuation), each stage an optimistix BFGS run (at most `max_steps`
+    iterations, tolerance `tol`) warm-started from the last, with gradients by implicit
+    differentiation through the periodic orbits. The result is confirmed on a finer grid.
+    `progress`, if given, is called with a one-line message after each stage.
+    """
+    _check_system(system)
+    band = _band(system, omegas)
+    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
+    if not (isinstance(max_steps, int) and max_steps >= 1):
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+    if not (isinstance(tol, float) and tol > 0):
+        raise ValueError(f"tol must be a positive float, got {tol!r}")
+    say = progress if progress is not None else (lambda message: None)
+    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    k0 = jnp.broadcast_to(system.tid_stiffness, amps.shape)
+    c0 = jnp.broadcast_to(system.tid_damping, amps.shape)
+    # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
+    # variables and would never be left.
+    u = jnp.stack([jnp.log(k0 / k_ref), jnp.sqrt(jnp.maximum(c0 / c_ref, 0.05))], axis=-1)
+    iterations = jnp.zeros(amps.shape, dtype=int)
+    for stage, sharpness in enumerate(SHARPNESS, start=1):
+        u, steps, ok = _optimise_stage(
+            system, amps, u, band, jnp.asarray(sharpness), settings, max_steps, tol
+        )
+        iterations = iterations + steps
+        say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
+            f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
+            f"{int(jnp.max(steps))} iterations at most")
+    k, c = _design_to_tuning(u.T, k_ref, c_ref)
+    fine = jnp.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
+    say(f"checking peaks on {fine.size} frequencies x {amps.size} amplitudes")
+    after = _peaks_batch(system, amps, k, c, fine, settings)
+    before = _peaks_batch(system, amps, k0, c0, fine, settings)
+    x_peak, y_peak, omega_x, _, at_edge, steady_ok = after
+    status = jnp.where(
+        ~ok, 1, jnp.where(~(steady_ok & before[5]), 2, jnp.where(at_edge, 3, 0))
+    )
+    return RetuneResult(
+        amplitudes=amps,
+        tid_stiffness=k,
+        tid_damping=c,
+        initial_stiffness=k0,
+        initial_damping=c0,
+        x_peak=x_peak,
+        x_peak_initial=before[0],
+        y_peak=y_peak,
+        y_peak_initial=before[1],
+        omega_peak=omega_x,
+        iterations=iterations,
+        converged=status == 0,
+        damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,
+        status=status,
+    )
