@@ -22,7 +22,7 @@ import numpy as np
 from . import __version__, plot
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
 from ._linear import den_hartog_tuning, linear_receptance
-from ._response import check_grid, frequency_response
+from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
 from ._steady_state import SolverSettings
 from ._system import (
@@ -35,7 +35,6 @@ from ._system import (
     PAPER_INERTANCE,
     PAPER_STROKE,
     TIDSystem,
-    check_values,
 )
 
 PROG = "tid-jax"
@@ -184,6 +183,17 @@ def _read_config(path: str) -> dict:
     return config
 
 
+def _number(name: str, value, allowed: str) -> float:
+    """`value` as a float if it is a finite number and `allowed` ("positive" or
+    "non-negative"), else `CLIError` naming `name`."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise CLIError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if not (math.isfinite(value) and (value > 0 if allowed == "positive" else value >= 0)):
+        raise CLIError(f"{name} must be finite and {allowed}, got {value!r}")
+    return value
+
+
 def _inputs(args) -> dict:
     """Config file, then flags, then defaults, checked: a dict of `INPUT_KEYS` (those
     given) and the `solver` table."""
@@ -203,21 +213,20 @@ def _inputs(args) -> dict:
     inputs = {key: inputs[key] for key in INPUT_KEYS if key in inputs}
     for key, _, _, allowed in PHYSICAL_INPUTS:
         if key in inputs:
-            if np.ndim(inputs[key]) != 0:
-                raise CLIError(f"{key} must be a single number, got {inputs[key]!r}")
-            check_values(key, inputs[key], allowed)
-            inputs[key] = float(inputs[key])
-    inputs["amplitudes"] = [
-        float(a) for a in np.atleast_1d(check_grid("amplitudes", inputs["amplitudes"]))
-    ]
+            inputs[key] = _number(key, inputs[key], allowed)
+    amplitudes = inputs["amplitudes"]
+    amplitudes = amplitudes if isinstance(amplitudes, list) else [amplitudes]
+    if not amplitudes:
+        raise CLIError("amplitudes must not be empty")
+    inputs["amplitudes"] = [_number("amplitudes", a, "positive") for a in amplitudes]
     n = inputs["n_frequencies"]
     if isinstance(n, bool) or not isinstance(n, int) or n < MIN_FREQUENCIES:
         raise CLIError(f"n_frequencies must be an integer >= {MIN_FREQUENCIES}, got {n!r}")
     if "band_hz" in inputs:
         band = inputs["band_hz"]
-        if np.shape(band) != (2,):
+        if not (isinstance(band, list) and len(band) == 2):
             raise CLIError(f"band_hz must be two frequencies [LOW, HIGH] in Hz, got {band!r}")
-        low, high = (float(f) for f in check_grid("band_hz", band))
+        low, high = (_number("band_hz", f, "positive") for f in band)
         if not low < high:
             raise CLIError(f"band_hz is empty: LOW must be below HIGH, got {low:g} to {high:g} Hz")
         inputs["band_hz"] = [low, high]

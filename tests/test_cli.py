@@ -1,0 +1,398 @@
+"""The `tid-jax` command line, run for real on small grids: `main(argv)` in-process (so the
+compiled solvers are shared between tests) and the installed console script once."""
+
+import contextlib
+import csv
+import io
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+
+import tid_jax as tj
+from tid_jax import _io
+from tid_jax.cli import FRF_COLUMNS, RETUNE_COLUMNS, main
+
+FRF_ARGS = ["frf", "--amplitudes", "200", "600", "--band-hz", "3", "5", "--n-frequencies", "5"]
+FRF_FILES = ("frf.csv", "frf.json", "frf.png", "frf_config.toml")
+RETUNE_FILES = (
+    "retune.csv",
+    "retune.json",
+    "retune_config.toml",
+    "retune_frequency_response.png",
+    "retune_summary.png",
+)
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def run(argv):
+    """`main(argv)` with stdout and stderr captured: `(exit status, stdout, stderr)`."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main([str(arg) for arg in argv])
+    return status, out.getvalue(), err.getvalue()
+
+
+def read_csv(path):
+    with open(path, newline="") as file:
+        rows = list(csv.reader(file))
+    return rows[0], rows[1:]
+
+
+def leftovers(folder):
+    """Temporary files of interrupted atomic writes."""
+    return sorted(p.name for p in pathlib.Path(folder).iterdir() if p.name.endswith(".tmp"))
+
+
+@pytest.fixture(scope="module")
+def frf_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("frf")
+    status, stdout, stderr = run([*FRF_ARGS, "--out", out, "--json"])
+    return status, stdout, stderr, out
+
+
+@pytest.fixture(scope="module")
+def retune_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("retune")
+    config = folder / "system.toml"
+    config.write_text(
+        "# the paper's device on a 2000 kg host\n"
+        "host_mass = 2000.0\nhost_frequency_hz = 4.0\nhost_damping_ratio = 0.02\n"
+        "inertance = 100.0\nfriction_force = 20.0\n"
+        "amplitudes = [200.0, 600.0]\nn_frequencies = 9\n"
+    )
+    out = folder / "out"
+    status, stdout, stderr = run(["retune", "--config", config, "--out", out])
+    return status, stdout, stderr, out
+
+
+# --- frf ------------------------------------------------------------------------------------
+
+
+def test_frf_writes_parsable_files(frf_run):
+    status, _, _, out = frf_run
+    assert status == 0
+    for name in FRF_FILES:
+        assert (out / name).stat().st_size > 0
+    assert (out / "frf.png").read_bytes()[:8] == PNG_SIGNATURE
+    header, rows = read_csv(out / "frf.csv")
+    assert tuple(header) == FRF_COLUMNS
+    assert len(rows) == 2 * 5
+    table = {
+        name: np.array([float(row[i]) for row in rows])
+        for i, name in enumerate(header)
+        if name not in ("converged", "stable")
+    }
+    assert set(table["amplitude_N"]) == {200.0, 600.0}
+    np.testing.assert_allclose(np.unique(table["frequency_Hz"]), np.linspace(3, 5, 5))
+    stiffness = tj.paper_system().host_stiffness
+    np.testing.assert_allclose(
+        table["x_over_A_K"], table["x_max_m"] / (table["amplitude_N"] / stiffness)
+    )
+    assert all(row[header.index("converged")] == "True" for row in rows)
+    assert leftovers(out) == []
+
+
+def test_frf_json_on_stdout_is_the_saved_json_and_rebuilds_the_system(frf_run):
+    status, stdout, _, out = frf_run
+    printed = json.loads(stdout)
+    assert printed == json.loads((out / "frf.json").read_text())
+    assert printed["version"] == tj.__version__
+    assert printed["solver"] == tj.SolverSettings().to_dict()
+    system = tj.TIDSystem(**printed["system"])
+    assert system.to_dict() == tj.paper_system().to_dict()
+    assert printed["system"] == tj.paper_system().to_dict()
+    # the saved peaks are the library's, for the saved system and frequencies
+    omegas = 2 * np.pi * np.asarray(printed["frequencies_hz"])
+    expected = tj.frequency_response(system, omegas, 600.0)
+    np.testing.assert_allclose(printed["x_max_m"][1], expected.x_max, rtol=1e-10)
+    np.testing.assert_allclose(printed["y_max_m"][1], expected.y_max, rtol=1e-10)
+
+
+def test_frf_linear_columns_are_the_linear_receptance(frf_run):
+    _, stdout, _, _ = frf_run
+    data = json.loads(stdout)
+    system = tj.paper_system()
+    receptance = tj.linear_receptance(system, 2 * np.pi * np.asarray(data["frequencies_hz"]))
+    stiffness = float(system.host_stiffness)
+    np.testing.assert_allclose(data["x_linear_over_A_K"], np.abs(receptance.host) * stiffness)
+    np.testing.assert_allclose(data["y_linear_over_A_K"], np.abs(receptance.inerter) * stiffness)
+
+
+def test_frf_reports_progress_and_where_results_went(frf_run):
+    _, _, stderr, out = frf_run
+    assert "amplitude 1/2 (A = 200 N)" in stderr
+    assert "amplitude 2/2 (A = 600 N)" in stderr
+    assert f"results in {out}/" in stderr
+
+
+def test_saved_config_reproduces_the_run(frf_run, tmp_path):
+    _, stdout, _, out = frf_run
+    config = tomllib.loads((out / "frf_config.toml").read_text())
+    assert config["amplitudes"] == [200.0, 600.0]
+    assert config["band_hz"] == [3.0, 5.0]
+    status, again, _ = run(
+        ["frf", "--config", out / "frf_config.toml", "--out", tmp_path, "--json", "--quiet"]
+    )
+    assert status == 0
+    first, second = json.loads(stdout), json.loads(again)
+    for key in ("system", "solver", "frequencies_hz", "x_max_m", "y_max_m", "summary"):
+        assert second[key] == first[key]
+
+
+def test_flags_override_config_and_table_is_printed(frf_run, tmp_path):
+    config = tmp_path / "mine.toml"
+    config.write_text(
+        "host_mass = 1000.0\nhost_frequency_hz = 3.0\nfriction_force = 5.0\n"
+        "tid_damping = 400.0\namplitudes = [100.0, 200.0]\nband_hz = [3.0, 5.0]\n"
+        "n_frequencies = 5\n"
+    )
+    stiffness = 9.0e5
+    status, stdout, stderr = run(
+        [
+            "frf",
+            "--config",
+            config,
+            "--host-mass",
+            1500,
+            "--host-stiffness",
+            stiffness,
+            "--amplitudes",
+            300,
+            700,
+            "--out",
+            tmp_path / "out",
+            "--quiet",
+        ]
+    )
+    assert status == 0
+    assert stderr == ""
+    lines = stdout.splitlines()
+    assert lines[1].split()[:2] == ["A", "[N]"]
+    assert [line.split()[0] for line in lines[3:]] == ["300", "700"]
+    data = json.loads((tmp_path / "out" / "frf.json").read_text())
+    k_dh, _ = tj.den_hartog_tuning(1500.0, stiffness, tj.paper_system().inertance)
+    assert data["system"]["host_mass"] == 1500.0  # flag beats config
+    assert data["system"]["host_stiffness"] == stiffness  # flag replaces host_frequency_hz
+    assert data["system"]["friction_force"] == 5.0  # config beats default
+    assert data["system"]["tid_damping"] == 400.0
+    assert data["system"]["tid_stiffness"] == pytest.approx(float(k_dh))  # default
+    assert data["amplitudes_N"] == [300.0, 700.0]
+    assert "host_frequency_hz" not in data["inputs"]
+
+
+# --- retune ---------------------------------------------------------------------------------
+
+
+def test_retune_prints_the_table_and_writes_every_file(retune_run):
+    status, stdout, stderr, out = retune_run
+    assert status == 0
+    for name in RETUNE_FILES:
+        assert (out / name).stat().st_size > 0
+    for name in RETUNE_FILES[3:]:
+        assert (out / name).read_bytes()[:8] == PNG_SIGNATURE
+    assert leftovers(out) == []
+    lines = stdout.splitlines()
+    assert "k/k_DH" in lines[1] and "c/c_DH" in lines[1] and "stroke [cm] (limit 7)" in lines[1]
+    assert [line.split()[0] for line in lines[3:]] == ["200", "600"]
+    assert "retune stage" in stderr and f"results in {out}/" in stderr
+
+
+def test_retune_csv_and_json_agree_with_the_system(retune_run):
+    _, stdout, _, out = retune_run
+    header, rows = read_csv(out / "retune.csv")
+    assert tuple(header) == RETUNE_COLUMNS
+    data = json.loads((out / "retune.json").read_text())
+    assert data["version"] == tj.__version__
+    assert data["solver"] == tj.SolverSettings().to_dict()
+    assert data["inputs"]["host_mass"] == 2000.0
+    system = tj.TIDSystem(**data["system"])
+    assert system.host_mass == 2000.0 and system.inertance == 100.0
+    assert float(system.host_frequency) == pytest.approx(2 * np.pi * 4.0)
+    k_dh, c_dh = (float(v) for v in tj.den_hartog_tuning(2000.0, system.host_stiffness, 100.0))
+    assert data["den_hartog"] == pytest.approx({"tid_stiffness": k_dh, "tid_damping": c_dh})
+    assert len(data["results"]) == len(rows) == 2
+    for record, row in zip(data["results"], rows, strict=True):
+        assert [str(record[key]) for key in RETUNE_COLUMNS] == row
+        assert record["k_over_k_den_hartog"] == pytest.approx(record["k_N_per_m"] / k_dh)
+        assert record["c_over_c_den_hartog"] == pytest.approx(record["c_N_s_per_m"] / c_dh)
+        assert record["stroke_limit_m"] == tj.PAPER_STROKE
+        assert record["within_stroke_limit"] == (record["stroke_after_m"] <= tj.PAPER_STROKE)
+        assert record["converged"] == record["status"].startswith("ok")
+        # retuning lowers the host peak; friction makes it a stiffer, less damped TID
+        assert record["x_peak_after_over_A_K"] < record["x_peak_before_over_A_K"]
+        assert record["k_over_k_den_hartog"] > 1
+        assert record["c_over_c_den_hartog"] < 1
+    low, high = data["results"]
+    assert low["c_over_c_den_hartog"] < high["c_over_c_den_hartog"]
+    # the saved table prints as the stdout table
+    assert f"{low['k_over_k_den_hartog']:.3f}" in stdout.splitlines()[3]
+
+
+# --- bad input ------------------------------------------------------------------------------
+
+BAD_TOML = 'host_mass = 1500\nfriction_force = "twenty\n'
+
+
+@pytest.mark.parametrize(
+    "argv, config, expected",
+    [
+        (["retune", "--host-mas", "1"], None, "unrecognized arguments: --host-mas"),
+        (["frf", "--host-mass", "-1"], None, "host_mass must be finite and positive, got -1.0"),
+        (["frf", "--host-mass", "heavy"], None, "argument --host-mass: invalid float value"),
+        (
+            ["frf", "--friction-force", "nan"],
+            None,
+            "friction_force must be finite and non-negative, got nan",
+        ),
+        (
+            ["retune", "--amplitudes", "100", "-5"],
+            None,
+            "amplitudes must be finite and positive, got -5.0",
+        ),
+        (["frf", "--band-hz", "5", "3"], None, "band_hz is empty"),
+        (["frf", "--band-hz", "4", "4"], None, "band_hz is empty"),
+        (["frf", "--n-frequencies", "0"], None, "n_frequencies must be an integer >= 5, got 0"),
+        (["fly"], None, "invalid choice: 'fly'"),
+        (["frf"], BAD_TOML, "is not valid TOML"),
+        (["frf"], "host_mas = 1500.0\n", "unknown key 'host_mas'"),
+        (["frf"], "host_mass = 'heavy'\n", "host_mass must be a number, got 'heavy'"),
+        (["frf"], "host_mass = -3.0\n", "host_mass must be finite and positive, got -3.0"),
+        (["frf"], "band_hz = [4.0]\n", "band_hz must be two frequencies"),
+        (["frf"], "host_frequency_hz = 4.0\nhost_stiffness = 1e6\n", "not both"),
+        (["frf"], "[solver]\nrtoll = 1e-6\n", "unknown key 'rtoll' in [solver]"),
+        (["frf"], "[solver]\nrtol = -1.0\n", "SolverSettings.rtol must be a positive number"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):
+    if config is not None:
+        (tmp_path / "bad.toml").write_text(config)
+        argv = [*argv, "--config", tmp_path / "bad.toml"]
+    status, stdout, stderr = run([*argv, "--out", tmp_path / "out"])
+    assert status == 2
+    assert stdout == ""
+    assert stderr.count("\n") == 1 and stderr.startswith("tid-jax: error: ")
+    assert expected in stderr
+    assert not (tmp_path / "out").exists()  # nothing computed, nothing written
+
+
+def test_missing_config_file(tmp_path):
+    status, _, stderr = run(["frf", "--config", tmp_path / "none.toml"])
+    assert status == 2
+    assert (
+        stderr == f"tid-jax: error: cannot read config {tmp_path / 'none.toml'}: "
+        "No such file or directory\n"
+    )
+
+
+@pytest.mark.parametrize("below", ["a-file", "a-file/sub"])
+def test_unwritable_output_folder(tmp_path, below):
+    (tmp_path / "a-file").write_text("not a folder")
+    status, stdout, stderr = run([*FRF_ARGS, "--out", tmp_path / below])
+    assert status == 2 and stdout == ""
+    assert stderr.count("\n") == 1
+    assert stderr.startswith(f"tid-jax: error: output folder {tmp_path / below} is ")
+    assert (tmp_path / "a-file").read_text() == "not a folder"
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["retune", "--help"], ["frf", "--help"]])
+def test_help(argv):
+    status, stdout, stderr = run(argv)
+    assert status == 0 and stderr == ""
+    assert stdout.startswith("usage: tid-jax")
+    if argv[0] != "--help":
+        for flag in ("--config", "--host-frequency-hz", "--band-hz", "--out", "--json"):
+            assert flag in stdout
+
+
+# --- atomic files ---------------------------------------------------------------------------
+
+
+def test_interrupted_write_keeps_the_old_file_and_leaves_no_temporary(tmp_path, monkeypatch):
+    path = _io.write_csv(tmp_path / "table.csv", ["a", "b"], [[1, 2], [3, 4]])
+    before = path.read_text()
+
+    def write_half_then_interrupt(self, text, *args, **kwargs):
+        with open(self, "w") as file:
+            file.write(text[: len(text) // 2])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pathlib.Path, "write_text", write_half_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        _io.write_csv(path, ["a", "b"], [[5, 6], [7, 8]] * 100)
+    assert path.read_text() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
+
+
+def test_interrupted_run_leaves_only_complete_files(frf_run, tmp_path, monkeypatch):
+    _, _, _, previous = frf_run
+    out = tmp_path / "out"
+    shutil.copytree(previous, out)
+    old = {name: (out / name).read_bytes() for name in FRF_FILES}
+    replace = os.replace
+    calls = []
+
+    def replace_then_interrupt(src, dst):
+        if pathlib.Path(dst).parent == out:
+            calls.append(dst)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+        replace(src, dst)
+
+    monkeypatch.setattr(_io.os, "replace", replace_then_interrupt)
+    argv = ["frf", "--amplitudes", "200", "250", "--band-hz", "3", "5", "--n-frequencies", "5"]
+    status, _, stderr = run([*argv, "--out", out])
+    assert status == 130
+    assert stderr.splitlines()[-1].startswith("tid-jax: interrupted")
+    assert leftovers(out) == []
+    assert sorted(p.name for p in out.iterdir()) == sorted(FRF_FILES)
+    written, interrupted = (pathlib.Path(p).name for p in calls)
+    assert "250.0" in (out / written).read_text()  # renamed into place whole
+    assert (out / interrupted).read_bytes() == old[interrupted]  # untouched
+    for name in set(FRF_FILES) - {written, interrupted}:
+        assert (out / name).read_bytes() == old[name]
+
+
+# --- the installed console script -----------------------------------------------------------
+
+
+def console_script():
+    script = shutil.which("tid-jax", path=os.path.dirname(sys.executable))
+    if script is None:
+        pytest.fail("console script tid-jax is not installed beside this Python")
+    return script
+
+
+def test_console_script_runs_and_fails_cleanly(tmp_path):
+    script = console_script()
+    argv = [
+        script,
+        "frf",
+        "--amplitudes",
+        "200",
+        "--band-hz",
+        "3",
+        "5",
+        "--n-frequencies",
+        "5",
+        "--out",
+        tmp_path,
+        "--json",
+        "--quiet",
+    ]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["amplitudes_N"] == [200.0]
+    assert all((tmp_path / name).exists() for name in FRF_FILES)
+    bad = subprocess.run(
+        [script, "retune", "--inertance", "-75"], capture_output=True, text=True, timeout=300
+    )
+    assert bad.returncode == 2
+    assert bad.stderr == "tid-jax: error: inertance must be finite and positive, got -75.0\n"
+    assert "Traceback" not in bad.stderr
