@@ -95,16 +95,22 @@ class SubstructuringStability(eqx.Module):
 
 
 class _Plan(NamedTuple):
-    """Static options: they select code paths and array sizes."""
+    """Static options: they select code paths and array sizes (each new plan compiles)."""
 
     scheme: str
-    guessed_force: str
-    prediction: str | None
-    prediction_order: int
     compliant: bool
     substeps: int
-    n_steps: int
-    buffer_length: int
+    buffer_length: int  # slots of the actuator's delay line
+
+
+class _Controller(eqx.Module):
+    """Options shared by all points of a batch, traced so that they do not recompile."""
+
+    dt: Array  # sample period, s
+    n_steps: Array  # samples simulated
+    prediction: Array  # 0 none, 1 polynomial, 2 harmonic
+    prediction_order: Array
+    harmonic_guess: Array  # bool: b_g y*'' ~ -b_g omega^2 y*
 
 
 class _Point(eqx.Module):
@@ -179,16 +185,17 @@ def _rk4(field, t, state, dt, substeps: int):
 # Controller, actuator and physical substructure --------------------------------------------
 
 
-def _lagrange_weights(order: int, steps_ahead):
-    """Weights on samples at 0, -1, ..., -order (in sample periods) of their interpolating
-    polynomial evaluated `steps_ahead` sample periods ahead."""
+def _lagrange_weights(order, steps_ahead):
+    """Weights on samples at 0, -1, ..., -MAX_PREDICTION_ORDER (in sample periods) of the
+    polynomial through the first `order + 1` of them, evaluated `steps_ahead` sample
+    periods ahead (zero beyond `order`)."""
     weights = []
-    for j in range(order + 1):
+    for j in range(MAX_PREDICTION_ORDER + 1):
         w = jnp.ones_like(steps_ahead)
-        for i in range(order + 1):
+        for i in range(MAX_PREDICTION_ORDER + 1):
             if i != j:
-                w = w * (steps_ahead + i) / (i - j)
-        weights.append(w)
+                w = w * jnp.where(i <= order, (steps_ahead + i) / (i - j), 1.0)
+        weights.append(jnp.where(j <= order, w, 0.0))
     return jnp.stack(weights)
 
 
@@ -197,8 +204,9 @@ def _harmonic_prediction(kinematics, omega, horizon):
     advanced with y and y' (y'' and y' for the acceleration, whose rate is -omega^2 y')."""
     y, v, a = kinematics
     cos, sin = jnp.cos(omega * horizon), jnp.sin(omega * horizon)
-    return jnp.stack([cos * y + sin / omega * v, cos * v - omega * sin * y,
-                      cos * a - omega * sin * v])
+    return jnp.stack(
+        [cos * y + sin / omega * v, cos * v - omega * sin * y, cos * a - omega * sin * v]
+    )
 
 
 def _inerter_force(system, kinematics):
@@ -208,15 +216,16 @@ def _inerter_force(system, kinematics):
     )
 
 
-def _fed_back_force(plan, point, actuator, measured):
+def _fed_back_force(plan, controller, point, actuator, measured):
     """The force the controller feeds back: f_s (conventional) or e = f_s - b_g y*''."""
     if plan.scheme == "conventional":
         return measured
-    if plan.guessed_force == "acceleration":
-        guessed = point.guessed_inertance * actuator[2]
-    else:  # the paper's approximation b_g y*'' ~ -b_g omega^2 y*
-        guessed = -point.guessed_inertance * point.omega**2 * actuator[0]
-    return measured - guessed
+    acceleration = jnp.where(
+        controller.harmonic_guess,
+        -(point.omega**2) * actuator[0],  # the paper's approximation of y*''
+        actuator[2],
+    )
+    return measured - point.guessed_inertance * acceleration
 
 
 def _physical_field(system, point, s, state, actuator):
@@ -244,15 +253,17 @@ def _linear_kinematics(system, point, times):
     jw = 1j * point.omega
     phase = point.amplitude * jnp.exp(jw * times)
     host, inerter = receptance.host * phase, receptance.inerter * phase
-    return jnp.stack([host.imag, (jw * host).imag, inerter.imag, (jw * inerter).imag,
-                      (jw**2 * inerter).imag])
+    return jnp.stack(
+        [host.imag, (jw * host).imag, inerter.imag, (jw * inerter).imag, (jw**2 * inerter).imag]
+    )
 
 
 # One test --------------------------------------------------------------------------------
 
 
-def _simulate_point(plan: _Plan, system: TIDSystem, point: _Point, dt):
-    n_steps, length, order = plan.n_steps, plan.buffer_length, plan.prediction_order
+def _simulate_point(plan: _Plan, controller: _Controller, system: TIDSystem, point: _Point):
+    length, dt = plan.buffer_length, controller.dt
+    n_steps, order = controller.n_steps, controller.prediction_order
     dtype = point.omega.dtype
     end = n_steps * dt
     window_start, previous_start = end - point.window, end - 2 * point.window
@@ -268,24 +279,25 @@ def _simulate_point(plan: _Plan, system: TIDSystem, point: _Point, dt):
     z0 = start[:4] if plan.scheme == "error_feedback" else start[:3]
     sample_times = (jnp.arange(length) - length) * dt  # slot n mod L holds sample n < 0
     commands0 = _linear_kinematics(system, point, sample_times + horizon)[2:].T
-    past0 = _linear_kinematics(system, point, -jnp.arange(1, order + 2) * dt)[2:].T
+    past_times = -jnp.arange(1, MAX_PREDICTION_ORDER + 1) * dt
+    past0 = _linear_kinematics(system, point, past_times)[2:].T  # samples n-1, n-2, ...
     delay = point.delay_samples * dt
     actuator0 = _linear_kinematics(system, point, -dt - delay + horizon)[2:]
-    held0 = _fed_back_force(plan, point, start[2:], _inerter_force(system, start[2:]))
+    held0 = _fed_back_force(plan, controller, point, start[2:], _inerter_force(system, start[2:]))
     physical0 = start[2:4]
 
-    def step(carry, n):
+    def step(n, carry):
         z, held, commands, past, actuator, physical, diverged, stats = carry
         t = n * dt
         # The controller commands the interface kinematics, predicted if asked.
         current = _interface_kinematics(plan, system, point, t, z, held)
-        if plan.prediction == "polynomial":
-            command = weights @ jnp.concatenate([current[None], past[:order]], axis=0)
-        elif plan.prediction == "harmonic":
-            command = _harmonic_prediction(current, point.omega, horizon)
-        else:
-            command = current
-        past = jnp.concatenate([current[None], past[:-1]], axis=0)
+        samples = jnp.concatenate([current[None], past], axis=0)
+        command = jnp.select(
+            [controller.prediction == 1, controller.prediction == 2],
+            [weights @ samples, _harmonic_prediction(current, point.omega, horizon)],
+            current,
+        )
+        past = samples[:-1]
         commands = commands.at[n % length].set(command)
         # The actuator: the delay (interpolated between samples), then the lag.
         newer = commands[(n - whole_samples) % length]
@@ -297,7 +309,7 @@ def _simulate_point(plan: _Plan, system: TIDSystem, point: _Point, dt):
             measured = point.parasitic_stiffness * (actuator[0] - physical[0])
         else:
             measured = _inerter_force(system, actuator)
-        force = _fed_back_force(plan, point, actuator, measured)
+        force = _fed_back_force(plan, controller, point, actuator, measured)
 
         def field(s, state):
             numerical, phys = state
@@ -332,17 +344,28 @@ def _simulate_point(plan: _Plan, system: TIDSystem, point: _Point, dt):
         sine, cosine = jnp.sin(point.omega * t_next), jnp.cos(point.omega * t_next)
         x, y = z[0], z[2]
         sums = sums + in_window * jnp.stack(
-            [sine * sine, cosine * cosine, sine * cosine, x * sine, x * cosine, y * sine,
-             y * cosine]
+            [
+                sine * sine,
+                cosine * cosine,
+                sine * cosine,
+                x * sine,
+                x * cosine,
+                y * sine,
+                y * cosine,
+            ]
         )
         stats = (peaks, previous_peaks, jnp.stack([values, recent[0]]), sums)
-        return (z, held, commands, past, actuator, physical, diverged, stats), None
+        return z, held, commands, past, actuator, physical, diverged, stats
 
     first = jnp.abs(jnp.stack([z0[0], z0[2]]))
-    stats0 = (jnp.zeros(2, dtype), jnp.zeros(2, dtype), jnp.stack([first, first]),
-              jnp.zeros(7, dtype))
+    stats0 = (
+        jnp.zeros(2, dtype),
+        jnp.zeros(2, dtype),
+        jnp.stack([first, first]),
+        jnp.zeros(7, dtype),
+    )
     carry0 = (z0, held0, commands0, past0, actuator0, physical0, jnp.zeros((), bool), stats0)
-    carry, _ = jax.lax.scan(step, carry0, jnp.arange(n_steps))
+    carry = jax.lax.fori_loop(0, n_steps, step, carry0)
     *_, diverged, (peaks, previous_peaks, _, sums) = carry
 
     # Least-squares fit of a sin + b cos over the window: phase atan2(b, a).
@@ -359,8 +382,8 @@ def _simulate_point(plan: _Plan, system: TIDSystem, point: _Point, dt):
 
 
 @eqx.filter_jit
-def _simulate_batch(plan: _Plan, system: TIDSystem, points: _Point, dt):
-    return jax.vmap(lambda point: _simulate_point(plan, system, point, dt))(points)
+def _simulate_batch(plan: _Plan, controller: _Controller, system: TIDSystem, points: _Point):
+    return jax.vmap(lambda point: _simulate_point(plan, controller, system, point))(points)
 
 
 def _first_harmonic_phase(samples):
@@ -495,7 +518,8 @@ def simulate_substructuring(
       "harmonic" (advance the phase of the current y, y', y'' by omega * horizon, exact
       for harmonic motion at the forcing frequency).
     - `prediction_order`: degree of the "polynomial" prediction, 0 to 4.
-    - `prediction_horizon`: how far ahead to predict, s (default: the delay).
+    - `prediction_horizon`: how far ahead to predict, s (default: the delay plus half a
+      sample period, the mean lag of the zero-order hold).
     - `actuator_lag`: time constant of the actuator's first-order lag, s (0: none).
     - `parasitic_stiffness`: stiffness in series with the physical inerter, N/m (None:
       rigid).
@@ -534,8 +558,7 @@ def simulate_substructuring(
     periods = _integer("periods", periods, 2 * measure_periods)
     lag = _real_scalar("actuator_lag", actuator_lag, "non-negative")
     if parasitic_stiffness is not None:
-        parasitic_stiffness = _real_scalar("parasitic_stiffness", parasitic_stiffness,
-                                           "positive")
+        parasitic_stiffness = _real_scalar("parasitic_stiffness", parasitic_stiffness, "positive")
     factor = _real_scalar("divergence_factor", divergence_factor, "positive")
     if factor <= 1:
         raise ValueError(f"divergence_factor must be > 1, got {divergence_factor!r}")
@@ -546,8 +569,9 @@ def simulate_substructuring(
             f"from the damper), got {float(system.tid_damping)!r}"
         )
     try:
-        shape = np.broadcast_shapes(omega_array.shape, amplitude_array.shape,
-                                    delay_array.shape, guess_array.shape)
+        shape = np.broadcast_shapes(
+            omega_array.shape, amplitude_array.shape, delay_array.shape, guess_array.shape
+        )
     except ValueError:
         raise ValueError(
             "omega, amplitude, delay and guessed_inertance must broadcast together, got "
@@ -569,7 +593,7 @@ def simulate_substructuring(
             f"{longest!r}; raise periods"
         )
     if prediction_horizon is None:
-        horizon_array = delay_array
+        horizon_array = delay_array + 0.5 / rate  # the hold lags half a sample on average
     else:
         horizon = _real_scalar("prediction_horizon", prediction_horizon, "non-negative")
         if horizon >= duration / 2:
@@ -581,27 +605,38 @@ def simulate_substructuring(
     if prediction is None:
         horizon_array = np.zeros(())
 
-    flat = [np.broadcast_to(a, shape).reshape(-1) for a in (
-        omega_array, amplitude_array, delay_array, guess_array,
-        np.broadcast_to(horizon_array, delay_array.shape))]
+    flat = [
+        np.broadcast_to(a, shape).reshape(-1)
+        for a in (
+            omega_array,
+            amplitude_array,
+            delay_array,
+            guess_array,
+            np.broadcast_to(horizon_array, delay_array.shape),
+        )
+    ]
     omegas, amplitudes, delays, guesses, horizons = flat
     delay_samples = delays * rate
+    # One spare slot beyond the two read (against rounding of the delay), rounded up to a
+    # power of two (at least 32) so that nearby delays share the compiled code.
+    needed = int(math.floor(float(np.max(delay_samples)))) + 3
     plan = _Plan(
         scheme=scheme,
-        guessed_force=guessed_force,
-        prediction=prediction,
-        prediction_order=order,
         compliant=parasitic_stiffness is not None,
         substeps=substeps,
-        n_steps=n_steps,
-        # one spare slot beyond the two read, against rounding of the delay
-        buffer_length=int(math.floor(float(np.max(delay_samples)))) + 3,
+        buffer_length=max(32, 1 << (needed - 1).bit_length()),
+    )
+    dtype = jnp.result_type(float)
+    controller = _Controller(
+        dt=jnp.asarray(1 / rate, dtype),
+        n_steps=jnp.asarray(n_steps),
+        prediction=jnp.asarray(0 if prediction is None else 1 + PREDICTIONS.index(prediction)),
+        prediction_order=jnp.asarray(order),
+        harmonic_guess=jnp.asarray(guessed_force == "harmonic"),
     )
     receptance = linear_receptance(system, omegas)
-    linear = np.maximum(np.abs(np.asarray(receptance.host)),
-                        np.abs(np.asarray(receptance.inerter)))
+    linear = np.maximum(np.abs(np.asarray(receptance.host)), np.abs(np.asarray(receptance.inerter)))
     scale = np.maximum(linear, 1 / float(system.host_stiffness)) * amplitudes
-    dtype = jnp.result_type(float)
     points = _Point(
         omega=jnp.asarray(omegas, dtype),
         amplitude=jnp.asarray(amplitudes, dtype),
@@ -613,17 +648,20 @@ def simulate_substructuring(
         bound=jnp.asarray(factor * scale, dtype),
         window=jnp.asarray(measure_periods * 2 * np.pi / omegas, dtype),
     )
-    out = _simulate_batch(plan, system, points, jnp.asarray(1 / rate, dtype))
+    out = _simulate_batch(plan, controller, system, points)
     out["stable"] = ~out["diverged"] & (out["growth"] <= 1 + growth_tolerance)
     fields = {key: jnp.reshape(value, shape) for key, value in out.items()}
 
     if reference:
-        pairs, inverse = np.unique(np.stack([omegas, amplitudes], axis=1), axis=0,
-                                   return_inverse=True)
-        whole = _reference_batch(system, jnp.asarray(pairs[:, 0], dtype),
-                                 jnp.asarray(pairs[:, 1], dtype))
-        whole = {key: jnp.reshape(value[inverse.reshape(-1)], shape)
-                 for key, value in whole.items()}
+        pairs, inverse = np.unique(
+            np.stack([omegas, amplitudes], axis=1), axis=0, return_inverse=True
+        )
+        whole = _reference_batch(
+            system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype)
+        )
+        whole = {
+            key: jnp.reshape(value[inverse.reshape(-1)], shape) for key, value in whole.items()
+        }
 
         def wrap(angle):
             return jnp.angle(jnp.exp(1j * angle))
@@ -676,8 +714,13 @@ def substructuring_stability(
     _real_scalar("omega", omega, "positive")
     _real_scalar("amplitude", amplitude, "positive")
     result = simulate_substructuring(
-        system, omega, amplitude, guessed_inertance=guesses[:, None], delay=delays[None, :],
-        reference=False, **options,
+        system,
+        omega,
+        amplitude,
+        guessed_inertance=guesses[:, None],
+        delay=delays[None, :],
+        reference=False,
+        **options,
     )
     stable = np.asarray(result.stable)
     run = np.cumprod(stable, axis=1).astype(bool)  # stable at this and every smaller delay
