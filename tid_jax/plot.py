@@ -265,3 +265,64 @@ def plot_retune_summary(
     axes[1, 1].set_title("(d) inerter stroke")
     fig.suptitle(title or "TID retuned for each forcing amplitude")
     return fig
+
+
+def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, title=None):
+    """The paper's Figure 14: peak host displacement x and inerter displacement y (m, drawn
+    in mm) against forcing frequency (Hz), the whole system as a dashed line and each
+    virtual substructuring test as markers. `tests` is a sequence of
+    `(label, x_max, y_max, stable)` on the same frequencies; unstable points are left out
+    and marked by a cross on the frequency axis."""
+    frequencies_hz = np.asarray(frequencies_hz, dtype=float)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
+    markers = ("o", "s", "^", "D", "v")
+    for ax, whole, index, name in (
+        (axes[0], whole_x, 1, "(a) host structure, x"),
+        (axes[1], whole_y, 2, "(b) TID (inerter terminal), y"),
+    ):
+        ax.plot(frequencies_hz, 1e3 * np.asarray(whole), color="black", linestyle="--",
+                linewidth=1.5, label="whole system")
+        for number, test in enumerate(tests):
+            label, stable = test[0], np.asarray(test[3], dtype=bool)
+            values = 1e3 * np.asarray(test[index], dtype=float)
+            ax.plot(frequencies_hz[stable], values[stable], linestyle="none",
+                    marker=markers[number % len(markers)], markersize=4, label=label)
+            if not np.all(stable):
+                ax.plot(frequencies_hz[~stable], np.zeros(int((~stable).sum())),
+                        linestyle="none", marker="x", color="tab:red",
+                        label=f"{label}: unstable")
+        ax.set(xlabel="forcing frequency [Hz]", ylabel="peak displacement [mm]", title=name)
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title or "Virtual substructuring test against the whole system")
+    return fig
+
+
+def plot_substructuring_stability(curves, *, max_delay=None, title=None):
+    """Largest stable actuator delay (s, drawn in ms) against the guessed-to-true inertance
+    ratio b_g / b. `curves` is a sequence of `(label, ratios, largest_stable_delay)` with
+    -1 where even the smallest delay was unstable (drawn at 0 with open markers);
+    `max_delay` (s), the largest delay tried, is drawn as a line: curves on it were stable
+    for every delay tried."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.2), layout="constrained")
+    markers = ("o", "s", "^", "D")
+    for number, (label, ratios, largest) in enumerate(curves):
+        ratios = np.asarray(ratios, dtype=float)
+        largest = np.asarray(largest, dtype=float)
+        marker = markers[number % len(markers)]
+        (line,) = ax.plot(ratios, 1e3 * np.maximum(largest, 0), marker=marker, label=label)
+        none = largest < 0
+        if np.any(none):
+            ax.plot(ratios[none], np.zeros(int(none.sum())), linestyle="none", marker=marker,
+                    markerfacecolor="white", color=line.get_color())
+    if max_delay is not None:
+        ax.axhline(1e3 * max_delay, color="0.5", linestyle=":",
+                   label="largest delay tried")
+    ax.axvline(0.5, color="0.7", linewidth=1)
+    ax.set(xlabel="guessed / true inertance  b_g / b", ylabel="largest stable delay [ms]",
+           title=title or "Error-feedback substructuring: stability against delay")
+    ax.set_ylim(bottom=-1)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
