@@ -53,7 +53,7 @@ def check_grid(name: str, values: ArrayLike) -> np.ndarray:
     bad = ~(np.isfinite(array) & (array > 0))
     if np.any(bad):
         raise ValueError(
-            f"{name} must be finite and positive, got {array.reshape(-1)[np.argmax(bad)]!r}"
+            f"{name} must be finite and positive, got {float(array.reshape(-1)[np.argmax(bad)])!r}"
         )
     return array
 
@@ -64,34 +64,59 @@ def point_response(system: TIDSystem, omega, amplitude, settings: SolverSettings
     p = parameter_vector(system, amplitude, omega)
     orbit = solve_orbit(p, settings, z_init)
     scale = amplitude / system.host_stiffness
-    x_max = refined_peak(orbit.x_samples) * scale
-    y_max = refined_peak(orbit.y_samples) * scale
+    # A failed integration gives non-finite samples: report +inf (and `converged` False).
+    x_max = jnp.nan_to_num(refined_peak(orbit.x_samples) * scale, nan=jnp.inf)
+    y_max = jnp.nan_to_num(refined_peak(orbit.y_samples) * scale, nan=jnp.inf)
     return orbit, x_max, y_max
 
 
-@eqx.filter_jit
-def _grid_response(system, omegas, amplitudes, settings):
-    def one(omega, amplitude):
-        orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
-        scale = amplitude / system.host_stiffness
-        state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
-        velocity = orbit.y_velocity_samples * omega * scale
-        stuck = jnp.abs(velocity) < 2 * system.friction_width
-        stable = jnp.max(jnp.abs(orbit.floquet_multipliers)) < 1
-        return dict(
-            x_max=x_max,
-            y_max=y_max,
-            converged=orbit.converged,
-            stable=stable,
-            state=state,
-            residual=orbit.residual,
-            newton_steps=orbit.newton_steps,
-            floquet_multipliers=orbit.floquet_multipliers,
-            stick_fraction=jnp.mean(stuck.astype(x_max.dtype)),
-        )
+def _point_summary(system, omega, amplitude, settings):
+    orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
+    scale = amplitude / system.host_stiffness
+    state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
+    velocity = orbit.y_velocity_samples * omega * scale
+    stuck = jnp.abs(velocity) < 2 * system.friction_width
+    return dict(
+        x_max=x_max,
+        y_max=y_max,
+        converged=orbit.converged,
+        stable=jnp.max(jnp.abs(orbit.floquet_multipliers)) < 1,
+        state=state,
+        residual=orbit.residual,
+        newton_steps=orbit.newton_steps,
+        floquet_multipliers=orbit.floquet_multipliers,
+        stick_fraction=jnp.mean(stuck.astype(x_max.dtype)),
+    )
 
+
+@eqx.filter_jit
+def _points(system, omegas, amplitudes, settings):
+    return jax.vmap(lambda w, a: _point_summary(system, w, a, settings))(omegas, amplitudes)
+
+
+def solve_points(system, omegas, amplitudes, settings: SolverSettings) -> dict:
+    """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched.
+    Points that do not converge are solved again, on their own, with
+    `settings.persistent()`; the better attempt is kept."""
+    out = _points(system, omegas, amplitudes, settings)
+    failed = np.flatnonzero(~np.asarray(out["converged"]))
+    if failed.size:
+        # Pad the retry batch to a power of two so that few batch sizes are compiled.
+        size = 1 << int(np.ceil(np.log2(failed.size)))
+        index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
+        retry = _points(system, omegas[index], amplitudes[index], settings.persistent())
+        better = np.asarray(retry["residual"])[: failed.size] < np.asarray(out["residual"])[failed]
+        chosen = failed[better]
+        out = {
+            key: value.at[chosen].set(retry[key][: failed.size][better])
+            for key, value in out.items()
+        }
+    return out
+
+
+def _grid_response(system, omegas, amplitudes, settings):
     omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
-    flat = jax.vmap(one)(omega_grid.reshape(-1), amplitude_grid.reshape(-1))
+    flat = solve_points(system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings)
     shape = amplitude_grid.shape
     return {key: value.reshape(shape + value.shape[1:]) for key, value in flat.items()}
 

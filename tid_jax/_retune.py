@@ -8,7 +8,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._linear import den_hartog_tuning
-from ._response import check_grid, point_response
+from ._response import check_grid, frequency_response, point_response
 from ._steady_state import SolverSettings
 from ._system import TIDSystem
 
@@ -105,19 +105,19 @@ class Peaks(eqx.Module):
     converged: Bool[Array, " amps"]  # every steady state in the band converged
 
 
-def _peaks_one(system, amplitude, omegas, settings):
-    xs, ys, ok, _ = sweep(system, amplitude, omegas, settings)
-    x_peak, omega_x, at_edge = grid_peak(xs, omegas)
-    y_peak, omega_y, _ = grid_peak(ys, omegas)
-    return x_peak, y_peak, omega_x, omega_y, at_edge, jnp.all(ok)
-
-
-@eqx.filter_jit
-def _peaks_batch(system, amplitudes, stiffness, damping, omegas, settings):
-    def one(amplitude, k, c):
-        return _peaks_one(_with_tuning(system, k, c), amplitude, omegas, settings)
-
-    return jax.vmap(one)(amplitudes, stiffness, damping)
+def _peaks_from_response(response, omegas) -> Peaks:
+    """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas`."""
+    x = jax.vmap(lambda v: grid_peak(v, omegas))(response.x_max)
+    y = jax.vmap(lambda v: grid_peak(v, omegas))(response.y_max)
+    return Peaks(
+        amplitudes=response.amplitudes,
+        x_peak=x[0],
+        y_peak=y[0],
+        omega_x=x[1],
+        omega_y=y[1],
+        at_edge=x[2],
+        converged=jnp.all(response.converged, axis=-1),
+    )
 
 
 def _check_system(system) -> None:
@@ -147,11 +147,8 @@ def peaks(
     `default_omegas(system)`) for each amplitude (N), all in one batched call."""
     _check_system(system)
     band = _band(system, omegas)
-    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
-    k = jnp.broadcast_to(system.tid_stiffness, amps.shape)
-    c = jnp.broadcast_to(system.tid_damping, amps.shape)
-    out = _peaks_batch(system, amps, k, c, band, settings)
-    return Peaks(amps, *out)
+    amps = np.atleast_1d(check_grid("amplitudes", amplitudes))
+    return _peaks_from_response(frequency_response(system, band, amps, settings=settings), band)
 
 
 def peak_response(
@@ -223,8 +220,17 @@ def _design_to_tuning(u, k_ref, c_ref):
     return k_ref * jnp.exp(u[0]), c_ref * u[1] ** 2
 
 
+# Newton iterations allowed per steady state inside the optimiser, where every solve is
+# warm-started; points that need more are still evaluated (at their last iterate), and the
+# final design is checked with fully converged steady states.
+DESIGN_NEWTON_STEPS = 4
+
+
 @eqx.filter_jit
 def _optimise_stage(system, amplitudes, u0, omegas, sharpness, settings, max_steps, tol):
+    settings = eqx.tree_at(
+        lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
+    )
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
 
     def objective(u, args):
@@ -291,13 +297,19 @@ def retune(
             f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    fine = jnp.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
-    say(f"checking peaks on {fine.size} frequencies x {amps.size} amplitudes")
-    after = _peaks_batch(system, amps, k, c, fine, settings)
-    before = _peaks_batch(system, amps, k0, c0, fine, settings)
-    x_peak, y_peak, omega_x, _, at_edge, steady_ok = after
+    fine = np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
+    say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
+    before = _peaks_from_response(frequency_response(system, fine, amps, settings=settings), fine)
+    rows = []
+    for i, amplitude in enumerate(np.asarray(amps)):
+        tuned = system.replace(tid_stiffness=k[i], tid_damping=c[i])
+        rows.append(frequency_response(tuned, fine, [amplitude], settings=settings))
+        say(f"checking the retuned design at {amplitude:g} N ({i + 1}/{amps.size})")
+    after = _peaks_from_response(
+        jax.tree.map(lambda *r: jnp.concatenate(r), *rows), jnp.asarray(fine)
+    )
     status = jnp.where(
-        ~ok, 1, jnp.where(~(steady_ok & before[5]), 2, jnp.where(at_edge, 3, 0))
+        ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )
     return RetuneResult(
         amplitudes=amps,
@@ -305,11 +317,11 @@ def retune(
         tid_damping=c,
         initial_stiffness=k0,
         initial_damping=c0,
-        x_peak=x_peak,
-        x_peak_initial=before[0],
-        y_peak=y_peak,
-        y_peak_initial=before[1],
-        omega_peak=omega_x,
+        x_peak=after.x_peak,
+        x_peak_initial=before.x_peak,
+        y_peak=after.y_peak,
+        y_peak_initial=before.y_peak,
+        omega_peak=after.omega_x,
         iterations=iterations,
         converged=status == 0,
         damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,

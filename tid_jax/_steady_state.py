@@ -44,6 +44,15 @@ class SolverSettings(eqx.Module):
             if not (isinstance(value, int) and value >= low):
                 raise ValueError(f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
 
+    def persistent(self) -> "SolverSettings":
+        """Settings for a second attempt at points that did not converge: a long transient
+        towards the attracting orbit, then more Newton iterations."""
+        return eqx.tree_at(
+            lambda s: (s.transient_periods, s.max_newton_steps),
+            self,
+            (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
+        )
+
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 

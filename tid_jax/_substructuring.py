@@ -43,8 +43,9 @@ class Substructuring(eqx.Module):
       `A sin(omega t)`, i.e. `x ~ X sin(omega t + x_phase)`, rad.
     - `stable`: the test neither diverged nor was still growing at the end.
     - `diverged`: |x| or |y| left the divergence bound (or became non-finite).
-    - `growth`: peak of the last window over the peak of the window before it (about 1
-      once settled, above 1 while an instability grows).
+    - `growth`: peak of the last window over the peak from mid-run up to that window
+      (at most about 1 once settled, even if the motion is irregular, as in friction
+      chatter; above 1 while an instability grows).
 
     With `reference=True` (else None):
 
@@ -266,7 +267,7 @@ def _simulate_point(plan: _Plan, controller: _Controller, system: TIDSystem, poi
     n_steps, order = controller.n_steps, controller.prediction_order
     dtype = point.omega.dtype
     end = n_steps * dt
-    window_start, previous_start = end - point.window, end - 2 * point.window
+    window_start, previous_start = end - point.window, end / 2
     whole_samples = jnp.floor(point.delay_samples).astype(jnp.int32)
     fraction = point.delay_samples - whole_samples
     horizon = point.horizon
@@ -527,11 +528,11 @@ def simulate_substructuring(
     - `substeps`: RK4 steps per sample.
     - `periods`: simulated duration, in periods of the lowest forcing frequency.
     - `measure_periods`: peaks and phases come from the last `measure_periods` periods;
-      the window before them is used to detect growth.
+      the peak between mid-run and them is used to detect growth.
     - `divergence_factor`: the test diverged once |x| or |y| exceeds this multiple of the
       largest of A / K and the frictionless |X|, |Y|.
-    - `growth_tolerance`: a test whose last-window peak exceeds the previous window's by
-      more than this fraction counts as unstable.
+    - `growth_tolerance`: a test whose last-window peak exceeds the peak from mid-run up
+      to that window by more than this fraction counts as unstable.
     - `reference`: also solve the whole system (`frequency_response`'s model) and report
       amplitude and phase errors.
 
@@ -555,7 +556,7 @@ def simulate_substructuring(
     order = _integer("prediction_order", prediction_order, 0, MAX_PREDICTION_ORDER)
     substeps = _integer("substeps", substeps, 1)
     measure_periods = _integer("measure_periods", measure_periods, 1)
-    periods = _integer("periods", periods, 2 * measure_periods)
+    periods = _integer("periods", periods, 3 * measure_periods)
     lag = _real_scalar("actuator_lag", actuator_lag, "non-negative")
     if parasitic_stiffness is not None:
         parasitic_stiffness = _real_scalar("parasitic_stiffness", parasitic_stiffness, "positive")

@@ -48,7 +48,7 @@ def check_values(name: str, value, allowed: str) -> None:
         bad |= ~(array >= 0)
     if np.any(bad):
         first = array.reshape(-1)[np.argmax(bad.reshape(-1))]
-        raise ValueError(f"{name} must be finite and {allowed}, got {first!r}")
+        raise ValueError(f"{name} must be finite and {allowed}, got {float(first)!r}")
 
 
 def _as_float_array(name: str, value, allowed: str) -> Array:

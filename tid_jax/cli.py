@@ -108,8 +108,9 @@ def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
             f"--{key.replace('_', '-')}",
             dest=key,
             type=float,
-            metavar=unit,
-            help=f"{description} [{unit}]",
+            metavar="RATIO" if unit == "-" else unit,
+            help=f"{description} [{unit}]"
+            + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
         )
     grid = parser.add_argument_group("forcing and frequency band")
     grid.add_argument(

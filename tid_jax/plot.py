@@ -294,7 +294,7 @@ def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, tit
         ax.set(xlabel="forcing frequency [Hz]", ylabel="peak displacement [mm]", title=name)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7, loc="lower center")
     fig.suptitle(title or "Virtual substructuring test against the whole system")
     return fig
 
@@ -305,7 +305,7 @@ def plot_substructuring_stability(curves, *, max_delay=None, title=None):
     -1 where even the smallest delay was unstable (drawn at 0 with open markers);
     `max_delay` (s), the largest delay tried, is drawn as a line: curves on it were stable
     for every delay tried."""
-    fig, ax = plt.subplots(figsize=(6.5, 4.2), layout="constrained")
+    fig, ax = plt.subplots(figsize=(9, 4.2), layout="constrained")
     markers = ("o", "s", "^", "D")
     for number, (label, ratios, largest) in enumerate(curves):
         ratios = np.asarray(ratios, dtype=float)
@@ -324,5 +324,5 @@ def plot_substructuring_stability(curves, *, max_delay=None, title=None):
            title=title or "Error-feedback substructuring: stability against delay")
     ax.set_ylim(bottom=-1)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return fig

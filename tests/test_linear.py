@@ -1,0 +1,90 @@
+import math
+
+import numpy as np
+import pytest
+
+import tid_jax as tj
+from tid_jax._system import FIELD_NAMES
+
+
+def test_den_hartog_paper_numbers():
+    alpha, xi = tj.den_hartog(0.05)
+    assert float(alpha) == pytest.approx(1 / 1.05**2, rel=1e-14)
+    assert float(alpha) == pytest.approx(0.907, abs=5e-4)
+    assert float(xi) == pytest.approx(0.134, abs=5e-4)
+    system = tj.paper_system()
+    k, c = tj.den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    assert float(k) == pytest.approx(42.97e3, abs=5.0)
+    assert float(c) == pytest.approx(0.479e3, abs=1.0)
+    assert float(system.tid_stiffness) == float(k)
+    assert float(system.host_stiffness) == pytest.approx(947.5e3, rel=1e-4)
+    assert float(system.host_damping) == pytest.approx(2 * 0.02 * math.sqrt(947482.0 * 1500), rel=1e-5)
+
+
+def _direct_receptance(system, omega):
+    # Independent check: solve the 2x2 complex dynamic-stiffness system of eq. (12), ff = 0.
+    M, K, C, b, k, c = (float(getattr(system, n)) for n in
+                        ("host_mass", "host_stiffness", "host_damping", "inertance",
+                         "tid_stiffness", "tid_damping"))
+    jw = 1j * omega
+    D = np.array([[K + k - M * omega**2 + jw * (C + c), -(k + jw * c)],
+                  [-(k + jw * c), k - b * omega**2 + jw * c]])
+    return np.linalg.solve(D, np.array([1.0, 0.0]))
+
+
+@pytest.mark.parametrize("ratio", [0.5, 0.9, 1.0, 1.07, 2.0])
+def test_receptance_matches_direct_solution(ratio):
+    system = tj.paper_system()
+    omega = ratio * float(system.host_frequency)
+    host, inerter = tj.linear_receptance(system, omega)
+    expected = _direct_receptance(system, omega)
+    assert complex(host) == pytest.approx(expected[0], rel=1e-12)
+    assert complex(inerter) == pytest.approx(expected[1], rel=1e-12)
+
+
+def _linear_peak(system):
+    omegas = np.linspace(0.6, 1.4, 400001) * float(system.host_frequency)
+    return float(np.max(np.abs(tj.linear_receptance(system, omegas).host))) * float(
+        system.host_stiffness
+    )
+
+
+def test_linear_peaks_with_den_hartog_tuning():
+    system = tj.paper_system()
+    assert _linear_peak(system) == pytest.approx(5.433, abs=1e-3)
+    assert _linear_peak(system.replace(host_damping=0.0)) == pytest.approx(6.408, abs=1e-3)
+
+
+def test_stuck_receptance_is_sdof():
+    system = tj.paper_system()
+    omega = 25.0
+    expected = 1 / (947482.0225045783 + float(system.tid_stiffness) - 1500 * omega**2
+                    + 1j * omega * (float(system.host_damping) + float(system.tid_damping)))
+    assert complex(tj.stuck_receptance(system, omega)) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("field", FIELD_NAMES)
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
+def test_system_rejects_bad_values(field, bad):
+    with pytest.raises(ValueError, match=field):
+        tj.paper_system().replace(**{field: bad})
+
+
+@pytest.mark.parametrize("field", ["host_mass", "host_stiffness", "inertance", "tid_stiffness",
+                                   "friction_width"])
+def test_system_rejects_zero_where_positive_required(field):
+    with pytest.raises(ValueError, match=f"{field} must be finite and positive, got 0.0"):
+        tj.paper_system().replace(**{field: 0.0})
+
+
+@pytest.mark.parametrize("field", ["host_damping", "friction_force", "tid_damping"])
+def test_system_accepts_zero_where_allowed(field):
+    system = tj.paper_system().replace(**{field: 0.0})
+    assert float(getattr(system, field)) == 0.0
+
+
+def test_system_rejects_non_numbers():
+    with pytest.raises(ValueError, match="inertance"):
+        tj.paper_system().replace(inertance="heavy")
+    with pytest.raises(ValueError, match="unknown TIDSystem field"):
+        tj.paper_system().replace(mass=1.0)

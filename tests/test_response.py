@@ -1,0 +1,190 @@
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings as hypothesis_settings, strategies as st
+
+import tid_jax as tj
+from tests.reference.coulomb import coulomb_steady_state
+
+RATIOS = np.linspace(0.7, 1.3, 25)  # omega / host frequency; contains 0.85, 0.9, ..., 1.1
+AMPLITUDES = [100.0, 200.0, 1000.0, 3000.0]
+REFERENCE_RATIOS = [0.85, 0.9, 0.95, 1.0, 1.05, 1.1]
+
+
+@pytest.fixture(scope="module")
+def system():
+    return tj.paper_system()
+
+
+@pytest.fixture(scope="module")
+def omegas(system):
+    return RATIOS * float(system.host_frequency)
+
+
+@pytest.fixture(scope="module")
+def nonlinear(system, omegas):
+    return tj.frequency_response(system, omegas, AMPLITUDES)
+
+
+@pytest.fixture(scope="module")
+def frictionless(system, omegas):
+    return tj.frequency_response(system.replace(friction_force=0.0), omegas, AMPLITUDES)
+
+
+def _normalised(result, system):
+    return np.asarray(result.x_max) / (np.asarray(result.amplitudes)[:, None] / float(
+        system.host_stiffness))
+
+
+def test_frictionless_matches_receptance(system, omegas, frictionless):
+    host, inerter = tj.linear_receptance(system, omegas)
+    amps = np.asarray(AMPLITUDES)[:, None]
+    assert frictionless.x_max.shape == (4, 25)
+    assert bool(jnp.all(frictionless.converged))
+    np.testing.assert_allclose(frictionless.x_max, np.abs(host) * amps, rtol=1e-5)
+    np.testing.assert_allclose(frictionless.y_max, np.abs(inerter) * amps, rtol=1e-5)
+    # A linear, damped system's periodic orbit is stable.
+    assert bool(jnp.all(frictionless.stable))
+    assert float(jnp.max(jnp.abs(frictionless.floquet_multipliers))) < 1
+
+
+def test_all_nonlinear_points_converge(nonlinear):
+    assert bool(jnp.all(nonlinear.converged))
+    assert float(jnp.max(nonlinear.residual)) <= tj.SolverSettings().periodicity_tol
+    assert np.all(np.isfinite(nonlinear.x_max)) and np.all(np.isfinite(nonlinear.y_max))
+
+
+@pytest.mark.parametrize("amplitude", [100.0, 200.0, 1000.0])
+def test_matches_exact_coulomb_reference(system, nonlinear, amplitude):
+    row = AMPLITUDES.index(amplitude)
+    parameters = {name: float(getattr(system, name)) for name in
+                  ("host_mass", "host_stiffness", "host_damping", "inertance", "friction_force",
+                   "tid_stiffness", "tid_damping")}
+    for ratio in REFERENCE_RATIOS:
+        column = int(np.argmin(np.abs(RATIOS - ratio)))
+        omega = RATIOS[column] * float(system.host_frequency)
+        reference = coulomb_steady_state(**parameters, omega=omega, amplitude=amplitude)
+        assert reference["converged"]
+        x_max = float(nonlinear.x_max[row, column])
+        assert x_max == pytest.approx(reference["x_max"], rel=5e-3), (amplitude, ratio)
+
+
+def test_converges_to_coulomb_as_width_shrinks(system):
+    # Stick-slip point: A = 100 N just below the host frequency.
+    omega = 0.95 * float(system.host_frequency)
+    parameters = {name: float(getattr(system, name)) for name in
+                  ("host_mass", "host_stiffness", "host_damping", "inertance", "friction_force",
+                   "tid_stiffness", "tid_damping")}
+    exact = coulomb_steady_state(**parameters, omega=omega, amplitude=100.0)["x_max"]
+    errors = []
+    for width in (1e-3, 1e-4, 1e-5):
+        result = tj.frequency_response(system.replace(friction_width=width), omega, 100.0)
+        assert bool(result.converged)
+        errors.append(abs(float(result.x_max) / exact - 1))
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] < 1e-3
+
+
+def test_stuck_limit_is_sdof_with_combined_stiffness_and_damping(system):
+    # Forcing well below the slip threshold (about 23 N): the inerter terminal stays stuck
+    # and the host responds as a single-degree-of-freedom system with K + k and C + c. The
+    # smoothed friction lets the terminal creep; that error shrinks with the width.
+    for ratio, amplitude in ((0.9, 5.0), (1.1, 5.0)):
+        omega = ratio * float(system.host_frequency)
+        expected = amplitude * abs(complex(tj.stuck_receptance(system, omega)))
+        errors = []
+        for width in (1e-4, 1e-5):
+            result = tj.frequency_response(system.replace(friction_width=width), omega, amplitude)
+            assert bool(result.converged)
+            assert float(result.stick_fraction) == 1.0
+            errors.append(abs(float(result.x_max) / expected - 1))
+        assert errors[1] < 1e-3
+        assert errors[1] < errors[0] / 5
+
+
+def _count_peaks(curve):
+    inner = curve[1:-1]
+    return int(np.sum((inner > curve[:-2]) & (inner > curve[2:])))
+
+
+def test_figure_5_behaviour(system, omegas, nonlinear):
+    normalised = _normalised(nonlinear, system)
+    linear = np.abs(np.asarray(tj.linear_receptance(system, omegas).host)) * float(
+        system.host_stiffness)
+    linear_peak = 5.433  # Den Hartog-tuned linear TID with 2% host damping (theory)
+    # A = 100 N: friction locks the inerter; one resonance peak, far above the linear one.
+    assert _count_peaks(normalised[0]) == 1
+    assert normalised[0].max() > 1.4 * linear_peak
+    # Large amplitudes: two peaks, approaching the linear TID's curve.
+    assert _count_peaks(normalised[3]) == 2
+    deviation = np.max(np.abs(normalised - linear[None, :]), axis=1) / linear_peak
+    assert deviation[0] > deviation[1] > deviation[2] > deviation[3]
+    assert deviation[3] < 0.03
+
+
+@hypothesis_settings(max_examples=8, deadline=None, derandomize=True)
+@given(
+    ratio=st.floats(0.6, 1.5),
+    amplitude=st.floats(1.0, 5000.0),
+    scale=st.floats(0.01, 100.0),
+)
+def test_frictionless_response_is_linear_in_amplitude(ratio, amplitude, scale):
+    system = tj.paper_system(friction_force=0.0)
+    omega = ratio * float(system.host_frequency)
+    base = tj.frequency_response(system, omega, amplitude)
+    scaled = tj.frequency_response(system, omega, amplitude * scale)
+    assert float(scaled.x_max) == pytest.approx(scale * float(base.x_max), rel=1e-7)
+    assert float(scaled.y_max) == pytest.approx(scale * float(base.y_max), rel=1e-7)
+
+
+def test_shapes(system):
+    w = float(system.host_frequency)
+    point = tj.frequency_response(system, w, 300.0)
+    assert point.x_max.shape == () and point.state.shape == (4,)
+    assert point.floquet_multipliers.shape == (4,)
+    row = tj.frequency_response(system, [w], [300.0])
+    assert row.x_max.shape == (1, 1)
+    assert float(row.x_max[0, 0]) == pytest.approx(float(point.x_max), rel=1e-12)
+
+
+def test_grid_shapes(nonlinear):
+    for name in ("x_max", "y_max", "converged", "stable", "residual", "newton_steps",
+                 "stick_fraction"):
+        assert getattr(nonlinear, name).shape == (4, 25), name
+    assert nonlinear.state.shape == (4, 25, 4)
+    assert nonlinear.floquet_multipliers.shape == (4, 25, 4)
+
+
+@pytest.mark.parametrize(
+    "omegas, amplitudes, message",
+    [
+        ([], [100.0], "omegas must not be empty"),
+        ([25.0], [], "amplitudes must not be empty"),
+        ([25.0, -1.0], [100.0], "omegas must be finite and positive, got -1.0"),
+        ([0.0], [100.0], "omegas must be finite and positive, got 0.0"),
+        ([25.0], [float("nan")], "amplitudes must be finite and positive, got nan"),
+        ([25.0], [float("inf")], "amplitudes must be finite and positive, got inf"),
+        ([[25.0]], [100.0], "omegas must be a scalar or 1-d"),
+        (["fast"], [100.0], "omegas must be numbers"),
+    ],
+)
+def test_bad_grids_raise(system, omegas, amplitudes, message):
+    with pytest.raises(ValueError, match=message):
+        tj.frequency_response(system, omegas, amplitudes)
+
+
+def test_unconverged_point_is_flagged_not_nan(system):
+    # One Newton iteration from the linear guess cannot reach the stick-slip orbit.
+    settings = tj.SolverSettings(transient_periods=0, max_newton_steps=1)
+    result = tj.frequency_response(system, 0.95 * float(system.host_frequency), 100.0,
+                                   settings=settings)
+    assert not bool(result.converged)
+    assert float(result.residual) > settings.periodicity_tol
+    assert np.isfinite(float(result.x_max))
+
+
+def test_failed_integration_is_flagged_not_nan(system):
+    settings = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
+    result = tj.frequency_response(system, float(system.host_frequency), 100.0, settings=settings)
+    assert not bool(result.converged)
+    assert not np.isnan(float(result.x_max))
