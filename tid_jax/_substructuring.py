@@ -394,9 +394,9 @@ def _first_harmonic_phase(samples):
 
 
 @eqx.filter_jit
-def _reference_batch(system: TIDSystem, omegas, amplitudes):
+def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSettings):
     def one(omega, amplitude):
-        orbit, x_max, y_max = point_response(system, omega, amplitude, SolverSettings())
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
         return dict(
             x_max=x_max,
             y_max=y_max,
@@ -484,6 +484,7 @@ def simulate_substructuring(
     divergence_factor: float = 100.0,
     growth_tolerance: float = 0.02,
     reference: bool = True,
+    settings: SolverSettings = SolverSettings(),  # noqa: B008 (immutable)
 ) -> Substructuring:
     """Simulate a real-time dynamic substructuring test of the inerter (paper section 5)
     as a digital controller runs it, and compare it with the whole system.
@@ -535,6 +536,7 @@ def simulate_substructuring(
       to that window by more than this fraction counts as unstable.
     - `reference`: also solve the whole system (`frequency_response`'s model) and report
       amplitude and phase errors.
+    - `settings`: `SolverSettings` of that whole-system solve.
 
     `omega`, `amplitude`, `delay` and `guessed_inertance` broadcast against each other;
     all points run in one compiled, vmapped call.
@@ -542,6 +544,8 @@ def simulate_substructuring(
     **Returns:** a `Substructuring`.
     """
     _check_system(system)
+    if not isinstance(settings, SolverSettings):
+        raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
     _choice("scheme", scheme, SCHEMES)
     _choice("guessed_force", guessed_force, GUESSED_FORCES)
     if prediction is not None:
@@ -582,8 +586,9 @@ def simulate_substructuring(
     highest = float(np.max(omega_array))
     if highest >= math.pi * rate / 4:
         raise ValueError(
-            f"omega must be below a quarter of the Nyquist frequency pi * sample_rate / 4 = "
-            f"{math.pi * rate / 4:g} rad/s, got {highest!r}; raise sample_rate"
+            f"omega must be below a quarter of the Nyquist frequency, pi * sample_rate / 4 = "
+            f"{math.pi * rate / 4:g} rad/s ({rate / 8:g} Hz), got {highest:g} rad/s "
+            f"({highest / (2 * math.pi):g} Hz); raise sample_rate"
         )
     n_steps = int(math.ceil(periods * 2 * math.pi / float(np.min(omega_array)) * rate))
     duration = n_steps / rate
@@ -658,7 +663,7 @@ def simulate_substructuring(
             np.stack([omegas, amplitudes], axis=1), axis=0, return_inverse=True
         )
         whole = _reference_batch(
-            system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype)
+            system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype), settings
         )
         whole = {
             key: jnp.reshape(value[inverse.reshape(-1)], shape) for key, value in whole.items()

@@ -1,0 +1,42 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import tid_jax as tj
+
+NAMES = ("tid_stiffness", "tid_damping", "friction_force", "inertance", "host_damping",
+         "amplitude")
+
+
+@pytest.fixture(scope="module")
+def peaks():
+    """Peak host and inerter displacement (m) as a function of the parameters `NAMES`, at a
+    point away from the optimum (Den Hartog tuning, A = 300 N)."""
+    system = tj.paper_system()
+    band = tj.default_omegas(system, 31)
+    base = jnp.array([float(getattr(system, n)) for n in NAMES[:-1]] + [300.0])
+
+    def fn(values):
+        tuned = system.replace(**dict(zip(NAMES[:-1], values[:-1])))
+        return jnp.stack([
+            tj.peak_response(tuned, values[-1], band, response="host"),
+            tj.peak_response(tuned, values[-1], band, response="inerter"),
+        ])
+
+    return base, jax.jit(fn)
+
+
+def test_gradients_match_finite_differences(peaks):
+    base, fn = peaks
+    grad_host = np.asarray(jax.jit(jax.grad(lambda v: fn(v)[0]))(base))
+    forward = np.asarray(jax.jit(jax.jacfwd(fn))(base))
+    np.testing.assert_allclose(grad_host, forward[0], rtol=1e-9)
+    value = np.asarray(fn(base))
+    for i, name in enumerate(NAMES):
+        h = 1e-4 * float(base[i])
+        fd = (np.asarray(fn(base.at[i].add(h))) - np.asarray(fn(base.at[i].add(-h)))) / (2 * h)
+        # Relative 1e-4, or 1e-6 of an elasticity-one derivative where the derivative is tiny.
+        floor = 1e-6 * value / float(base[i])
+        np.testing.assert_array_less(np.abs(forward[:, i] - fd), 1e-4 * np.abs(fd) + floor,
+                                     err_msg=name)
