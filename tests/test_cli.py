@@ -396,3 +396,32 @@ def test_console_script_runs_and_fails_cleanly(tmp_path):
     assert bad.returncode == 2
     assert bad.stderr == "tid-jax: error: inertance must be finite and positive, got -75.0\n"
     assert "Traceback" not in bad.stderr
+
+
+# --- the README's quick start and example ---------------------------------------------------
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def readme_blocks(heading):
+    """The fenced code blocks under the `## heading` section of README.md."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split(f"\n## {heading}\n", 1)[1].split("\n## ", 1)[0]
+    return [block.split("\n", 1)[1] for block in section.split("```")[1::2]]
+
+
+def test_quick_start_is_two_commands_and_ci_runs_the_second():
+    (block,) = readme_blocks("Quick start")
+    install_and_retune, install_and_test = block.strip().splitlines()
+    assert install_and_retune.endswith("pip install -e . && tid-jax retune")
+    assert install_and_test.endswith("python -m pytest -q")
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    assert install_and_test in ci
+
+
+def test_readme_example_uses_the_public_api():
+    (example,) = readme_blocks("Python example")
+    code = compile(example, "README.md", "exec")
+    assert len(example.strip().splitlines()) <= 10
+    names = {name for name in code.co_names if hasattr(tj, name)}
+    assert {"paper_system", "retune", "frequency_response", "default_omegas"} <= names
