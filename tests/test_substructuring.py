@@ -3,12 +3,17 @@
 Expected values come from the whole-system model (`frequency_response`), from closed-form
 linear theory of the delayed loop, or from the neutral-equation stability condition."""
 
+import contextlib
+import csv
+import io
+import json
 import math
 
 import numpy as np
 import pytest
 
 import tid_jax as tj
+from tid_jax.cli import RTDS_COLUMNS, main
 
 SYSTEM = tj.paper_system()
 FRICTIONLESS = SYSTEM.replace(friction_force=0.0)
@@ -323,3 +328,68 @@ def test_bad_system_rejected():
         )
     with pytest.raises(ValueError, match="delay"):
         tj.substructuring_stability(SYSTEM, OMEGAS[1], A, guessed_inertance=[B], delay=[0.01, 0.0])
+
+
+def run_cli(argv):
+    """`tid-jax` in-process: `(exit status, stdout, stderr)`."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main([str(arg) for arg in argv])
+    return status, out.getvalue(), err.getvalue()
+
+
+def test_cli_rtds_table_and_files(tmp_path, whole):
+    frequencies = [f"{w / (2 * math.pi):.1f}" for w in OMEGAS]
+    status, stdout, _ = run_cli(
+        [
+            "rtds",
+            "--frequency-hz",
+            *frequencies,
+            "--amplitude",
+            A,
+            "--delay-ms",
+            10,
+            "--guessed-inertance-ratio",
+            0.8,
+            "--out",
+            tmp_path,
+            "--quiet",
+        ]
+    )
+    assert status == 0
+    assert stdout.count("stable") == 3
+    with open(tmp_path / "rtds.csv", newline="") as file:
+        rows = list(csv.reader(file))
+    assert tuple(rows[0]) == RTDS_COLUMNS
+    table = np.array(
+        [
+            [float(v == "True") if v in ("True", "False") else float(v) for v in row]
+            for row in rows[1:]
+        ]
+    )
+    column = {name: table[:, i] for i, name in enumerate(RTDS_COLUMNS)}
+    np.testing.assert_allclose(column["x_whole_m"], whole.x_max, rtol=1e-6)
+    assert np.max(relative(column["x_test_m"], whole.x_max)) < 0.02
+    assert np.max(relative(column["y_test_m"], whole.y_max)) < 0.02
+    data = json.loads((tmp_path / "rtds.json").read_text())
+    assert data["test"]["guessed_inertance_kg"] == pytest.approx(0.8 * B)
+    assert (tmp_path / "rtds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    ("argv", "word"),
+    [
+        (["--delay-ms", "-1"], "delay_ms"),
+        (["--scheme", "hybrid"], "scheme"),
+        (["--frequency-hz", "4", "--band-hz", "3", "5"], "--frequency-hz"),
+        (["--frequency-hz", "400"], "omega"),
+        (["--amplitude", "0"], "amplitudes"),
+    ],
+)
+def test_cli_rtds_bad_input_is_one_line(tmp_path, argv, word):
+    status, stdout, stderr = run_cli(["rtds", *argv, "--out", tmp_path, "--quiet"])
+    assert status == 2
+    assert stdout == ""
+    assert len(stderr.strip().splitlines()) == 1
+    assert word in stderr
+    assert not any(tmp_path.iterdir())
