@@ -5,6 +5,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._dynamics import parameter_vector
+from ._sharding import sharded_batch
 from ._steady_state import SolverSettings, refined_peak, solve_orbit
 from ._system import TIDSystem
 
@@ -97,14 +98,18 @@ def _points(system, omegas, amplitudes, settings):
 def solve_points(system, omegas, amplitudes, settings: SolverSettings) -> dict:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched.
     Points that do not converge are solved again, on their own, with
-    `settings.persistent()`; the better attempt is kept."""
-    out = _points(system, omegas, amplitudes, settings)
+    `settings.persistent()`; the better attempt is kept. Each batch is sharded over all JAX
+    devices (`sharded_batch`)."""
+    out = sharded_batch(lambda w, a: _points(system, w, a, settings), omegas, amplitudes)
     failed = np.flatnonzero(~np.asarray(out["converged"]))
     if failed.size:
         # Pad the retry batch to a power of two so that few batch sizes are compiled.
         size = 1 << int(np.ceil(np.log2(failed.size)))
         index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
-        retry = _points(system, omegas[index], amplitudes[index], settings.persistent())
+        persistent = settings.persistent()
+        retry = sharded_batch(
+            lambda w, a: _points(system, w, a, persistent), omegas[index], amplitudes[index]
+        )
         better = np.asarray(retry["residual"])[: failed.size] < np.asarray(out["residual"])[failed]
         chosen = failed[better]
         out = {

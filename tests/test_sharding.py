@@ -1,0 +1,72 @@
+"""Sharding the batch over several devices gives the single-device answer.
+
+Each case runs in a fresh subprocess, since the number of (simulated CPU) devices is fixed
+when JAX starts."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+# 2 amplitudes x 5 frequencies = 10 points: not a multiple of 4 devices, so padding is used.
+SCRIPT = """
+import json
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import tid_jax as tj
+from tid_jax._sharding import batch_sharding, sharded_batch
+
+system = tj.paper_system()
+omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
+response = tj.frequency_response(system, omegas, [100.0, 400.0])
+seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
+# The solve itself, on the same (already compiled) padded batch: where did its outputs live?
+from tid_jax._response import _points
+flat_w, flat_a = (g.reshape(-1) for g in np.meshgrid(omegas, [100.0, 400.0]))
+solved = []
+sharded_batch(
+    lambda w, a: solved.append(_points(system, w, a, tj.SolverSettings())) or solved[-1],
+    jax.numpy.asarray(flat_w), jax.numpy.asarray(flat_a),
+)
+sharding = batch_sharding()
+devices_used = 1 if sharding is None else len(sharding.mesh.devices.reshape(-1))
+print(json.dumps(dict(
+    devices=len(jax.devices()),
+    devices_used=devices_used,
+    padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
+    if sharding is not None else 1,
+    trimmed=len(seen),
+    solve_devices=len(solved[0]["x_max"].devices()),
+    x_max=np.asarray(response.x_max).tolist(),
+    y_max=np.asarray(response.y_max).tolist(),
+    converged=np.asarray(response.converged).tolist(),
+)))
+"""
+
+
+def _run(device_count: int) -> dict:
+    env = dict(os.environ)
+    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={device_count}"
+    env["JAX_ENABLE_X64"] = "1"
+    env["JAX_PLATFORMS"] = "cpu"
+    done = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-4000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_four_devices_match_one():
+    single = _run(1)
+    sharded = _run(4)
+    assert single["devices"] == 1 and single["devices_used"] == 1
+    assert sharded["devices"] == 4 and sharded["devices_used"] == 4
+    assert sharded["padded_devices"] == 4
+    assert sharded["trimmed"] == 10
+    assert sharded["solve_devices"] == 4 and single["solve_devices"] == 1
+    assert np.all(single["converged"]) and sharded["converged"] == single["converged"]
+    for key in ("x_max", "y_max"):
+        np.testing.assert_allclose(sharded[key], single[key], rtol=1e-10, atol=0)

@@ -1,0 +1,59 @@
+"""Spreading a flat batch of independent problems over every JAX device.
+
+Batched solves (one steady-state orbit per (amplitude, frequency) point) are
+independent along the batch axis, so they split across devices with no
+communication: the batch is padded to a multiple of the device count, placed
+with `NamedSharding(Mesh(devices, ("batch",)), PartitionSpec("batch"))`, and
+the jitted, vmapped solve then runs one slice per device (XLA propagates the
+input sharding through the vmap). The outputs are trimmed back to the
+original length. On a single device this is a no-op.
+
+Several GPUs of one node are used automatically: `jax.devices()` lists them
+all. For several hosts, every process calls `jax.distributed.initialize()`
+(with `coordinator_address=`, `num_processes=`, `process_id=`, or from the
+cluster environment, e.g. SLURM) before any other JAX call; the same program
+then sees the devices of all hosts in `jax.devices()` and the batch is
+sharded over all of them. On CPU, several devices can be simulated with
+`XLA_FLAGS=--xla_force_host_platform_device_count=N` (set before importing
+JAX).
+"""
+
+import jax
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+BATCH_AXIS = "batch"
+
+
+def batch_sharding(devices=None) -> NamedSharding | None:
+    """The sharding of a batch axis over `devices` (default: all of `jax.devices()`), or
+    `None` when there is only one device."""
+    devices = jax.devices() if devices is None else list(devices)
+    if len(devices) < 2:
+        return None
+    return NamedSharding(Mesh(np.asarray(devices), (BATCH_AXIS,)), PartitionSpec(BATCH_AXIS))
+
+
+def _pad(array, size: int):
+    """`array` with its leading axis extended to `size` by repeating its last entry (a valid
+    problem, so padding never produces failures of its own)."""
+    extra = size - array.shape[0]
+    if extra == 0:
+        return array
+    return jax.numpy.concatenate([array, jax.numpy.repeat(array[-1:], extra, axis=0)])
+
+
+def sharded_batch(function, *batch, devices=None):
+    """`function(*batch)` with every array of `batch` (same leading length n) padded to a
+    multiple of the device count and sharded over the devices along its leading axis;
+    every array of the returned pytree is trimmed back to its first n entries. Calls
+    `function(*batch)` unchanged on one device."""
+    sharding = batch_sharding(devices)
+    if sharding is None:
+        return function(*batch)
+    size = batch[0].shape[0]
+    count = sharding.mesh.size
+    padded = -(-size // count) * count
+    placed = [jax.device_put(_pad(array, padded), sharding) for array in batch]
+    out = function(*placed)
+    return jax.tree_util.tree_map(lambda value: value[:size], out)
