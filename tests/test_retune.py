@@ -17,7 +17,9 @@ def system():
 
 @pytest.fixture(scope="module")
 def band(system):
-    return tj.default_omegas(system, N_FREQUENCIES)
+    # Narrower than the default band (both peaks stay inside for every design visited here),
+    # so that 31 frequencies resolve the peaks as finely as the default 61 do.
+    return np.linspace(0.8, 1.2, N_FREQUENCIES) * float(system.host_frequency)
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +87,7 @@ def test_nonlinear_retune_trend_matches_figure_7(system, nonlinear):
     assert abs(k[-1] - 1) < 0.02 and abs(c[-1] - 1) < 0.1
 
 
-def test_retune_agrees_with_derivative_free_search(system, band):
+def test_retune_agrees_with_derivative_free_search(system, band, nonlinear):
     # A second opinion at A = 400 N: Nelder-Mead on the exact (refined) grid maximum.
     amplitude = 400.0
     k_dh, c_dh = float(system.tid_stiffness), float(system.tid_damping)
@@ -98,8 +100,7 @@ def test_retune_agrees_with_derivative_free_search(system, band):
     u0 = jnp.array([np.log(1.034), np.sqrt(0.85)])
     search = optx.minimise(lambda u, _: peak(u), optx.NelderMead(rtol=1e-6, atol=1e-6), u0,
                            max_steps=200, throw=False)
-    gradient_based = tj.retune(system, [amplitude], omegas=band, tol=1e-5)
-    ours = float(gradient_based.x_peak[0]) / _static(system, amplitude)
+    ours = float(nonlinear.x_peak[1]) / _static(system, amplitude)
     theirs = float(peak(search.value))
     assert ours <= theirs * (1 + 2e-3)
 

@@ -259,7 +259,7 @@ def retune(
     omegas: ArrayLike | None = None,
     settings: SolverSettings = SolverSettings(),
     max_steps: int = 60,
-    tol: float = 1e-6,
+    tol: float = 1e-5,
     progress: Callable[[str], None] | None = None,
 ) -> RetuneResult:
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
