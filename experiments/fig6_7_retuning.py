@@ -87,6 +87,7 @@ def main() -> None:
             k / k_dh,
             c / c_dh,
             paper=tuple(zip(*PAPER_RATIOS, strict=True)),
+            converged=np.asarray(result.converged),
             title="TID retuned for each forcing amplitude (paper Figure 7)",
         ),
         args.out / "fig7_retuned_parameters.png",

@@ -528,6 +528,7 @@ def _run_retune(args) -> int:
             y_before,
             y_after,
             stroke_limit=stroke_limit,
+            converged=np.asarray(result.converged),
         ),
         output.path("retune_summary.png"),
     )
@@ -869,8 +870,9 @@ def _run_rtds(args) -> int:
     if args.frequency_hz is not None:
         if args.band_hz is not None:
             raise CLIError("give --frequency-hz or --band-hz, not both")
-        frequencies_hz = np.asarray([_number("frequency_hz", f, "positive")
-                                     for f in args.frequency_hz])
+        frequencies_hz = np.asarray(
+            [_number("frequency_hz", f, "positive") for f in args.frequency_hz]
+        )
         omegas = 2 * math.pi * frequencies_hz
     else:
         frequencies_hz, omegas = _frequencies(inputs, system)
@@ -939,13 +941,20 @@ def _run_rtds(args) -> int:
         output.path("rtds.png"),
     )
     json_path = output.path("rtds.json")
-    data = output.document(
-        "rtds", inputs, system, settings, frequencies_hz, test=test, **columns
-    )
+    data = output.document("rtds", inputs, system, settings, frequencies_hz, test=test, **columns)
     write_json(json_path, data)
 
-    header = ["f [Hz]", "x whole [mm]", "x test [mm]", "x err [%]", "y whole [mm]",
-              "y test [mm]", "y err [%]", "phase err x/y [deg]", "test"]
+    header = [
+        "f [Hz]",
+        "x whole [mm]",
+        "x test [mm]",
+        "x err [%]",
+        "y whole [mm]",
+        "y test [mm]",
+        "y err [%]",
+        "phase err x/y [deg]",
+        "test",
+    ]
     table_rows = []
     for j, f in enumerate(frequencies_hz):
         stable = columns["stable"][j]
@@ -954,18 +963,24 @@ def _run_rtds(args) -> int:
         def shown(value, scale, digits, stable=stable):
             return f"{scale * value:.{digits}f}" if stable else "-"
 
-        table_rows.append([
-            f"{f:.3f}",
-            f"{1e3 * columns['x_whole_m'][j]:.4f}",
-            shown(columns["x_test_m"][j], 1e3, 4),
-            shown(columns["x_amplitude_error"][j], 100, 2),
-            f"{1e3 * columns['y_whole_m'][j]:.4f}",
-            shown(columns["y_test_m"][j], 1e3, 4),
-            shown(columns["y_amplitude_error"][j], 100, 2),
-            (f"{math.degrees(columns['x_phase_error_rad'][j]):.2f}/"
-             f"{math.degrees(columns['y_phase_error_rad'][j]):.2f}") if stable else "-",
-            status,
-        ])
+        table_rows.append(
+            [
+                f"{f:.3f}",
+                f"{1e3 * columns['x_whole_m'][j]:.4f}",
+                shown(columns["x_test_m"][j], 1e3, 4),
+                shown(columns["x_amplitude_error"][j], 100, 2),
+                f"{1e3 * columns['y_whole_m'][j]:.4f}",
+                shown(columns["y_test_m"][j], 1e3, 4),
+                shown(columns["y_amplitude_error"][j], 100, 2),
+                (
+                    f"{math.degrees(columns['x_phase_error_rad'][j]):.2f}/"
+                    f"{math.degrees(columns['y_phase_error_rad'][j]):.2f}"
+                )
+                if stable
+                else "-",
+                status,
+            ]
+        )
     title = (
         f"Substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
         f"prediction {args.prediction}, {rate:g} Hz) against the whole system, "

@@ -37,9 +37,10 @@ def _amplitude_colours(amplitudes):
 
 
 def _plain_log_axis(axis):
-    """Log-scaled axis labelled 100, 200, 1000 rather than 10^2, 2x10^2, 10^3."""
+    """Log-scaled axis with ticks labelled 100, 200, 500, 1000 rather than 10^2, 10^3."""
+    axis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
     axis.set_major_formatter(ticker.FormatStrFormatter("%g"))
-    axis.set_minor_formatter(ticker.FormatStrFormatter("%g"))
+    axis.set_minor_formatter(ticker.NullFormatter())
 
 
 def _mark_host_frequency(ax, host_frequency_hz):
@@ -144,31 +145,31 @@ def plot_retune_responses(
     return fig
 
 
-def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None):
-    ax_k.plot(amplitudes, k_ratio, "o-", color="tab:blue", label="retuned (this package)")
-    ax_c.plot(amplitudes, c_ratio, "o-", color="tab:blue", label="retuned (this package)")
-    if paper is not None:
-        amps, k_paper, c_paper = paper
-        ax_k.plot(
-            amps,
-            k_paper,
-            "s",
-            color="tab:orange",
-            markersize=8,
-            fillstyle="none",
-            markeredgewidth=2,
-            label="paper, section 4.2",
-        )
-        ax_c.plot(
-            amps,
-            c_paper,
-            "s",
-            color="tab:orange",
-            markersize=8,
-            fillstyle="none",
-            markeredgewidth=2,
-            label="paper, section 4.2",
-        )
+def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None, converged=None):
+    amplitudes = np.asarray(amplitudes)
+    failed = np.zeros(amplitudes.shape, bool) if converged is None else ~np.asarray(converged)
+    paper_style = dict(
+        color="tab:orange",
+        markersize=8,
+        fillstyle="none",
+        markeredgewidth=2,
+        linestyle="none",
+        label="paper, section 4.2",
+    )
+    for ax, ratio in ((ax_k, np.asarray(k_ratio)), (ax_c, np.asarray(c_ratio))):
+        ax.plot(amplitudes, ratio, "o-", color="tab:blue", label="retuned (this package)")
+        if failed.any():
+            ax.plot(
+                amplitudes[failed],
+                ratio[failed],
+                "x",
+                color="tab:red",
+                markersize=10,
+                markeredgewidth=2,
+                label="status not ok (see table)",
+            )
+        if paper is not None:
+            ax.plot(paper[0], paper[1 if ax is ax_k else 2], "s", **paper_style)
     for ax, label in ((ax_k, "stiffness  k / k_DH"), (ax_c, "damping  c / c_DH")):
         ax.axhline(1.0, color="black", linestyle="--", linewidth=1.0, label="Den Hartog")
         ax.set(xscale="log", xlabel="forcing amplitude A [N]", ylabel=label)
@@ -180,11 +181,12 @@ def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None):
     ax_c.set_ylim(bottom=0)
 
 
-def plot_tuning_ratios(amplitudes, k_ratio, c_ratio, *, paper=None, title=None):
+def plot_tuning_ratios(amplitudes, k_ratio, c_ratio, *, paper=None, converged=None, title=None):
     """The paper's Figure 7: retuned stiffness and damping as ratios to Den Hartog's against
-    forcing amplitude (N). `paper = (amplitudes, k_ratio, c_ratio)` adds reference points."""
+    forcing amplitude (N). `paper = (amplitudes, k_ratio, c_ratio)` adds reference points;
+    `converged` (bool per amplitude; the retune status is ok) marks the others."""
     fig, (ax_k, ax_c) = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
-    _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper)
+    _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper, converged)
     if title:
         fig.suptitle(title)
     return fig
@@ -244,12 +246,13 @@ def plot_retune_summary(
     y_after,
     *,
     stroke_limit=None,
+    converged=None,
     title=None,
 ):
     """Retuning at a glance: k / k_DH and c / c_DH (top) and the peak host displacement over
     A / K and inerter stroke (cm) before and after retuning (bottom) against amplitude (N)."""
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), layout="constrained")
-    _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio)
+    _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio, None, converged)
     curves = (
         (
             "before (initial tuning)",
@@ -280,17 +283,34 @@ def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, tit
         (axes[0], whole_x, 1, "(a) host structure, x"),
         (axes[1], whole_y, 2, "(b) TID (inerter terminal), y"),
     ):
-        ax.plot(frequencies_hz, 1e3 * np.asarray(whole), color="black", linestyle="--",
-                linewidth=1.5, label="whole system")
+        ax.plot(
+            frequencies_hz,
+            1e3 * np.asarray(whole),
+            color="black",
+            linestyle="--",
+            linewidth=1.5,
+            label="whole system",
+        )
         for number, test in enumerate(tests):
             label, stable = test[0], np.asarray(test[3], dtype=bool)
             values = 1e3 * np.asarray(test[index], dtype=float)
-            ax.plot(frequencies_hz[stable], values[stable], linestyle="none",
-                    marker=markers[number % len(markers)], markersize=4, label=label)
+            ax.plot(
+                frequencies_hz[stable],
+                values[stable],
+                linestyle="none",
+                marker=markers[number % len(markers)],
+                markersize=4,
+                label=label,
+            )
             if not np.all(stable):
-                ax.plot(frequencies_hz[~stable], np.zeros(int((~stable).sum())),
-                        linestyle="none", marker="x", color="tab:red",
-                        label=f"{label}: unstable")
+                ax.plot(
+                    frequencies_hz[~stable],
+                    np.zeros(int((~stable).sum())),
+                    linestyle="none",
+                    marker="x",
+                    color="tab:red",
+                    label=f"{label}: unstable",
+                )
         ax.set(xlabel="forcing frequency [Hz]", ylabel="peak displacement [mm]", title=name)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
@@ -314,14 +334,22 @@ def plot_substructuring_stability(curves, *, max_delay=None, title=None):
         (line,) = ax.plot(ratios, 1e3 * np.maximum(largest, 0), marker=marker, label=label)
         none = largest < 0
         if np.any(none):
-            ax.plot(ratios[none], np.zeros(int(none.sum())), linestyle="none", marker=marker,
-                    markerfacecolor="white", color=line.get_color())
+            ax.plot(
+                ratios[none],
+                np.zeros(int(none.sum())),
+                linestyle="none",
+                marker=marker,
+                markerfacecolor="white",
+                color=line.get_color(),
+            )
     if max_delay is not None:
-        ax.axhline(1e3 * max_delay, color="0.5", linestyle=":",
-                   label="largest delay tried")
+        ax.axhline(1e3 * max_delay, color="0.5", linestyle=":", label="largest delay tried")
     ax.axvline(0.5, color="0.7", linewidth=1)
-    ax.set(xlabel="guessed / true inertance  b_g / b", ylabel="largest stable delay [ms]",
-           title=title or "Error-feedback substructuring: stability against delay")
+    ax.set(
+        xlabel="guessed / true inertance  b_g / b",
+        ylabel="largest stable delay [ms]",
+        title=title or "Error-feedback substructuring: stability against delay",
+    )
     ax.set_ylim(bottom=-1)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
