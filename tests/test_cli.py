@@ -66,6 +66,7 @@ def retune_run(tmp_path_factory):
         "host_mass = 2000.0\nhost_frequency_hz = 4.0\nhost_damping_ratio = 0.02\n"
         "inertance = 100.0\nfriction_force = 20.0\n"
         "amplitudes = [200.0, 600.0]\nband_hz = [3.2, 4.8]\nn_frequencies = 17\n"
+        "stroke_limit = 0.005\n"
     )
     out = folder / "out"
     status, stdout, stderr = run(["retune", "--config", config, "--out", out])
@@ -199,7 +200,7 @@ def test_retune_prints_the_table_and_writes_every_file(retune_run):
         assert (out / name).read_bytes()[:8] == PNG_SIGNATURE
     assert leftovers(out) == []
     lines = stdout.splitlines()
-    assert "k/k_DH" in lines[1] and "c/c_DH" in lines[1] and "stroke [cm] (limit 7)" in lines[1]
+    assert "k/k_DH" in lines[1] and "c/c_DH" in lines[1] and "stroke [cm] (limit 0.5)" in lines[1]
     assert [line.split()[0] for line in lines[3:]] == ["200", "600"]
     assert "retune stage" in stderr and f"results in {out}/" in stderr
 
@@ -222,14 +223,17 @@ def test_retune_csv_and_json_agree_with_the_system(retune_run):
         assert [str(record[key]) for key in RETUNE_COLUMNS] == row
         assert record["k_over_k_den_hartog"] == pytest.approx(record["k_N_per_m"] / k_dh)
         assert record["c_over_c_den_hartog"] == pytest.approx(record["c_N_s_per_m"] / c_dh)
-        assert record["stroke_limit_m"] == tj.PAPER_STROKE
-        assert record["within_stroke_limit"] == (record["stroke_after_m"] <= tj.PAPER_STROKE)
+        assert record["stroke_limit_m"] == 0.005
         assert record["converged"] == record["status"].startswith("ok")
         # retuning lowers the host peak; friction makes it a stiffer, less damped TID
         assert record["x_peak_after_over_A_K"] < record["x_peak_before_over_A_K"]
         assert record["k_over_k_den_hartog"] > 1
         assert record["c_over_c_den_hartog"] < 1
     low, high = data["results"]
+    # the stroke grows with amplitude: 200 N stays within 5 mm, 600 N does not
+    assert low["within_stroke_limit"] and low["stroke_after_m"] <= 0.005
+    assert not high["within_stroke_limit"] and high["stroke_after_m"] > 0.005
+    assert "stroke over limit" not in low["status"] and "stroke over limit" in high["status"]
     assert low["c_over_c_den_hartog"] < high["c_over_c_den_hartog"]
     # the saved table prints as the stdout table
     assert f"{low['k_over_k_den_hartog']:.3f}" in stdout.splitlines()[3]

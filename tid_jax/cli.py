@@ -482,6 +482,7 @@ def _run_retune(args) -> int:
     x_peak_after = np.asarray(result.x_peak) / static
     y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
     within = y_after <= stroke_limit
+    improved = x_peak_after <= x_peak_before
     statuses = result.status_messages()
     records = [
         dict(
@@ -502,7 +503,9 @@ def _run_retune(args) -> int:
                     bool(within[i]),
                     int(result.iterations[i]),
                     bool(result.converged[i]),
-                    statuses[i] + ("" if within[i] else "; stroke over limit"),
+                    statuses[i]
+                    + ("" if within[i] else "; stroke over limit")
+                    + ("" if improved[i] else "; peak above the initial tuning's"),
                 ),
                 strict=True,
             )
