@@ -20,6 +20,17 @@ from ._retune import (
     peaks as peaks,
     retune as retune,
 )
+from ._robust import (
+    BestTunings as BestTunings,
+    OptimumSensitivities as OptimumSensitivities,
+    RobustDesign as RobustDesign,
+    Sensitivities as Sensitivities,
+    TuningPerformance as TuningPerformance,
+    best_tunings as best_tunings,
+    robust_tune as robust_tune,
+    sensitivities as sensitivities,
+    tuning_performance as tuning_performance,
+)
 from ._steady_state import SolverSettings as SolverSettings
 from ._substructuring import (
     Substructuring as Substructuring,
