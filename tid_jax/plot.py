@@ -57,8 +57,8 @@ def plot_frequency_response(
 ):
     """The paper's Figure 5: peak host displacement (a) and inerter displacement (b) over
     A / K against forcing frequency (Hz), one line per forcing amplitude (N); arrays
-    `x_norm`, `y_norm` are `(n_amplitudes, n_frequencies)`. `linear = (x, y)` on the same
-    frequencies adds the frictionless TID."""
+    `x_norm`, `y_norm` are `(n_amplitudes, n_frequencies)`. `linear = (frequencies_hz, x,
+    y)` adds the frictionless TID."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
     colours = _amplitude_colours(amplitudes)
     panels = (
