@@ -418,7 +418,7 @@ def test_quick_start_is_two_commands_and_ci_runs_the_second():
     (block,) = readme_blocks("Quick start")
     install_and_retune, install_and_test = block.strip().splitlines()
     assert install_and_retune.endswith("pip install -e . && tid-jax retune")
-    assert install_and_test.endswith("python -m pytest -q")
+    assert install_and_test.endswith("python -m pytest")
     ci = (ROOT / ".ci" / "run").read_text().splitlines()
     assert install_and_test in ci
 
