@@ -63,15 +63,32 @@ def test_sensitivities_match_finite_differences(system, band, sensitivity):
 
 
 def test_elasticities_obey_scaling_laws(sensitivity):
-    # Scaling M, K, C, b, k, c by s leaves x unchanged when friction and forcing scale too:
-    # the elasticities of x with respect to all eight parameters sum to 1 (x ~ A / K at
-    # fixed ratios, and A, ff scale with it: sum over all = elasticity of A x / A = 1).
-    # Scaling every force (A, ff, K, k ...) is the same check in another form; here the
-    # dimensionless check: x is homogeneous of degree 1 in (A, ff) at fixed structure.
+    # Exact laws of eq. (12), whatever the solver. Multiplying every mass, stiffness,
+    # damping and force by s leaves x and y unchanged: the elasticities sum to 0. The
+    # forcing and friction forces set the response only through A/K and ff/A up to a scale:
+    # x(s A, s ff) = s x(A, ff), so e_A + e_ff = 1. (The friction width, a velocity, is held
+    # fixed by both.) At the optimum the same laws hold with k, c free: the host and stroke
+    # elasticities over the other parameters sum to 0 and e_A + e_ff = 1, k* scales with
+    # stiffness (its elasticities sum to 1) and c* likewise, and neither depends on A, ff
+    # apart from ff / A.
     index = {name: i for i, name in enumerate(sensitivity.parameters)}
-    for quantity in (sensitivity.host_elasticity, sensitivity.stroke_elasticity):
-        e = np.asarray(quantity)
-        assert e[index["amplitude"]] + e[index["friction_force"]] == pytest.approx(1.0, abs=1e-5)
+    a, f = index["amplitude"], index["friction_force"]
+    optimum = sensitivity.optimum
+    # The envelope theorem needs first derivatives only; the moving optimum also needs the
+    # curvature of the objective, from differences of first derivatives: looser.
+    for e, tol in (
+        (sensitivity.host_elasticity, 1e-4),
+        (sensitivity.stroke_elasticity, 1e-4),
+        (optimum.host_elasticity, 1e-4),
+        (optimum.stroke_elasticity, 3e-3),
+    ):
+        e = np.asarray(e)
+        assert np.sum(e) == pytest.approx(0.0, abs=tol)
+        assert e[a] + e[f] == pytest.approx(1.0, abs=tol)
+    for e in (optimum.stiffness_elasticity, optimum.damping_elasticity):
+        e = np.asarray(e)
+        assert np.sum(e) == pytest.approx(1.0, abs=3e-3)
+        assert e[a] + e[f] == pytest.approx(0.0, abs=3e-3)
 
 
 def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensitivity):
@@ -252,3 +269,41 @@ def test_robust_tune_rejects_bad_input(system, best):
         tj.robust_tune(system, ROBUST_AMPLITUDES, best="none")
     with pytest.raises(ValueError, match="another system"):
         tj.tuning_performance(system.replace(host_mass=1000.0), best)
+
+
+# --- command line ----------------------------------------------------------------------
+
+
+def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, sensitivity):
+    from tid_jax import cli
+
+    status = cli.main(
+        [
+            "sensitivity",
+            "--amplitudes",
+            str(SENSITIVITY_AMPLITUDE),
+            "--n-frequencies",
+            str(N_FREQUENCIES),
+            "--no-optimum",
+            "--quiet",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert status == 0
+    lines = capsys.readouterr().out.splitlines()
+    first = lines[3].split()  # after the title, the header and the rule
+    order = np.argsort(-np.abs(np.asarray(sensitivity.host_elasticity)))
+    assert first[1] == sensitivity.parameters[order[0]]
+    assert float(first[5]) == pytest.approx(float(sensitivity.host_elasticity[order[0]]), abs=1e-4)
+    with open(tmp_path / "sensitivity.csv") as file:
+        assert len(file.readlines()) == 1 + len(sensitivity.parameters)
+
+
+def test_cli_robust_rejects_bad_tolerance(tmp_path, capsys):
+    from tid_jax import cli
+
+    status = cli.main(["robust", "--host-frequency-tolerance", "1.5", "--out", str(tmp_path)])
+    assert status == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "host_frequency_tolerance" in error[0]

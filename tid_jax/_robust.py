@@ -31,9 +31,11 @@ _K, _C = PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping")
 # (u0, u1, *_OTHER): u0 = ln(k / k_ref), u1 = sqrt(c / c_ref), as in `retune`.
 _OTHER = tuple(i for i in range(len(PARAMETERS)) if i not in (_K, _C))
 
-# Design-variable step of the central differences that give the curvature of each refined
-# peak (the curvature of the smooth maximum across peaks is exact).
-_STENCIL_STEP = 5e-4
+# Design-variable step of the differences of exact gradients that give the curvature of
+# each refined peak (forward while optimising, central for the final derivatives; the
+# curvature of the smooth maximum across peaks is exact). Smaller steps amplify the noise
+# of the orbit solver in the gradients, larger ones the truncation error.
+_STENCIL_STEP = 1e-3
 _CHUNK = 3  # points per kernel call (one compiled shape for every use)
 _MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
 _MIN_STEP = 1e-8  # trust radius at which a stage gives up
@@ -55,7 +57,7 @@ ROBUST_STATUS_MESSAGES = {
 }
 
 
-# --- the kernel: refined peaks and their derivatives at five designs ----------------------
+# --- the kernel: refined peaks and their derivatives at a few designs ---------------------
 
 
 def _log_candidates(values, omegas):
@@ -569,8 +571,8 @@ def _check_options(max_steps, tol) -> None:
 
 class OptimumSensitivities(eqx.Module):
     """How the retuned optimum moves with each parameter. The optimum is the tuning
-    (k*, c*) minimising the smooth maximum over the band of the host displacement (the
-    objective of `retune`), solved to stationarity. Arrays are ordered as
+    (k*, c*) minimising the smooth maximum over the band of the host displacement (see
+    `best_tunings`), solved to stationarity. Arrays are ordered as
     `Sensitivities.parameters`; their `tid_stiffness` and `tid_damping` entries are 0, as
     the optimum does not depend on the tuning it starts from. SI units.
 
@@ -726,8 +728,8 @@ def sensitivities(
     forward-mode implicit differentiation through the periodic orbits.
 
     With `optimum=True` also at the retuned optimum (see `OptimumSensitivities`): the
-    tuning minimising the smooth peak (as `retune` does, starting from the system's tuning)
-    is found by Newton's method (at most `max_steps` steps per smooth-max stage, until the
+    tuning minimising the smooth peak (see `best_tunings`; from the system's tuning) is
+    found by Newton's method (at most `max_steps` steps per smooth-max stage, until the
     Newton decrement is below `tol`), then differentiated through its stationarity
     condition rather than re-optimised.
     """
@@ -771,15 +773,16 @@ def sensitivities(
 
 class BestTunings(eqx.Module):
     """For each host-frequency scale and forcing amplitude, the tuning that minimises the
-    smooth maximum over the band of the host displacement (the objective of `retune`),
-    found by Newton's method, and the peaks it achieves. Arrays are `[scales, amps]`; SI.
+    smooth maximum over the band of the host displacement, found by Newton's method, and
+    the peaks it achieves. Arrays are `[scales, amps]`; SI.
 
     - `system`: the nominal system; a scale s multiplies its host stiffness by s**2 (host
       frequency by s) and its band `omegas` (rad/s) by s.
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
     - `host_peak`, `stroke_peak`: peak |x| and |y| over the band with it, m.
     - `objective`: its smooth log peak (ln m), the reference of the worst-case ratio.
-    - `iterations`: Newton steps; `converged`: stationary and every steady state converged.
+    - `iterations`: Newton steps; `stationary`: the Newton decrement fell below the
+      tolerance; `converged`: stationary and every steady state in the band converged.
     """
 
     system: TIDSystem
@@ -792,6 +795,7 @@ class BestTunings(eqx.Module):
     stroke_peak: Float[Array, "scales amps"]
     objective: Float[Array, "scales amps"]
     iterations: Int[Array, "scales amps"]
+    stationary: Bool[Array, "scales amps"]
     converged: Bool[Array, "scales amps"]
 
 
@@ -814,10 +818,16 @@ def best_tunings(
 ) -> BestTunings:
     """The best achievable peak host displacement for each forcing amplitude (N) and host
     frequency scale (host stiffness times scale**2), over the band `omegas` (rad/s, for
-    the nominal system; default `default_omegas(system)`) scaled with the host frequency:
-    `retune`'s objective, minimised from the system's tuning (k times scale**2, c times
-    scale) by Newton's method to a Newton decrement below `tol` (at most `max_steps` steps
-    per smooth-max stage). `progress`, if given, gets a line per scenario."""
+    the nominal system; default `default_omegas(system)`) scaled with the host frequency.
+
+    The objective is that of `retune`, a smooth maximum (sharpness rising over
+    `SHARPNESS`) of the log host peaks refined by parabolas through three samples, except
+    that the parabola vertices at every concave sample count, not only at local maxima:
+    this keeps it continuous when a peak moves past a sample, where `retune`'s jumps. It
+    is minimised from the system's tuning (k times scale**2, c times scale) by a
+    trust-region Newton method (curvature of each refined peak from differences of its
+    exact gradient) to a Newton decrement below `tol`, at most `max_steps` steps per
+    stage. `progress`, if given, gets a line per scenario."""
     _check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
@@ -826,7 +836,8 @@ def best_tunings(
     ctx = _Context(system, band, settings)
     shape = (scales.size, amps.size)
     out = {name: np.zeros(shape) for name in ("k", "c", "x", "y", "objective")}
-    steps, converged = np.zeros(shape, dtype=int), np.zeros(shape, dtype=bool)
+    steps = np.zeros(shape, dtype=int)
+    stationary, converged = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
     for i, scale in enumerate(scales):
         start = _scaled_start(ctx, system, float(scale))
         states = ctx.cold_states(*ctx.tuning(start), amps, float(scale))
@@ -840,6 +851,7 @@ def best_tunings(
             out["x"][i, j], out["y"][i, j] = centre.host_peak(), centre.stroke_peak()
             out["objective"][i, j] = minimum.objective.value
             steps[i, j] = minimum.steps
+            stationary[i, j] = minimum.converged
             converged[i, j] = minimum.converged and minimum.evaluation.converged()
             if progress is not None:
                 progress(
@@ -847,7 +859,8 @@ def best_tunings(
                     f"(A = {amplitude:g} N, host frequency x {scale:g}): "
                     f"k/k_ref = {out['k'][i, j] / ctx.k_ref:.4f}, "
                     f"c/c_ref = {out['c'][i, j] / ctx.c_ref:.4f}, {minimum.steps} steps"
-                    + ("" if converged[i, j] else ", not converged")
+                    + ("" if stationary[i, j] else ", not stationary")
+                    + ("" if minimum.evaluation.converged() else ", steady states failed")
                 )
     return BestTunings(
         system=system,
@@ -860,6 +873,7 @@ def best_tunings(
         stroke_peak=jnp.asarray(out["y"]),
         objective=jnp.asarray(out["objective"]),
         iterations=jnp.asarray(steps),
+        stationary=jnp.asarray(stationary),
         converged=jnp.asarray(converged),
     )
 
@@ -971,7 +985,8 @@ class RobustDesign(eqx.Module):
       `stroke_margin = 1 - max_stroke / stroke_limit`.
     - `performance`: the robust tuning's `TuningPerformance` on the design band (its
       `ratio` per scenario); `check_stroke_peak`: inerter peaks `[scales, amps]` on the
-      fine grid; `best`: the `BestTunings` it was measured against.
+      fine grid, `check_converged`: whether every steady state there converged; `best`:
+      the `BestTunings` it was measured against.
     - `iterations`: Newton steps; `converged`; `status`: see `status_message()`.
     """
 
@@ -985,6 +1000,7 @@ class RobustDesign(eqx.Module):
     stroke_margin: Float[Array, ""]
     performance: TuningPerformance
     check_stroke_peak: Float[Array, "scales amps"]
+    check_converged: Bool[Array, "scales amps"]
     best: BestTunings
     iterations: Int[Array, ""]
     converged: Bool[Array, ""]
@@ -1149,6 +1165,7 @@ def robust_tune(
         stroke_margin=jnp.asarray(1 - max_stroke / limit),
         performance=performance,
         check_stroke_peak=jnp.asarray(check_y),
+        check_converged=jnp.asarray(check_ok),
         best=best,
         iterations=jnp.asarray(steps),
         converged=jnp.asarray(status == 0),

@@ -24,6 +24,7 @@ from ._io import check_writable_dir, json_text, write_csv, write_json, write_tom
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
+from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_performance
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._system import (
@@ -1006,12 +1007,387 @@ def _run_rtds(args) -> int:
     return output.finish(data, title + "\n" + _format_table(header, table_rows))
 
 
+# --- tid-jax sensitivity --------------------------------------------------------------------
+
+SENSITIVITY_COLUMNS = (
+    "amplitude_N",
+    "parameter",
+    "value",
+    "unit",
+    "host_peak_m",
+    "host_derivative_m_per_unit",
+    "host_elasticity",
+    "stroke_peak_m",
+    "stroke_derivative_m_per_unit",
+    "stroke_elasticity",
+    "optimum_k_N_per_m",
+    "optimum_c_N_s_per_m",
+    "optimum_host_elasticity",
+    "optimum_stroke_elasticity",
+    "optimum_stiffness_elasticity",
+    "optimum_damping_elasticity",
+    "converged",
+    "optimum_converged",
+)
+
+
+def _add_sensitivity_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sensitivity",
+        help="derivatives of the peak responses with respect to every parameter",
+        description="For each forcing amplitude: derivatives and elasticities (d ln peak / "
+        "d ln p) of the peak host displacement and inerter stroke over the band with "
+        "respect to the host mass, stiffness and damping, the inertance, the friction "
+        "force, the TID stiffness and damping and the amplitude, at the given tuning and "
+        "at the tuning retuned for that amplitude (envelope theorem and implicit "
+        "differentiation). Prints a table ranked by the host elasticity and saves "
+        "sensitivity.csv, sensitivity.json, sensitivity_config.toml and, for several "
+        "amplitudes, sensitivity.png to --out.",
+    )
+    _add_system_arguments(parser)
+    parser.add_argument(
+        "--no-optimum",
+        action="store_true",
+        help="only at the given tuning (skips finding the retuned optimum)",
+    )
+    _add_output_arguments(parser)
+
+
+def _run_sensitivity(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
+        f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
+    )
+    results = []
+    for i, amplitude in enumerate(amplitudes):
+        results.append(
+            sensitivities(
+                system, amplitude, omegas=omegas, optimum=not args.no_optimum, settings=settings
+            )
+        )
+        output.say(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
+
+    records = []
+    for amplitude, result in zip(amplitudes, results, strict=True):
+        optimum = result.optimum
+        for i, name in enumerate(result.parameters):
+            optimal = (
+                [None] * 8
+                if optimum is None
+                else [
+                    float(optimum.tid_stiffness),
+                    float(optimum.tid_damping),
+                    float(optimum.host_elasticity[i]),
+                    float(optimum.stroke_elasticity[i]),
+                    float(optimum.stiffness_elasticity[i]),
+                    float(optimum.damping_elasticity[i]),
+                    None,
+                    bool(optimum.converged),
+                ]
+            )
+            values = [
+                float(amplitude),
+                name,
+                float(result.values[i]),
+                PARAMETER_UNITS[name],
+                float(result.host_peak),
+                float(result.host_derivative[i]),
+                float(result.host_elasticity[i]),
+                float(result.stroke_peak),
+                float(result.stroke_derivative[i]),
+                float(result.stroke_elasticity[i]),
+                *optimal[:6],
+                bool(result.converged),
+                optimal[7],
+            ]
+            records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
+
+    write_csv(
+        output.path("sensitivity.csv"),
+        SENSITIVITY_COLUMNS,
+        [["" if r[key] is None else r[key] for key in SENSITIVITY_COLUMNS] for r in records],
+    )
+    write_toml(
+        output.path("sensitivity_config.toml"),
+        _config_data(inputs),
+        comment=_config_comment("sensitivity"),
+    )
+    if amplitudes.size > 1:
+        parameters = results[0].parameters
+
+        def series(get, names):
+            return {n: np.array([get(r)[parameters.index(n)] for r in results]) for n in names}
+
+        design = ("tid_stiffness", "tid_damping")
+        physical = [n for n in parameters if n not in design]
+        optimum_given = not args.no_optimum
+        plot.save_figure(
+            plot.plot_elasticities(
+                amplitudes,
+                series(lambda r: np.asarray(r.host_elasticity), parameters),
+                series(lambda r: np.asarray(r.stroke_elasticity), parameters),
+                optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical)
+                if optimum_given
+                else None,
+                optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical)
+                if optimum_given
+                else None,
+            ),
+            output.path("sensitivity.png"),
+        )
+    json_path = output.path("sensitivity.json")
+    data = output.document("sensitivity", inputs, system, settings, frequencies_hz, results=records)
+    write_json(json_path, data)
+
+    header = ["A [N]", "parameter", "value", "unit", "d x/dp [m/unit]", "e_x", "e_y"]
+    if not args.no_optimum:
+        header += ["e_x retuned", "e_y retuned", "e_k*", "e_c*"]
+    rows = []
+    for amplitude in amplitudes:
+        ranked = sorted(
+            (r for r in records if r["amplitude_N"] == float(amplitude)),
+            key=lambda r: -abs(r["host_elasticity"]),
+        )
+        for r in ranked:
+            row = [
+                f"{amplitude:g}",
+                r["parameter"],
+                f"{r['value']:.5g}",
+                r["unit"],
+                f"{r['host_derivative_m_per_unit']:.3e}",
+                f"{r['host_elasticity']:.4f}",
+                f"{r['stroke_elasticity']:.4f}",
+            ]
+            if not args.no_optimum:
+                row += [
+                    f"{r['optimum_host_elasticity']:.4f}",
+                    f"{r['optimum_stroke_elasticity']:.4f}",
+                    f"{r['optimum_stiffness_elasticity']:.4f}",
+                    f"{r['optimum_damping_elasticity']:.4f}",
+                ]
+            rows.append(row)
+    unconverged = [
+        f"{a:g} N"
+        for a, r in zip(amplitudes, results, strict=True)
+        if not bool(r.converged) or (r.optimum is not None and not bool(r.optimum.converged))
+    ]
+    title = (
+        f"Sensitivities of the peak responses ({_describe(system)}); e_x, e_y: elasticities "
+        f"d ln(peak) / d ln(p) of the host peak and the inerter stroke; 'retuned': at the "
+        f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c; ranked by |e_x|"
+        + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows))
+
+
+# --- tid-jax robust -------------------------------------------------------------------------
+
+ROBUST_COLUMNS = (
+    "host_frequency_scale",
+    "amplitude_N",
+    "best_k_N_per_m",
+    "best_c_N_s_per_m",
+    "best_x_peak_m",
+    "robust_x_peak_m",
+    "robust_ratio",
+    "robust_stroke_m",
+    "given_ratio",
+    "given_stroke_m",
+)
+
+
+def _add_robust_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "robust",
+        help="one TID tuning for a range of forcing amplitudes (and host frequencies)",
+        description="The TID stiffness k and damping c minimising the worst case, over the "
+        "forcing amplitudes (and host frequencies), of the peak host displacement over "
+        "the best achievable at that amplitude, with the inerter stroke within the "
+        "stroke limit; compared with the given (default: Den Hartog) tuning. Prints a "
+        "table and saves robust.csv, robust.json, robust_config.toml and robust.png "
+        "to --out.",
+    )
+    _add_system_arguments(parser)
+    parser.add_argument(
+        "--host-frequency-tolerance",
+        dest="host_frequency_tolerance",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="also hold for host frequencies (1 +- FRACTION) times the nominal one, "
+        "e.g. 0.05 (default 0: nominal only)",
+    )
+    parser.add_argument(
+        "--no-stroke-limit",
+        action="store_true",
+        help="leave the inerter stroke free",
+    )
+    _add_output_arguments(parser)
+
+
+def _run_robust(args) -> int:
+    inputs = _inputs(args)
+    tolerance = args.host_frequency_tolerance
+    if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
+        raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
+    stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
+    output = _Output(args)
+    output.say(
+        f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} host "
+        f"frequencies, {omegas.size} frequencies each; {_describe(system)}"
+    )
+    result = robust_tune(
+        system,
+        amplitudes,
+        host_frequency_scales=scales,
+        stroke_limit=stroke_limit,
+        omegas=omegas,
+        settings=settings,
+        progress=output.say,
+    )
+    given = tuning_performance(system, result.best, settings=settings)
+    robust = result.performance
+    best = result.best
+    records = [
+        dict(
+            zip(
+                ROBUST_COLUMNS,
+                (
+                    float(scale),
+                    float(amplitude),
+                    float(best.tid_stiffness[i, j]),
+                    float(best.tid_damping[i, j]),
+                    float(best.host_peak[i, j]),
+                    float(robust.host_peak[i, j]),
+                    float(robust.ratio[i, j]),
+                    float(robust.stroke_peak[i, j]),
+                    float(given.ratio[i, j]),
+                    float(given.stroke_peak[i, j]),
+                ),
+                strict=True,
+            )
+        )
+        for i, scale in enumerate(scales)
+        for j, amplitude in enumerate(amplitudes)
+    ]
+    write_csv(
+        output.path("robust.csv"),
+        ROBUST_COLUMNS,
+        [[r[key] for key in ROBUST_COLUMNS] for r in records],
+    )
+    write_toml(
+        output.path("robust_config.toml"), _config_data(inputs), comment=_config_comment("robust")
+    )
+    nominal = scales.index(1.0)
+    plot.save_figure(
+        plot.plot_robust_comparison(
+            amplitudes,
+            [
+                (
+                    f"given tuning: worst {float(given.worst_ratio):.3f}",
+                    np.asarray(given.ratio[nominal]),
+                    np.asarray(given.stroke_peak[nominal]),
+                    dict(color="tab:red", linestyle="--", marker="."),
+                ),
+                (
+                    f"robust: worst {float(result.worst_ratio):.3f}",
+                    np.asarray(robust.ratio[nominal]),
+                    np.asarray(robust.stroke_peak[nominal]),
+                    dict(color="tab:blue", linewidth=2.0, marker="."),
+                ),
+            ],
+            stroke_limit=stroke_limit,
+            title="Robust TID tuning" + (" (nominal host frequency)" if tolerance > 0 else ""),
+        ),
+        output.path("robust.png"),
+    )
+    k_dh, c_dh = _den_hartog(system)
+    k, c = float(result.tid_stiffness), float(result.tid_damping)
+    summary = {
+        "tid_stiffness": k,
+        "tid_damping": c,
+        "k_over_k_den_hartog": k / k_dh,
+        "c_over_c_den_hartog": c / c_dh,
+        "worst_ratio": float(result.worst_ratio),
+        "worst_amplitude_N": float(result.worst_amplitude),
+        "worst_host_frequency_scale": float(result.worst_host_frequency_scale),
+        "stroke_limit_m": stroke_limit,
+        "max_stroke_m": float(result.max_stroke),
+        "given_worst_ratio": float(given.worst_ratio),
+        "given_worst_amplitude_N": float(given.worst_amplitude),
+        "iterations": int(result.iterations),
+        "converged": bool(result.converged),
+        "status": result.status_message(),
+    }
+    json_path = output.path("robust.json")
+    data = output.document(
+        "robust",
+        inputs,
+        system,
+        settings,
+        frequencies_hz,
+        host_frequency_scales=list(scales),
+        robust=summary,
+        results=records,
+    )
+    write_json(json_path, data)
+
+    header = [
+        "f_n x",
+        "A [N]",
+        "best k/k_DH",
+        "best c/c_DH",
+        "ratio robust",
+        "ratio given",
+        "stroke robust [cm]",
+        "stroke given [cm]",
+    ]
+    rows = [
+        [
+            f"{r['host_frequency_scale']:g}",
+            f"{r['amplitude_N']:g}",
+            f"{r['best_k_N_per_m'] / k_dh:.3f}",
+            f"{r['best_c_N_s_per_m'] / c_dh:.3f}",
+            f"{r['robust_ratio']:.3f}",
+            f"{r['given_ratio']:.3f}",
+            f"{100 * r['robust_stroke_m']:.2f}",
+            f"{100 * r['given_stroke_m']:.2f}",
+        ]
+        for r in records
+    ]
+    limit_text = (
+        "no stroke limit"
+        if stroke_limit is None
+        else (f"max stroke {100 * summary['max_stroke_m']:.2f} cm (limit {100 * stroke_limit:g})")
+    )
+    title = (
+        f"Robust tuning ({_describe(system)}): k = {k:.5g} N/m ({k / k_dh:.3f} k_DH), "
+        f"c = {c:.4g} N s/m ({c / c_dh:.3f} c_DH); worst ratio to the best tuning "
+        f"{summary['worst_ratio']:.3f} at {summary['worst_amplitude_N']:g} N"
+        + (f", host frequency x {summary['worst_host_frequency_scale']:g}" if tolerance else "")
+        + f" (given tuning: {summary['given_worst_ratio']:.3f} at "
+        f"{summary['given_worst_amplitude_N']:g} N); {limit_text}; {summary['status']}"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows))
+
+
 # --- entry point ----------------------------------------------------------------------------
 
 _COMMANDS = {
     "retune": (_add_retune_parser, _run_retune),
     "frf": (_add_frf_parser, _run_frf),
     "rtds": (_add_rtds_parser, _run_rtds),
+    "sensitivity": (_add_sensitivity_parser, _run_sensitivity),
+    "robust": (_add_robust_parser, _run_robust),
 }
 
 

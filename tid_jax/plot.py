@@ -354,3 +354,80 @@ def plot_substructuring_stability(curves, *, max_delay=None, title=None):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return fig
+
+
+PARAMETER_LABELS = {
+    "host_mass": "host mass M",
+    "host_stiffness": "host stiffness K",
+    "host_damping": "host damping C",
+    "inertance": "inertance b",
+    "friction_force": "friction force ff",
+    "tid_stiffness": "TID stiffness k",
+    "tid_damping": "TID damping c",
+    "amplitude": "forcing amplitude A",
+}
+
+
+def plot_elasticities(
+    amplitudes, host, stroke, *, optimum_host=None, optimum_stroke=None, title=None
+):
+    """Elasticities d ln(peak) / d ln(p) of the peak host displacement (a) and of the peak
+    inerter stroke (b) against forcing amplitude (N), one colour per parameter. `host` and
+    `stroke` map parameter names to arrays over `amplitudes` at the given tuning (solid
+    lines); `optimum_host` and `optimum_stroke`, if given, the same at the tuning retuned
+    for each amplitude (dashed lines)."""
+    fig, (ax_x, ax_y) = plt.subplots(1, 2, figsize=(12, 4.8), layout="constrained")
+    colours = plt.get_cmap("tab10")
+    for ax, given, optimum in ((ax_x, host, optimum_host), (ax_y, stroke, optimum_stroke)):
+        for n, (name, values) in enumerate(given.items()):
+            colour = colours(n % 10)
+            ax.plot(amplitudes, values, color=colour, marker=".",
+                    label=PARAMETER_LABELS.get(name, name))
+            if optimum is not None and name in optimum:
+                ax.plot(amplitudes, optimum[name], color=colour, linestyle="--", marker=".")
+        ax.axhline(0.0, color="black", linewidth=0.8)
+        ax.set(xscale="log", xlabel="forcing amplitude A [N]")
+        _plain_log_axis(ax.xaxis)
+        ax.grid(alpha=0.3, which="both")
+    ax_x.set(ylabel="elasticity  d ln x_peak / d ln p", title="(a) peak host displacement")
+    ax_y.set(ylabel="elasticity  d ln y_peak / d ln p", title="(b) peak inerter stroke")
+    handles, labels = ax_x.get_legend_handles_labels()
+    if optimum_host is not None:
+        handles += [
+            matplotlib.lines.Line2D([], [], color="0.3", label="at the given tuning"),
+            matplotlib.lines.Line2D([], [], color="0.3", linestyle="--",
+                                    label="at the tuning retuned for each A"),
+        ]
+        labels += ["at the given tuning", "at the tuning retuned for each A"]
+    fig.legend(handles, labels, loc="outside right center", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_robust_comparison(amplitudes, designs, *, stroke_limit=None, title=None):
+    """TID tunings over a range of forcing amplitudes (N): (a) peak host displacement over
+    the best achievable at each amplitude, (b) peak inerter stroke (cm). `designs` is a
+    sequence of `(label, ratio, stroke_m, style)` with `style` matplotlib line keywords;
+    `stroke_limit` (m) draws the stroke limit."""
+    fig, (ax_r, ax_y) = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
+    for label, ratio, stroke, style in designs:
+        ax_r.plot(amplitudes, ratio, label=label, **style)
+        ax_y.plot(amplitudes, 100 * np.asarray(stroke), label=label, **style)
+    ax_r.axhline(1.0, color="black", linewidth=0.8)
+    if stroke_limit is not None:
+        ax_y.axhline(100 * stroke_limit, color="tab:red", linewidth=1.5,
+                     label=f"stroke limit +-{100 * stroke_limit:g} cm")
+    ax_r.set(xscale="log", xlabel="forcing amplitude A [N]",
+             ylabel="peak host displacement / best achievable at A",
+             title="(a) host structure, relative to retuning for each A")
+    ax_y.set(xscale="log", yscale="log", xlabel="forcing amplitude A [N]",
+             ylabel="peak inerter stroke  |y| [cm]", title="(b) inerter stroke")
+    _plain_log_axis(ax_y.yaxis)
+    for ax in (ax_r, ax_y):
+        _plain_log_axis(ax.xaxis)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
