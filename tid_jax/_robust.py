@@ -42,9 +42,10 @@ _MIN_STEP = 1e-8  # trust radius at which a stage gives up
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
 # The optimiser aims at a Newton decrement below `tol`; the noise of the orbit solver in the
-# gradients can hold it somewhat above (most at high amplitudes, where the balance of peaks
-# is stiffest). Within NOISE_FACTOR * tol the optimum counts as converged.
-NOISE_FACTOR = 100.0
+# gradients, and jumps of ~1e-8 in the log peak where a sample's concavity flips, can hold
+# it above that (most where peaks of different amplitudes balance). Within
+# NOISE_FACTOR * tol (1e-6 of the log peak by default) the optimum counts as converged.
+NOISE_FACTOR = 1000.0
 _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
 # The limit is aimed at this fraction below the stated one on the design grid, then checked
 # on a grid CHECK_REFINEMENT times finer; if it is exceeded there the design-grid target is
