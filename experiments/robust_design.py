@@ -141,8 +141,9 @@ def main() -> None:
     }
     designs = [
         (
-            f"{name}: worst {float(performance[name].worst_ratio):.3f}, "
-            f"stroke {100 * fine_stroke[name]:.1f} cm",
+            f"{name}: worst {float(performance[name].worst_ratio):.3f}"
+            + (f" ({worst_overall[name][0]:.3f} over all)" if name in worst_overall else "")
+            + f", stroke {100 * fine_stroke[name]:.1f} cm",
             np.asarray(performance[name].ratio[0]),
             np.asarray(performance[name].stroke_peak[0]),
             styles.get(name, dict(color="tab:gray", linestyle="-.", marker="^")),
