@@ -26,6 +26,7 @@ STATUS_MESSAGES = {
     1: "optimiser did not converge",
     2: "some steady states did not converge",
     3: "peak at the edge of the frequency band",
+    4: "the retuned peak was above the initial tuning's on the check grid: initial tuning kept",
 }
 
 
@@ -227,29 +228,52 @@ DESIGN_NEWTON_STEPS = 4
 
 
 @eqx.filter_jit
-def _optimise_stage(system, amplitudes, u0, omegas, sharpness, settings, max_steps, tol):
+def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
+    """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
+    from the orbits `z0` (default: solved at `u0`); returns the designs, iterations, success
+    and the orbits of the last accepted design."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
     )
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    solver = optx.BFGS(rtol=tol, atol=tol)
+    options = dict(autodiff_mode="fwd")
+    tags = frozenset()
 
-    def objective(u, args):
-        amplitude, z_warm = args
-        k, c = _design_to_tuning(u, k_ref, c_ref)
-        xs, _, _, _ = sweep(_with_tuning(system, k, c), amplitude, omegas, settings, z_warm)
-        static = amplitude / system.host_stiffness
-        return smooth_log_peak(xs / static, omegas, sharpness)
+    def one(amplitude, u_start, z_start):
+        def objective(u, z_warm):
+            k, c = _design_to_tuning(u, k_ref, c_ref)
+            xs, _, _, states = sweep(_with_tuning(system, k, c), amplitude, omegas, settings,
+                                     z_warm)
+            static = amplitude / system.host_stiffness
+            return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(states)
 
-    def one(amplitude, u_start):
-        # Orbits at the stage's starting tuning warm-start every shooting solve of the stage.
-        k, c = _design_to_tuning(u_start, k_ref, c_ref)
-        _, _, _, z_warm = sweep(_with_tuning(system, k, c), amplitude, omegas, settings)
-        solver = optx.BFGS(rtol=tol, atol=tol)
-        sol = optx.minimise(objective, solver, u_start, args=(amplitude, z_warm),
-                            max_steps=max_steps, throw=False)
-        return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+        # Every shooting solve starts from the orbits of the last accepted design, so that
+        # the Newton iterations of the steady states follow the optimiser.
+        if z_start is None:
+            k, c = _design_to_tuning(u_start, k_ref, c_ref)
+            _, _, _, z_start = sweep(_with_tuning(system, k, c), amplitude, omegas, settings)
+        f_struct, aux_struct = jax.eval_shape(objective, u_start, z_start)
+        state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
 
-    return jax.vmap(one)(amplitudes, u0)
+        def cond(carry):
+            u, state, z, steps = carry
+            done, _ = solver.terminate(objective, u, z, options, state, tags)
+            return ~done & (steps < max_steps)
+
+        def body(carry):
+            u, state, z, steps = carry
+            u, state, _ = solver.step(objective, u, z, options, state, tags)
+            z = jnp.where(state.num_accepted_steps > 0, state.aux, z)
+            return u, state, z, steps + 1
+
+        u, state, z, steps = jax.lax.while_loop(cond, body, (u_start, state, z_start, 0))
+        done, result = solver.terminate(objective, u, z, options, state, tags)
+        return u, steps, done & (result == optx.RESULTS.successful), z
+
+    if z0 is None:
+        return jax.vmap(lambda a, u: one(a, u, None))(amplitudes, u0)
+    return jax.vmap(one)(amplitudes, u0, z0)
 
 
 def retune(
@@ -288,9 +312,10 @@ def retune(
     # variables and would never be left.
     u = jnp.stack([jnp.log(k0 / k_ref), jnp.sqrt(jnp.maximum(c0 / c_ref, 0.05))], axis=-1)
     iterations = jnp.zeros(amps.shape, dtype=int)
+    orbits = None
     for stage, sharpness in enumerate(SHARPNESS, start=1):
-        u, steps, ok = _optimise_stage(
-            system, amps, u, band, jnp.asarray(sharpness), settings, max_steps, tol
+        u, steps, ok, orbits = _optimise_stage(
+            system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps, tol
         )
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
@@ -311,6 +336,12 @@ def retune(
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )
+    # A design that the check finds worse than the tuning it started from (the design grid
+    # misled the optimiser) is not returned: the initial tuning is kept and flagged.
+    worse = after.x_peak > before.x_peak
+    status = jnp.where(worse, 4, status)
+    k, c = jnp.where(worse, k0, k), jnp.where(worse, c0, c)
+    after = jax.tree.map(lambda b, a: jnp.where(worse, b, a), before, after)
     return RetuneResult(
         amplitudes=amps,
         tid_stiffness=k,
