@@ -294,7 +294,9 @@ def retune(
     replaced by a smooth maximum of the parabola-refined local peaks whose sharpness grows
     over `SHARPNESS` (continuation), each stage an optimistix BFGS run (at most `max_steps`
     iterations, tolerance `tol`) warm-started from the last, with gradients by implicit
-    differentiation through the periodic orbits. The result is confirmed on a finer grid.
+    differentiation through the periodic orbits; every steady state shoots from the orbit
+    of the last accepted design. The result is confirmed on a finer grid; a design whose
+    peak there is above the initial tuning's is replaced by the initial tuning (status 4).
     `progress`, if given, is called with a one-line message after each stage.
     """
     _check_system(system)
