@@ -93,18 +93,14 @@ class _Parser(argparse.ArgumentParser):
 # --- shared arguments -------------------------------------------------------------------
 
 
-def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
+def _add_structure_arguments(parser: argparse.ArgumentParser, config_help: str) -> None:
+    """The "structure and device" group: --config and a flag per physical input."""
     group = parser.add_argument_group(
         "structure and device",
         "SI units, frequencies in Hz. Defaults: the paper's system (1500 kg, 4 Hz, 2% "
         "damping, b = 75 kg, ff = 20 N, Den Hartog k and c). Flags override --config.",
     )
-    group.add_argument(
-        "--config",
-        metavar="FILE.toml",
-        help="TOML file with any of the keys below (flag names with '_' for "
-        "'-') and an optional [solver] table; see the README",
-    )
+    group.add_argument("--config", metavar="FILE.toml", help=config_help)
     for key, unit, description, _ in PHYSICAL_INPUTS:
         group.add_argument(
             f"--{key.replace('_', '-')}",
@@ -114,6 +110,14 @@ def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
             help=f"{description} [{unit}]"
             + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
         )
+
+
+def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_structure_arguments(
+        parser,
+        "TOML file with any of the keys below (flag names with '_' for "
+        "'-') and an optional [solver] table; see the README",
+    )
     grid = parser.add_argument_group("forcing and frequency band")
     grid.add_argument(
         "--amplitudes",
@@ -759,26 +763,11 @@ def _add_rtds_parser(subparsers) -> None:
         "whole system (amplitude and phase errors) and reports unstable tests. Prints a "
         "table and saves rtds.csv, rtds.json and rtds.png to --out.",
     )
-    group = parser.add_argument_group(
-        "structure and device",
-        "SI units, frequencies in Hz. Defaults: the paper's system (1500 kg, 4 Hz, 2% "
-        "damping, b = 75 kg, ff = 20 N, Den Hartog k and c). Flags override --config.",
-    )
-    group.add_argument(
-        "--config",
-        metavar="FILE.toml",
-        help="TOML file with the structure and device keys (and amplitudes, band_hz, "
+    _add_structure_arguments(
+        parser,
+        "TOML file with the structure and device keys (and amplitudes, band_hz, "
         "n_frequencies), as for the other commands",
     )
-    for key, unit, description, _ in PHYSICAL_INPUTS:
-        group.add_argument(
-            f"--{key.replace('_', '-')}",
-            dest=key,
-            type=float,
-            metavar="RATIO" if unit == "-" else unit,
-            help=f"{description} [{unit}]"
-            + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
-        )
     forcing = parser.add_argument_group("forcing")
     forcing.add_argument(
         "--amplitude",
