@@ -90,26 +90,38 @@ def _point_summary(system, omega, amplitude, settings):
     )
 
 
+def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
+    """`system` with the TID's stiffness k and damping c replaced (traceable, unchecked)."""
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (stiffness, damping))
+
+
 @eqx.filter_jit
-def _points(system, omegas, amplitudes, settings):
-    return jax.vmap(lambda w, a: _point_summary(system, w, a, settings))(omegas, amplitudes)
+def _points(system, omegas, amplitudes, settings, stiffness=None, damping=None):
+    if stiffness is None:
+        return jax.vmap(lambda w, a: _point_summary(system, w, a, settings))(omegas, amplitudes)
+    return jax.vmap(
+        lambda w, a, k, c: _point_summary(with_tuning(system, k, c), w, a, settings)
+    )(omegas, amplitudes, stiffness, damping)
 
 
-def solve_points(system, omegas, amplitudes, settings: SolverSettings) -> dict:
-    """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched.
-    Points that do not converge are solved again, on their own, with
-    `settings.persistent()`; the better attempt is kept. Each batch is sharded over all JAX
-    devices (`sharded_batch`)."""
-    out = sharded_batch(lambda w, a: _points(system, w, a, settings), omegas, amplitudes)
+def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None) -> dict:
+    """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched;
+    with `tunings = (stiffness, damping)`, flat lists too, point i uses the TID stiffness
+    and damping `stiffness[i]`, `damping[i]`. Points that do not converge are solved again,
+    on their own, with `settings.persistent()`; the better attempt is kept. Each batch is
+    sharded over all JAX devices (`sharded_batch`)."""
+    batch = (omegas, amplitudes) + (() if tunings is None else tuple(tunings))
+
+    def solve(settings):
+        return lambda *b: _points(system, *b[:2], settings, *b[2:])
+
+    out = sharded_batch(solve(settings), *batch)
     failed = np.flatnonzero(~np.asarray(out["converged"]))
     if failed.size:
         # Pad the retry batch to a power of two so that few batch sizes are compiled.
         size = 1 << int(np.ceil(np.log2(failed.size)))
         index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
-        persistent = settings.persistent()
-        retry = sharded_batch(
-            lambda w, a: _points(system, w, a, persistent), omegas[index], amplitudes[index]
-        )
+        retry = sharded_batch(solve(settings.persistent()), *(b[index] for b in batch))
         better = np.asarray(retry["residual"])[: failed.size] < np.asarray(out["residual"])[failed]
         chosen = failed[better]
         out = {

@@ -8,7 +8,14 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._linear import den_hartog_tuning
-from ._response import check_grid, frequency_response, point_response
+from ._response import (
+    FrequencyResponse,
+    check_grid,
+    frequency_response,
+    point_response,
+    solve_points,
+    with_tuning,
+)
 from ._steady_state import SolverSettings
 from ._system import TIDSystem
 
@@ -77,10 +84,6 @@ def smooth_log_peak(values: Float[Array, " freqs"], omegas, sharpness) -> Float[
     return jax.nn.logsumexp(sharpness * logs) / sharpness
 
 
-def _with_tuning(system: TIDSystem, k, c) -> TIDSystem:
-    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-
-
 def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
     """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
     one amplitude, shooting from `z_init` (one state per frequency) if given."""
@@ -106,7 +109,7 @@ class Peaks(eqx.Module):
     converged: Bool[Array, " amps"]  # every steady state in the band converged
 
 
-def _peaks_from_response(response, omegas) -> Peaks:
+def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
     """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas`."""
     x = jax.vmap(lambda v: grid_peak(v, omegas))(response.x_max)
     y = jax.vmap(lambda v: grid_peak(v, omegas))(response.y_max)
@@ -119,6 +122,25 @@ def _peaks_from_response(response, omegas) -> Peaks:
         at_edge=x[2],
         converged=jnp.all(response.converged, axis=-1),
     )
+
+
+def _tuned_peaks(system, stiffness, damping, amplitudes, omegas, settings) -> Peaks:
+    """`Peaks` over `omegas` of the design (`stiffness[i]`, `damping[i]`) at
+    `amplitudes[i]`, every design in one batch."""
+    shape = (amplitudes.size, omegas.size)
+
+    def flat(values):
+        return jnp.broadcast_to(values, shape).reshape(-1)
+
+    out = solve_points(
+        system, flat(omegas), flat(amplitudes[:, None]), settings,
+        (flat(stiffness[:, None]), flat(damping[:, None])),
+    )
+    response = FrequencyResponse(
+        omegas=omegas, amplitudes=amplitudes, **{key: value.reshape(shape + value.shape[1:])
+                                                 for key, value in out.items()}
+    )
+    return _peaks_from_response(response, omegas)
 
 
 def _check_system(system) -> None:
@@ -243,7 +265,7 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     def one(amplitude, u_start, z_start):
         def objective(u, z_warm):
             k, c = _design_to_tuning(u, k_ref, c_ref)
-            xs, _, _, states = sweep(_with_tuning(system, k, c), amplitude, omegas, settings,
+            xs, _, _, states = sweep(with_tuning(system, k, c), amplitude, omegas, settings,
                                      z_warm)
             static = amplitude / system.host_stiffness
             return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(states)
@@ -252,7 +274,7 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         # the Newton iterations of the steady states follow the optimiser.
         if z_start is None:
             k, c = _design_to_tuning(u_start, k_ref, c_ref)
-            _, _, _, z_start = sweep(_with_tuning(system, k, c), amplitude, omegas, settings)
+            _, _, _, z_start = sweep(with_tuning(system, k, c), amplitude, omegas, settings)
         f_struct, aux_struct = jax.eval_shape(objective, u_start, z_start)
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
 
@@ -271,9 +293,12 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         done, result = solver.terminate(objective, u, z, options, state, tags)
         return u, steps, done & (result == optx.RESULTS.successful), z
 
+    # One amplitude after another (each vmapped over its frequencies): an amplitude's
+    # optimiser stops when it converges, and its integrations wait only for its own
+    # stiffest steady state, not for those of every amplitude.
     if z0 is None:
-        return jax.vmap(lambda a, u: one(a, u, None))(amplitudes, u0)
-    return jax.vmap(one)(amplitudes, u0, z0)
+        return jax.lax.map(lambda args: one(*args, None), (amplitudes, u0))
+    return jax.lax.map(lambda args: one(*args), (amplitudes, u0, z0))
 
 
 def retune(
@@ -327,14 +352,8 @@ def retune(
     fine = np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
     say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
     before = _peaks_from_response(frequency_response(system, fine, amps, settings=settings), fine)
-    rows = []
-    for i, amplitude in enumerate(np.asarray(amps)):
-        tuned = system.replace(tid_stiffness=k[i], tid_damping=c[i])
-        rows.append(frequency_response(tuned, fine, [amplitude], settings=settings))
-        say(f"checking the retuned design at {amplitude:g} N ({i + 1}/{amps.size})")
-    after = _peaks_from_response(
-        jax.tree.map(lambda *r: jnp.concatenate(r), *rows), jnp.asarray(fine)
-    )
+    say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
+    after = _tuned_peaks(system, k, c, amps, jnp.asarray(fine), settings)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )

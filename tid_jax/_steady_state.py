@@ -46,11 +46,14 @@ class SolverSettings(eqx.Module):
 
     def persistent(self) -> "SolverSettings":
         """Settings for a second attempt at points that did not converge: a long transient
-        towards the attracting orbit, then more Newton iterations."""
+        towards the attracting orbit, then more Newton iterations, on integrations 100 times
+        more accurate (Newton stalls where the integration error of the period map exceeds
+        `periodicity_tol`)."""
         return eqx.tree_at(
-            lambda s: (s.transient_periods, s.max_newton_steps),
+            lambda s: (s.rtol, s.atol, s.transient_periods, s.max_newton_steps),
             self,
-            (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
+            (self.rtol / 100, self.atol / 100, max(40, 4 * self.transient_periods),
+             max(25, 2 * self.max_newton_steps)),
         )
 
     def to_dict(self) -> dict:
