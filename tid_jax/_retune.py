@@ -124,9 +124,10 @@ def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
     )
 
 
-def _tuned_peaks(system, stiffness, damping, amplitudes, omegas, settings) -> Peaks:
-    """`Peaks` over `omegas` of the design (`stiffness[i]`, `damping[i]`) at
-    `amplitudes[i]`, every design in one batch."""
+def tuned_response(system, stiffness, damping, amplitudes, omegas, settings) -> FrequencyResponse:
+    """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
+    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch."""
+    amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
     shape = (amplitudes.size, omegas.size)
 
     def flat(values):
@@ -134,13 +135,12 @@ def _tuned_peaks(system, stiffness, damping, amplitudes, omegas, settings) -> Pe
 
     out = solve_points(
         system, flat(omegas), flat(amplitudes[:, None]), settings,
-        (flat(stiffness[:, None]), flat(damping[:, None])),
+        (flat(jnp.asarray(stiffness)[:, None]), flat(jnp.asarray(damping)[:, None])),
     )
-    response = FrequencyResponse(
-        omegas=omegas, amplitudes=amplitudes, **{key: value.reshape(shape + value.shape[1:])
-                                                 for key, value in out.items()}
+    return FrequencyResponse(
+        omegas=omegas, amplitudes=amplitudes,
+        **{key: value.reshape(shape + value.shape[1:]) for key, value in out.items()},
     )
-    return _peaks_from_response(response, omegas)
 
 
 def _check_system(system) -> None:
@@ -315,7 +315,9 @@ def retune(
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over the band
     `omegas` (rad/s; default `default_omegas(system)`).
 
-    All amplitudes are solved in one batched call. The non-smooth maximum over frequency is
+    All amplitudes are solved in one compiled call, one amplitude after another (each with
+    its frequencies batched), so that each optimiser stops as soon as it converges; the
+    checks are batched over every amplitude and frequency. The non-smooth maximum over frequency is
     replaced by a smooth maximum of the parabola-refined local peaks whose sharpness grows
     over `SHARPNESS` (continuation), each stage an optimistix BFGS run (at most `max_steps`
     iterations, tolerance `tol`) warm-started from the last, with gradients by implicit
@@ -349,11 +351,11 @@ def retune(
             f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    fine = np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
+    fine = jnp.asarray(np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1))
     say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
     before = _peaks_from_response(frequency_response(system, fine, amps, settings=settings), fine)
     say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
-    after = _tuned_peaks(system, k, c, amps, jnp.asarray(fine), settings)
+    after = _peaks_from_response(tuned_response(system, k, c, amps, fine, settings), fine)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )

@@ -23,7 +23,7 @@ from . import __version__, plot
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
-from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
+from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune, tuned_response
 from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_performance
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
@@ -453,30 +453,14 @@ def _run_retune(args) -> int:
     result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=output.say)
 
     stiffness = float(system.host_stiffness)
-    x_before = np.empty((amplitudes.size, omegas.size))
-    x_after = np.empty_like(x_before)
-    for i, (amplitude, k, c) in enumerate(
-        zip(
-            amplitudes,
-            np.asarray(result.tid_stiffness),
-            np.asarray(result.tid_damping),
-            strict=True,
-        )
-    ):
-        static = amplitude / stiffness
-        x_before[i] = (
-            np.asarray(frequency_response(system, omegas, amplitude, settings=settings).x_max)
-            / static
-        )
-        retuned = system.replace(tid_stiffness=k, tid_damping=c)
-        x_after[i] = (
-            np.asarray(frequency_response(retuned, omegas, amplitude, settings=settings).x_max)
-            / static
-        )
-        output.say(
-            f"frequency responses before/after retuning: {i + 1}/{amplitudes.size} "
-            f"(A = {amplitude:g} N)"
-        )
+    static = amplitudes[:, None] / stiffness
+    output.say("frequency responses before and after retuning")
+    x_before = np.asarray(
+        frequency_response(system, omegas, amplitudes, settings=settings).x_max
+    ).reshape(static.size, -1) / static
+    x_after = np.asarray(tuned_response(
+        system, result.tid_stiffness, result.tid_damping, amplitudes, omegas, settings
+    ).x_max) / static
 
     k_dh, c_dh = _den_hartog(system)
     stroke_limit = inputs["stroke_limit"]
