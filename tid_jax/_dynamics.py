@@ -25,13 +25,20 @@ def smooth_sign(velocity: Float[Array, "..."], width: Float[Array, "..."]) -> Fl
     return jnp.tanh(velocity / width)
 
 
+def parameters(system, amplitude, omega) -> list[Float[Array, ""]]:
+    """A `TIDSystem`'s fields, the forcing amplitude (N) and frequency (rad/s) as the
+    scalars of `p` (order `PARAMETERS`), in one floating dtype. Kept apart (not stacked),
+    so that derivatives can see which of them depend on a differentiated input."""
+    values = [jnp.asarray(getattr(system, name)) for name in PARAMETERS[:-2]]
+    values += [jnp.asarray(amplitude), jnp.asarray(omega)]
+    dtype = jnp.result_type(*values, float)
+    return [value.astype(dtype) for value in values]
+
+
 def parameter_vector(system, amplitude, omega) -> Float[Array, " 10"]:
     """Stack a `TIDSystem`'s fields, the forcing amplitude (N) and frequency (rad/s) into
     the flat vector `p` (order `PARAMETERS`)."""
-    fields = [jnp.asarray(getattr(system, name)) for name in PARAMETERS[:-2]]
-    return jnp.stack([*fields, jnp.asarray(amplitude), jnp.asarray(omega)]).astype(
-        jnp.result_type(*fields, amplitude, omega, float)
-    )
+    return jnp.stack(parameters(system, amplitude, omega))
 
 
 def displacement_scale(p: Float[Array, " 10"]) -> Float[Array, ""]:

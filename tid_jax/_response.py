@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
-from ._dynamics import parameter_vector
+from ._dynamics import parameters
 from ._sharding import sharded_batch
 from ._steady_state import SolverSettings, refined_peak, solve_orbit
 from ._system import TIDSystem
@@ -59,11 +59,20 @@ def check_grid(name: str, values: ArrayLike) -> np.ndarray:
     return array
 
 
-def point_response(system: TIDSystem, omega, amplitude, settings: SolverSettings, z_init=None):
+def point_response(
+    system: TIDSystem,
+    omega,
+    amplitude,
+    settings: SolverSettings,
+    z_init=None,
+    monodromy_init=None,
+    directions: tuple[int, ...] = (),
+):
     """Single (omega, amplitude) point: the orbit (shooting from the scaled state `z_init`
-    if given) and its peaks |x|, |y| in metres."""
-    p = parameter_vector(system, amplitude, omega)
-    orbit = solve_orbit(p, settings, z_init)
+    if given, with chord iterations first if `monodromy_init` is given; see `solve_orbit`)
+    and its peaks |x|, |y| in metres."""
+    p = parameters(system, amplitude, omega)
+    orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
     scale = amplitude / system.host_stiffness
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
     x_max = jnp.nan_to_num(refined_peak(orbit.x_samples) * scale, nan=jnp.inf)
@@ -95,13 +104,25 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (stiffness, damping))
 
 
+# Points solved together as one vmapped batch; larger batches are solved chunk after chunk,
+# so that each chunk's adaptive integrations and Newton iterations wait only for its own
+# slowest point (neighbouring points, of similar stiffness, share a chunk).
+CHUNK = 64
+
+
 @eqx.filter_jit
 def _points(system, omegas, amplitudes, settings, stiffness=None, damping=None):
-    if stiffness is None:
-        return jax.vmap(lambda w, a: _point_summary(system, w, a, settings))(omegas, amplitudes)
-    return jax.vmap(
-        lambda w, a, k, c: _point_summary(with_tuning(system, k, c), w, a, settings)
-    )(omegas, amplitudes, stiffness, damping)
+    def one(batch):
+        if stiffness is None:
+            w, a = batch
+            return _point_summary(system, w, a, settings)
+        w, a, k, c = batch
+        return _point_summary(with_tuning(system, k, c), w, a, settings)
+
+    batch = (omegas, amplitudes) if stiffness is None else (omegas, amplitudes, stiffness, damping)
+    if omegas.shape[0] <= CHUNK:
+        return jax.vmap(one)(batch)
+    return jax.lax.map(one, batch, batch_size=CHUNK)
 
 
 def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None) -> dict:

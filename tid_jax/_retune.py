@@ -7,6 +7,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._dynamics import PARAMETERS
 from ._linear import den_hartog_tuning
 from ._response import (
     FrequencyResponse,
@@ -25,6 +26,8 @@ BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
 # Sharpness of the smooth maximum (in log-peak units) at each continuation stage.
 SHARPNESS = (50.0, 1000.0)
+# Optimiser tolerance of every stage but the last.
+CONTINUATION_TOL = 1e-3
 # Refinement of the final check: that many times more frequencies than the design grid.
 CHECK_REFINEMENT = 2
 
@@ -237,16 +240,31 @@ class RetuneResult(eqx.Module):
 DAMPING_BOUND_RATIO = 1e-3
 
 
+# Scales of the design variables u = (DESIGN_SCALE[0] ln(k / k_ref), DESIGN_SCALE[1]
+# sqrt(c / c_ref)): they make the curvature of the log peak about one in each, so that
+# BFGS's first steps (from an identity Hessian) are about the right length.
+DESIGN_SCALE = (10.0, 3.0)
+
+
 def _design_to_tuning(u, k_ref, c_ref):
     # k > 0 through an exponential; c >= 0 through a square, so that the bound c = 0 is a
     # stationary point of the unconstrained problem and can be reached exactly.
-    return k_ref * jnp.exp(u[0]), c_ref * u[1] ** 2
+    return k_ref * jnp.exp(u[0] / DESIGN_SCALE[0]), c_ref * (u[1] / DESIGN_SCALE[1]) ** 2
+
+
+def _tuning_to_design(k, c, k_ref, c_ref):
+    return jnp.stack(
+        [DESIGN_SCALE[0] * jnp.log(k / k_ref), DESIGN_SCALE[1] * jnp.sqrt(c / c_ref)], axis=-1
+    )
 
 
 # Newton iterations allowed per steady state inside the optimiser, where every solve is
 # warm-started; points that need more are still evaluated (at their last iterate), and the
 # final design is checked with fully converged steady states.
 DESIGN_NEWTON_STEPS = 4
+# The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
+# shooting iterations carry tangents along them for the implicit derivatives.
+DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))
 
 
 @eqx.filter_jit
@@ -262,19 +280,36 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     options = dict(autodiff_mode="fwd")
     tags = frozenset()
 
+    def design_sweep(u, amplitude, warm):
+        """Host peaks (m) at every frequency, and the orbits' states and monodromy matrices,
+        shooting by chord iterations from the orbits `warm` of a nearby design."""
+        k, c = _design_to_tuning(u, k_ref, c_ref)
+        tuned = with_tuning(system, k, c)
+
+        def one(omega, z0, monodromy):
+            orbit, x_max, _ = point_response(
+                tuned, omega, amplitude, settings, z0, monodromy, DESIGN_PARAMETERS
+            )
+            return x_max, (orbit.state, orbit.monodromy)
+
+        return jax.vmap(one)(omegas, *warm)
+
     def one(amplitude, u_start, z_start):
-        def objective(u, z_warm):
-            k, c = _design_to_tuning(u, k_ref, c_ref)
-            xs, _, _, states = sweep(with_tuning(system, k, c), amplitude, omegas, settings,
-                                     z_warm)
+        def objective(u, warm):
+            xs, orbits = design_sweep(u, amplitude, warm)
             static = amplitude / system.host_stiffness
-            return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(states)
+            return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(orbits)
 
         # Every shooting solve starts from the orbits of the last accepted design, so that
         # the Newton iterations of the steady states follow the optimiser.
         if z_start is None:
             k, c = _design_to_tuning(u_start, k_ref, c_ref)
-            _, _, _, z_start = sweep(with_tuning(system, k, c), amplitude, omegas, settings)
+
+            def cold(omega):
+                orbit, _, _ = point_response(with_tuning(system, k, c), omega, amplitude, settings)
+                return orbit.state, orbit.monodromy
+
+            z_start = jax.vmap(cold)(omegas)
         f_struct, aux_struct = jax.eval_shape(objective, u_start, z_start)
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
 
@@ -286,7 +321,8 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         def body(carry):
             u, state, z, steps = carry
             u, state, _ = solver.step(objective, u, z, options, state, tags)
-            z = jnp.where(state.num_accepted_steps > 0, state.aux, z)
+            z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
+                             state.aux, z)
             return u, state, z, steps + 1
 
         u, state, z, steps = jax.lax.while_loop(cond, body, (u_start, state, z_start, 0))
@@ -339,12 +375,15 @@ def retune(
     c0 = jnp.broadcast_to(system.tid_damping, amps.shape)
     # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
     # variables and would never be left.
-    u = jnp.stack([jnp.log(k0 / k_ref), jnp.sqrt(jnp.maximum(c0 / c_ref, 0.05))], axis=-1)
+    u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
     orbits = None
     for stage, sharpness in enumerate(SHARPNESS, start=1):
+        # Stages before the last only bring the design near the optimum.
+        stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
         u, steps, ok, orbits = _optimise_stage(
-            system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps, tol
+            system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps,
+            jnp.asarray(stage_tol),
         )
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
@@ -353,7 +392,7 @@ def retune(
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
     fine = jnp.asarray(np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1))
     say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
-    before = _peaks_from_response(frequency_response(system, fine, amps, settings=settings), fine)
+    before = _peaks_from_response(tuned_response(system, k0, c0, amps, fine, settings), fine)
     say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
     after = _peaks_from_response(tuned_response(system, k, c, amps, fine, settings), fine)
     status = jnp.where(

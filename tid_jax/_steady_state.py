@@ -1,5 +1,6 @@
 import functools as ft
 import math
+from collections.abc import Sequence
 
 import diffrax as dfx
 import equinox as eqx
@@ -68,6 +69,7 @@ class Orbit(eqx.Module):
     x_samples: Float[Array, " samples"]  # scaled x over one period
     y_samples: Float[Array, " samples"]
     y_velocity_samples: Float[Array, " samples"]
+    monodromy: Float[Array, "4 4"]  # dPhi_T/dz at `state`
     floquet_multipliers: Complex[Array, " 4"]
     residual: Float[Array, ""]  # max |Phi_T(z0) - z0|, scaled
     newton_steps: Int[Array, ""]
@@ -145,35 +147,76 @@ def _transient(z, p, settings: SolverSettings):
     return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
 
 
-def _samples_and_jacobian(z, p, settings):
-    """One integration of a period from `z` with tangents along the four state directions:
-    `(xs, ys, ws, z_end)` and their Jacobians with respect to `z` (that of `z_end` is the
-    monodromy matrix)."""
-    fn = lambda z0: _period_samples(z0, p, settings)
-    basis = jnp.eye(4, dtype=z.dtype)
-    primal, tangents = jax.vmap(lambda t: jax.jvp(fn, (z,), (t,)), out_axes=(None, 0))(basis)
-    return primal, tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
+def _samples_and_jacobian(z, p, settings, directions=()):
+    """One integration of a period from `z` with tangents along the four state directions
+    and the parameters `p[i]`, `i` in `directions`: `(xs, ys, ws, z_end)`, their Jacobians
+    with respect to `z` (that of `z_end` is the monodromy matrix) and with respect to those
+    parameters (last axis of size `len(directions)`)."""
+    index = jnp.asarray(directions, dtype=int)
+    fn = lambda z0, q: _period_samples(z0, p.at[index].set(q), settings)
+    size = 4 + len(directions)
+    basis = jnp.eye(size, dtype=z.dtype)
+    q = p[index]
+    primal, tangents = jax.vmap(
+        lambda t: jax.jvp(fn, (z, q), (t[:4], t[4:])), out_axes=(None, 0)
+    )(basis)
+    tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
+    return primal, tuple(t[..., :4] for t in tangents), tuple(t[..., 4:] for t in tangents)
 
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 
 
-def _shoot(z0, p, settings: SolverSettings):
+def _limited(z, update):
+    size = jnp.max(jnp.abs(update))
+    limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
+    return z + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300))
+
+
+def _chord(z0, p, settings: SolverSettings, monodromy):
+    """Chord iterations for z* = Phi_T(z*) with the fixed Jacobian `I - monodromy` (from a
+    nearby orbit): each costs one integration without tangents. Stops once the residual
+    is within `settings.periodicity_tol` or after `settings.max_newton_steps` iterations;
+    returns the last iterate (or `z0` if the iterations diverge)."""
+    lu = jax.scipy.linalg.lu_factor(jnp.eye(4, dtype=z0.dtype) - monodromy)
+
+    def cond(carry):
+        _, residual, steps = carry
+        return (residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
+
+    def body(carry):
+        z, _, steps = carry
+        r = _period_map(z, p, settings) - z
+        ok = jnp.all(jnp.isfinite(r))
+        residual = jnp.where(ok, jnp.max(jnp.abs(r)), jnp.inf)
+        converged = residual <= settings.periodicity_tol
+        step = jax.scipy.linalg.lu_solve(lu, jnp.where(ok, r, 0.0))
+        z_next = jnp.where(converged | ~ok, z, _limited(z, step))
+        return z_next, residual, steps + 1
+
+    z, residual, _ = jax.lax.while_loop(cond, body, (z0, jnp.asarray(jnp.inf, z0.dtype), 0))
+    return jnp.where(jnp.isfinite(residual) & jnp.all(jnp.isfinite(z)), z, z0)
+
+
+def _shoot(z0, p, settings: SolverSettings, directions=()):
     """Newton shooting for z* = Phi_T(z*). Each iteration is one integration of a period
-    with four state tangents, giving the residual Phi_T(z) - z, the monodromy matrix and
-    the samples at once. Once the residual is within `settings.periodicity_tol`, the last
-    Newton update is applied to the state and, to first order, to the samples (their error
-    is then second order in the residual)."""
+    with four state tangents (and one per parameter in `directions`), giving the residual
+    Phi_T(z) - z, the monodromy matrix and the samples at once. Once the residual is
+    within `settings.periodicity_tol`, the last Newton update is applied to the state and,
+    to first order, to the samples (their error is then second order in the residual)."""
     eye = jnp.eye(4, dtype=z0.dtype)
 
     def evaluate(z):
-        (xs, ys, ws, z_end), (jx, jy, jw, monodromy) = _samples_and_jacobian(z, p, settings)
+        (xs, ys, ws, z_end), (jx, jy, jw, monodromy), (jx_p, jy_p, jw_p, jz_p) = (
+            _samples_and_jacobian(z, p, settings, directions)
+        )
         residual = z_end - z
         update = jnp.linalg.solve(eye - monodromy, residual)
         finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(xs))
         finite = finite & jnp.all(jnp.isfinite(ys))
         return dict(
             z=z, xs=xs, ys=ys, ws=ws, jx=jx, jy=jy, jw=jw, monodromy=monodromy,
+            jx_p=jx_p, jy_p=jy_p, jw_p=jw_p, jz_p=jz_p,
             update=jnp.where(finite, update, 0.0),
             residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
         )
@@ -184,11 +227,7 @@ def _shoot(z0, p, settings: SolverSettings):
 
     def body(carry):
         state, steps = carry
-        update = state["update"]
-        size = jnp.max(jnp.abs(update))
-        limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(state["z"])))
-        z_new = state["z"] + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300))
-        return evaluate(z_new), steps + 1
+        return evaluate(_limited(state["z"], state["update"])), steps + 1
 
     state, steps = jax.lax.while_loop(cond, body, (evaluate(z0), jnp.array(1)))
     dz = state["update"]
@@ -197,23 +236,22 @@ def _shoot(z0, p, settings: SolverSettings):
         xs=state["xs"] + state["jx"] @ dz,
         ys=state["ys"] + state["jy"] @ dz,
         ws=state["ws"] + state["jw"] @ dz,
-        jx=state["jx"],
-        jy=state["jy"],
-        jw=state["jw"],
-        monodromy=state["monodromy"],
+        **{key: state[key] for key in ("jx", "jy", "jw", "monodromy", "jx_p", "jy_p", "jw_p",
+                                       "jz_p")},
     )
     return orbit, state["residual"], steps
 
 
-@ft.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _with_orbit_derivatives(settings, orbit, *p):
+@ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _with_orbit_derivatives(settings, directions, orbit, *p):
     """Identity on a converged `orbit`; its JVP is the implicit derivative of the orbit
-    with respect to the parameters `p`."""
+    with respect to the parameters `p`, using the Jacobians that `_shoot` formed with
+    respect to `p[i]`, `i` in `directions`, where it can."""
     del p
     return orbit
 
 
-def _orbit_jvp(settings, primals, tangents):
+def _orbit_jvp(settings, directions, primals, tangents):
     # z* = Phi_T(z*, p) gives dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp, and the samples follow by
     # the chain rule. Only parameters with non-zero tangents are differentiated, and every
     # Jacobian is formed from primals alone: the tangent map is an explicit matrix product,
@@ -225,14 +263,19 @@ def _orbit_jvp(settings, primals, tangents):
     if not active:
         return orbit, tangent_out
 
-    def period(*values):
-        q = list(p)
-        for i, value in zip(active, values):
-            q[i] = value
-        return _period_samples(orbit["z"], jnp.stack(q), settings)
+    if set(active) <= set(directions):
+        columns = jnp.asarray([directions.index(i) for i in active], dtype=int)
+        jx_p, jy_p, jw_p, jz_p = (orbit[key][..., columns] for key in
+                                  ("jx_p", "jy_p", "jw_p", "jz_p"))
+    else:
+        def period(*values):
+            q = list(p)
+            for i, value in zip(active, values, strict=True):
+                q[i] = value
+            return _period_samples(orbit["z"], jnp.stack(q), settings)
 
-    jac = jax.jacfwd(period, argnums=tuple(range(len(active))))(*(p[i] for i in active))
-    jx_p, jy_p, jw_p, jz_p = (jnp.stack(j, axis=-1) for j in jac)
+        jac = jax.jacfwd(period, argnums=tuple(range(len(active))))(*(p[i] for i in active))
+        jx_p, jy_p, jw_p, jz_p = (jnp.stack(j, axis=-1) for j in jac)
     p_active_dot = jnp.stack([p_dot[i] for i in active])
     eye = jnp.eye(4, dtype=orbit["z"].dtype)
     z_dot = jnp.linalg.solve(eye - orbit["monodromy"], jz_p) @ p_active_dot
@@ -247,26 +290,41 @@ _with_orbit_derivatives.defjvp(_orbit_jvp, symbolic_zeros=True)
 
 
 def solve_orbit(
-    p: Float[Array, " 10"],
+    p: Float[Array, " 10"] | Sequence[Float[Array, ""]],
     settings: SolverSettings,
     z_init: Float[Array, " 4"] | None = None,
+    monodromy_init: Float[Array, "4 4"] | None = None,
+    directions: tuple[int, ...] = (),
 ) -> Orbit:
-    """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`), by
+    """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`; or
+    the sequence of its scalars, which lets derivatives skip the parameters that do not
+    depend on the differentiated inputs), by
     shooting from `z_init` (scaled state; default the linear steady state followed by
     `settings.transient_periods` periods). Differentiable with respect to `p` (implicit
-    differentiation), not with respect to `z_init`."""
-    p_const = jax.lax.stop_gradient(p)
+    differentiation), not with respect to `z_init`.
+
+    With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
+    at slightly different parameters), chord iterations without tangents bring `z_init`
+    to the orbit before the Newton iteration that forms the Jacobians. Derivatives with
+    respect to `p[i]`, `i` in `directions`, reuse the tangents of that iteration."""
+    scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
+    p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
         z_init = _transient(linear_initial_state(p_const), p_const, settings)
-    orbit, residual, steps = _shoot(jax.lax.stop_gradient(z_init), p_const, settings)
-    orbit = _with_orbit_derivatives(settings, orbit, *(p[i] for i in range(p.shape[0])))
+    z_init = jax.lax.stop_gradient(z_init)
+    if monodromy_init is not None:
+        z_init = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
+    orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
+    orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit["xs"]))
+    monodromy = jax.lax.stop_gradient(orbit["monodromy"])
     return Orbit(
         state=orbit["z"],
         x_samples=orbit["xs"],
         y_samples=orbit["ys"],
         y_velocity_samples=orbit["ws"],
-        floquet_multipliers=jnp.linalg.eigvals(jax.lax.stop_gradient(orbit["monodromy"])),
+        monodromy=monodromy,
+        floquet_multipliers=jnp.linalg.eigvals(monodromy),
         residual=residual,
         newton_steps=steps,
         converged=converged,
