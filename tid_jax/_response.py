@@ -5,7 +5,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._dynamics import parameters
-from ._sharding import sharded_batch
+from ._sharding import map_batch, sharded_batch
 from ._steady_state import SolverSettings, refined_peak, solve_orbit
 from ._system import TIDSystem
 
@@ -120,9 +120,7 @@ def _points(system, omegas, amplitudes, settings, stiffness=None, damping=None):
         return _point_summary(with_tuning(system, k, c), w, a, settings)
 
     batch = (omegas, amplitudes) if stiffness is None else (omegas, amplitudes, stiffness, damping)
-    if omegas.shape[0] <= CHUNK:
-        return jax.vmap(one)(batch)
-    return jax.lax.map(one, batch, batch_size=CHUNK)
+    return map_batch(one, batch, CHUNK)
 
 
 def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None) -> dict:

@@ -17,6 +17,7 @@ from ._response import (
     solve_points,
     with_tuning,
 )
+from ._sharding import map_batch, sharded_batch
 from ._steady_state import SolverSettings
 from ._system import TIDSystem
 
@@ -211,7 +212,9 @@ class RetuneResult(eqx.Module):
     """Per-amplitude retuned TID (SI units). `x_peak`/`x_peak_initial` and `y_peak`/
     `y_peak_initial` are the peak host and inerter displacements over the band after and
     before retuning, confirmed on a frequency grid `CHECK_REFINEMENT` times finer than the
-    design grid. `status` codes are explained by `status_messages()`."""
+    design grid, `check_omegas`, on which `x_response`/`x_response_initial` hold the peak
+    host displacement over a period at every frequency. `status` codes are explained by
+    `status_messages()`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -227,6 +230,9 @@ class RetuneResult(eqx.Module):
     converged: Bool[Array, " amps"]
     damping_at_bound: Bool[Array, " amps"]
     status: Int[Array, " amps"]
+    check_omegas: Float[Array, " check"]  # rad/s, the check grid
+    x_response: Float[Array, "amps check"]  # m, peak |x| over a period on the check grid
+    x_response_initial: Float[Array, "amps check"]  # m, the same for the initial tuning
 
     def status_messages(self) -> list[str]:
         messages = []
@@ -329,12 +335,12 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         done, result = solver.terminate(objective, u, z, options, state, tags)
         return u, steps, done & (result == optx.RESULTS.successful), z
 
-    # One amplitude after another (each vmapped over its frequencies): an amplitude's
-    # optimiser stops when it converges, and its integrations wait only for its own
-    # stiffest steady state, not for those of every amplitude.
+    # One amplitude after another (each vmapped over its frequencies; with several devices,
+    # one sequence per device): an amplitude's optimiser stops when it converges, and its
+    # integrations wait only for its own stiffest steady state, not for every amplitude's.
     if z0 is None:
-        return jax.lax.map(lambda args: one(*args, None), (amplitudes, u0))
-    return jax.lax.map(lambda args: one(*args), (amplitudes, u0, z0))
+        return map_batch(lambda args: one(*args, None), (amplitudes, u0), 1)
+    return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
 
 
 def retune(
@@ -381,9 +387,12 @@ def retune(
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
-        u, steps, ok, orbits = _optimise_stage(
-            system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps,
-            jnp.asarray(stage_tol),
+        u, steps, ok, orbits = sharded_batch(
+            lambda amps, u, orbits: _optimise_stage(
+                system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps,
+                jnp.asarray(stage_tol),
+            ),
+            amps, u, orbits,
         )
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
@@ -392,9 +401,11 @@ def retune(
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
     fine = jnp.asarray(np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1))
     say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
-    before = _peaks_from_response(tuned_response(system, k0, c0, amps, fine, settings), fine)
+    initial = tuned_response(system, k0, c0, amps, fine, settings)
+    before = _peaks_from_response(initial, fine)
     say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
-    after = _peaks_from_response(tuned_response(system, k, c, amps, fine, settings), fine)
+    retuned = tuned_response(system, k, c, amps, fine, settings)
+    after = _peaks_from_response(retuned, fine)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )
@@ -404,6 +415,7 @@ def retune(
     status = jnp.where(worse, 4, status)
     k, c = jnp.where(worse, k0, k), jnp.where(worse, c0, c)
     after = jax.tree.map(lambda b, a: jnp.where(worse, b, a), before, after)
+    x_response = jnp.where(worse[:, None], initial.x_max, retuned.x_max)
     return RetuneResult(
         amplitudes=amps,
         tid_stiffness=k,
@@ -415,6 +427,9 @@ def retune(
         y_peak=after.y_peak,
         y_peak_initial=before.y_peak,
         omega_peak=after.omega_x,
+        check_omegas=fine,
+        x_response=x_response,
+        x_response_initial=initial.x_max,
         iterations=iterations,
         converged=status == 0,
         damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,

@@ -44,16 +44,35 @@ def _pad(array, size: int):
 
 
 def sharded_batch(function, *batch, devices=None):
-    """`function(*batch)` with every array of `batch` (same leading length n) padded to a
-    multiple of the device count and sharded over the devices along its leading axis;
-    every array of the returned pytree is trimmed back to its first n entries. Calls
-    `function(*batch)` unchanged on one device."""
+    """`function(*batch)` with every array of `batch` (pytrees of arrays with the same
+    leading length n) padded to a multiple of the device count and sharded over the
+    devices along its leading axis; every array of the returned pytree is trimmed back to
+    its first n entries. Calls `function(*batch)` unchanged on one device."""
     sharding = batch_sharding(devices)
     if sharding is None:
         return function(*batch)
-    size = batch[0].shape[0]
+    size = jax.tree_util.tree_leaves(batch)[0].shape[0]
     count = sharding.mesh.size
     padded = -(-size // count) * count
-    placed = [jax.device_put(_pad(array, padded), sharding) for array in batch]
+    placed = jax.tree_util.tree_map(
+        lambda array: jax.device_put(_pad(array, padded), sharding), batch
+    )
     out = function(*placed)
     return jax.tree_util.tree_map(lambda value: value[:size], out)
+
+
+def map_batch(function, batch, chunk: int):
+    """`jax.vmap(function)(batch)` (a pytree of arrays with leading length n) computed
+    `chunk` entries at a time with `jax.lax.map`, so that the while loops of a chunk wait
+    only for that chunk's slowest entry. When n divides evenly over the devices, the batch
+    is first split into one part per device, each mapped on its own: a batch placed by
+    `sharded_batch` then runs in parallel on every device."""
+    size = jax.tree_util.tree_leaves(batch)[0].shape[0]
+    parts = len(jax.devices())
+    if size % parts:
+        parts = 1
+    if size <= chunk * parts:
+        return jax.vmap(function)(batch)
+    split = jax.tree_util.tree_map(lambda a: a.reshape(parts, size // parts, *a.shape[1:]), batch)
+    out = jax.vmap(lambda part: jax.lax.map(function, part, batch_size=chunk))(split)
+    return jax.tree_util.tree_map(lambda a: a.reshape(size, *a.shape[2:]), out)

@@ -23,7 +23,7 @@ from . import __version__, plot
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
-from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune, tuned_response
+from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
 from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_performance
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
@@ -453,14 +453,10 @@ def _run_retune(args) -> int:
     result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=output.say)
 
     stiffness = float(system.host_stiffness)
-    static = amplitudes[:, None] / stiffness
-    output.say("frequency responses before and after retuning")
-    x_before = np.asarray(
-        frequency_response(system, omegas, amplitudes, settings=settings).x_max
-    ).reshape(static.size, -1) / static
-    x_after = np.asarray(tuned_response(
-        system, result.tid_stiffness, result.tid_damping, amplitudes, omegas, settings
-    ).x_max) / static
+    # The frequency responses before and after retuning, on retune's check grid.
+    check_hz = np.asarray(result.check_omegas) / (2 * math.pi)
+    x_before = np.asarray(result.x_response_initial) / (amplitudes[:, None] / stiffness)
+    x_after = np.asarray(result.x_response) / (amplitudes[:, None] / stiffness)
 
     k_dh, c_dh = _den_hartog(system)
     stroke_limit = inputs["stroke_limit"]
@@ -513,7 +509,7 @@ def _run_retune(args) -> int:
     linear_hz, x_linear, _ = _linear_curves(system, frequencies_hz)
     plot.save_figure(
         plot.plot_retune_responses(
-            frequencies_hz,
+            check_hz,
             amplitudes,
             x_before,
             x_after,
