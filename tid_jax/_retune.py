@@ -358,15 +358,18 @@ def retune(
     `omegas` (rad/s; default `default_omegas(system)`).
 
     All amplitudes are solved in one compiled call, one amplitude after another (each with
-    its frequencies batched), so that each optimiser stops as soon as it converges; the
-    checks are batched over every amplitude and frequency. The non-smooth maximum over frequency is
-    replaced by a smooth maximum of the parabola-refined local peaks whose sharpness grows
-    over `SHARPNESS` (continuation), each stage an optimistix BFGS run (at most `max_steps`
-    iterations, tolerance `tol`) warm-started from the last, with gradients by implicit
-    differentiation through the periodic orbits; every steady state shoots from the orbit
-    of the last accepted design. The result is confirmed on a finer grid; a design whose
-    peak there is above the initial tuning's is replaced by the initial tuning (status 4).
-    `progress`, if given, is called with a one-line message after each stage.
+    its frequencies batched; with several JAX devices, one sequence per device), so that
+    each optimiser stops as soon as it converges; the checks are batched over every
+    amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
+    maximum of the parabola-refined local peaks whose sharpness grows over `SHARPNESS`
+    (continuation), each stage an optimistix BFGS run (at most `max_steps` iterations,
+    tolerance `tol` for the last stage, `CONTINUATION_TOL` before) warm-started from the
+    last, with gradients by implicit differentiation through the periodic orbits. Every
+    steady state starts from the orbit of the last accepted design: chord iterations with
+    that orbit's monodromy matrix, then one Newton iteration whose tangents give the
+    derivatives. The result is confirmed on a grid `CHECK_REFINEMENT` times finer; a design
+    whose peak there is above the initial tuning's is replaced by the initial tuning
+    (status 4). `progress`, if given, is called with a one-line message after each stage.
     """
     _check_system(system)
     band = _band(system, omegas)

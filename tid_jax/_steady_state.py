@@ -176,26 +176,32 @@ def _limited(z, update):
 def _chord(z0, p, settings: SolverSettings, monodromy):
     """Chord iterations for z* = Phi_T(z*) with the fixed Jacobian `I - monodromy` (from a
     nearby orbit): each costs one integration without tangents. Stops once the residual
-    is within `settings.periodicity_tol` or after `settings.max_newton_steps` iterations;
-    returns the last iterate (or `z0` if the iterations diverge)."""
+    is within `settings.periodicity_tol` or after `settings.max_newton_steps` iterations.
+    Returns the last iterate while the residuals fall, else the best one evaluated (`z0`
+    if none is finite)."""
     lu = jax.scipy.linalg.lu_factor(jnp.eye(4, dtype=z0.dtype) - monodromy)
+    inf = jnp.asarray(jnp.inf, z0.dtype)
 
     def cond(carry):
-        _, residual, steps = carry
-        return (residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
+        _, _, best_residual, _, steps = carry
+        return (best_residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
 
     def body(carry):
-        z, _, steps = carry
+        z, best, best_residual, _, steps = carry
         r = _period_map(z, p, settings) - z
-        ok = jnp.all(jnp.isfinite(r))
-        residual = jnp.where(ok, jnp.max(jnp.abs(r)), jnp.inf)
+        ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
+        residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
+        improved = residual < best_residual
+        best, best_residual = jnp.where(improved, z, best), jnp.minimum(residual, best_residual)
         converged = residual <= settings.periodicity_tol
         step = jax.scipy.linalg.lu_solve(lu, jnp.where(ok, r, 0.0))
         z_next = jnp.where(converged | ~ok, z, _limited(z, step))
-        return z_next, residual, steps + 1
+        return z_next, best, best_residual, improved, steps + 1
 
-    z, residual, _ = jax.lax.while_loop(cond, body, (z0, jnp.asarray(jnp.inf, z0.dtype), 0))
-    return jnp.where(jnp.isfinite(residual) & jnp.all(jnp.isfinite(z)), z, z0)
+    z, best, _, improved, _ = jax.lax.while_loop(
+        cond, body, (z0, z0, inf, jnp.asarray(False), 0)
+    )
+    return jnp.where(improved & jnp.all(jnp.isfinite(z)), z, best)
 
 
 def _shoot(z0, p, settings: SolverSettings, directions=()):
