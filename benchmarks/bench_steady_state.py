@@ -207,7 +207,7 @@ def main():
     ratio_points = scipy_per_orbit / (points_warm / baseline.size)
     ratio_surface = scipy_per_orbit / surface_per_orbit
     say(f"Date: {datetime.date.today().isoformat()}; machine: {platform.processor() or 'x86_64'}"
-        f" CPU, {len(jax.devices())} JAX device(s), 2 cores (shared with other jobs); "
+        f" CPU, {len(jax.devices())} JAX device(s), 2 cores; "
         f"JAX {jax.__version__}, float64.")
     say()
     say("| quantity | scipy LSODA | tid_jax | ratio |")
