@@ -1,3 +1,4 @@
+import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
@@ -390,13 +391,11 @@ def retune(
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
-        u, steps, ok, orbits = sharded_batch(
-            lambda amps, u, orbits: _optimise_stage(
-                system, amps, u, orbits, band, jnp.asarray(sharpness), settings, max_steps,
-                jnp.asarray(stage_tol),
-            ),
-            amps, u, orbits,
+        stage_run = ft.partial(
+            _optimise_stage, system, omegas=band, sharpness=jnp.asarray(sharpness),
+            settings=settings, max_steps=max_steps, tol=jnp.asarray(stage_tol),
         )
+        u, steps, ok, orbits = sharded_batch(stage_run, amps, u, orbits)
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
             f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
