@@ -23,6 +23,8 @@ class FrequencyResponse(eqx.Module):
     - `residual`: periodicity residual, in units of the static displacement A / K.
     - `newton_steps`: shooting iterations used.
     - `floquet_multipliers`: eigenvalues of the monodromy matrix.
+    - `monodromy`: the monodromy matrix dPhi_T/dz, in the scaled state units of
+      `solve_orbit` (displacements in A / K, velocities in omega A / K).
     - `stick_fraction`: share of the period with |y'| below two friction widths.
     """
 
@@ -36,6 +38,7 @@ class FrequencyResponse(eqx.Module):
     residual: Float[Array, "*grid"]
     newton_steps: Int[Array, "*grid"]
     floquet_multipliers: Complex[Array, "*grid 4"]
+    monodromy: Float[Array, "*grid 4 4"]
     stick_fraction: Float[Array, "*grid"]
 
 
@@ -95,6 +98,7 @@ def _point_summary(system, omega, amplitude, settings):
         residual=orbit.residual,
         newton_steps=orbit.newton_steps,
         floquet_multipliers=orbit.floquet_multipliers,
+        monodromy=orbit.monodromy,
         stick_fraction=jnp.mean(stuck.astype(x_max.dtype)),
     )
 

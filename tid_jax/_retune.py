@@ -30,7 +30,8 @@ DEFAULT_FREQUENCIES = 61
 SHARPNESS = (50.0, 1000.0)
 # Optimiser tolerance of every stage but the last.
 CONTINUATION_TOL = 1e-3
-# Refinement of the final check: that many times more frequencies than the design grid.
+# Refinement of the check grid: the design grid with CHECK_REFINEMENT - 1 frequencies
+# inserted evenly between neighbours.
 CHECK_REFINEMENT = 2
 
 STATUS_MESSAGES = {
@@ -269,6 +270,9 @@ def _tuning_to_design(k, c, k_ref, c_ref):
 # warm-started; points that need more are still evaluated (at their last iterate), and the
 # final design is checked with fully converged steady states.
 DESIGN_NEWTON_STEPS = 4
+# Consecutive rejected line-search steps (each halving the step) after which the design is
+# taken as converged: no decrease is found above the noise of the objective.
+MAX_REJECTED_STEPS = 12
 # The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
 # shooting iterations carry tangents along them for the implicit derivatives.
 DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))
@@ -277,8 +281,8 @@ DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_da
 @eqx.filter_jit
 def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
     """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
-    from the orbits `z0` (default: solved at `u0`); returns the designs, iterations, success
-    and the orbits of the last accepted design."""
+    from the orbits `z0` (scaled states and monodromy matrices, of a nearby design); returns
+    the designs, iterations, success and the orbits of the last accepted design."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
     )
@@ -309,38 +313,35 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
 
         # Every shooting solve starts from the orbits of the last accepted design, so that
         # the Newton iterations of the steady states follow the optimiser.
-        if z_start is None:
-            k, c = _design_to_tuning(u_start, k_ref, c_ref)
-
-            def cold(omega):
-                orbit, _, _ = point_response(with_tuning(system, k, c), omega, amplitude, settings)
-                return orbit.state, orbit.monodromy
-
-            z_start = jax.vmap(cold)(omegas)
         f_struct, aux_struct = jax.eval_shape(objective, u_start, z_start)
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
 
         def cond(carry):
-            u, state, z, steps = carry
+            u, state, z, steps, rejected = carry
             done, _ = solver.terminate(objective, u, z, options, state, tags)
-            return ~done & (steps < max_steps)
+            return ~done & (steps < max_steps) & (rejected < MAX_REJECTED_STEPS)
 
         def body(carry):
-            u, state, z, steps = carry
+            u, state, z, steps, rejected = carry
+            accepted = state.num_accepted_steps
             u, state, _ = solver.step(objective, u, z, options, state, tags)
             z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
                              state.aux, z)
-            return u, state, z, steps + 1
+            rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
+            return u, state, z, steps + 1, rejected
 
-        u, state, z, steps = jax.lax.while_loop(cond, body, (u_start, state, z_start, 0))
+        u, state, z, steps, rejected = jax.lax.while_loop(
+            cond, body, (u_start, state, z_start, 0, 0)
+        )
         done, result = solver.terminate(objective, u, z, options, state, tags)
-        return u, steps, done & (result == optx.RESULTS.successful), z
+        # A line search that finds no decrease in MAX_REJECTED_STEPS halvings has reached
+        # the noise of the objective (steady states converged to the periodicity tolerance).
+        stalled = rejected >= MAX_REJECTED_STEPS
+        return u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z
 
     # One amplitude after another (each vmapped over its frequencies; with several devices,
     # one sequence per device): an amplitude's optimiser stops when it converges, and its
     # integrations wait only for its own stiffest steady state, not for every amplitude's.
-    if z0 is None:
-        return map_batch(lambda args: one(*args, None), (amplitudes, u0), 1)
     return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
 
 
@@ -387,7 +388,19 @@ def retune(
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
-    orbits = None
+    # The check grid holds the design grid (every CHECK_REFINEMENT-th point): the initial
+    # tuning's orbits there start the optimiser.
+    fraction = np.arange(CHECK_REFINEMENT) / CHECK_REFINEMENT
+    design = np.asarray(band)
+    fine = jnp.asarray(np.append((design[:-1, None] + np.diff(design)[:, None] * fraction),
+                                 design[-1]))
+    say(f"initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
+    initial = tuned_response(system, k0, c0, amps, fine, settings)
+    before = _peaks_from_response(initial, fine)
+    static = (amps / system.host_stiffness)[:, None, None]
+    units = jnp.stack([static[..., 0] + 0 * band, static[..., 0] * band] * 2, axis=-1)
+    orbits = (initial.state[:, ::CHECK_REFINEMENT] / units,
+              initial.monodromy[:, ::CHECK_REFINEMENT])
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
@@ -401,10 +414,6 @@ def retune(
             f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    fine = jnp.asarray(np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1))
-    say(f"checking the initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
-    initial = tuned_response(system, k0, c0, amps, fine, settings)
-    before = _peaks_from_response(initial, fine)
     say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
     retuned = tuned_response(system, k, c, amps, fine, settings)
     after = _peaks_from_response(retuned, fine)
