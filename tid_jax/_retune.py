@@ -365,11 +365,13 @@ def retune(
     amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
     maximum of the parabola-refined local peaks whose sharpness grows over `SHARPNESS`
     (continuation), each stage an optimistix BFGS run (at most `max_steps` iterations,
-    tolerance `tol` for the last stage, `CONTINUATION_TOL` before) warm-started from the
-    last, with gradients by implicit differentiation through the periodic orbits. Every
-    steady state starts from the orbit of the last accepted design: chord iterations with
-    that orbit's monodromy matrix, then one Newton iteration whose tangents give the
-    derivatives. The result is confirmed on a grid `CHECK_REFINEMENT` times finer; a design
+    tolerance `tol` for the last stage, `CONTINUATION_TOL` before; a stage also ends,
+    converged, when its line search finds no decrease in `MAX_REJECTED_STEPS` halvings)
+    warm-started from the last, with gradients by implicit differentiation through the
+    periodic orbits. The first stage starts from the initial tuning's orbits on the check
+    grid; every steady state then starts from the orbit of the last accepted design: chord
+    iterations with that orbit's monodromy matrix, then one Newton iteration whose tangents
+    give the derivatives. The result is confirmed on a grid `CHECK_REFINEMENT` times finer; a design
     whose peak there is above the initial tuning's is replaced by the initial tuning
     (status 4). `progress`, if given, is called with a one-line message after each stage.
     """
