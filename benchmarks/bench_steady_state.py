@@ -232,7 +232,8 @@ def main():
     elif retune is None:
         retune_text = "not run"
     else:
-        first = retune["stages"][0][0] if retune["stages"] else float("nan")
+        first = next((t for t, message in retune["stages"] if "stage 1" in message),
+                     float("nan"))
         retune_text = (f"{retune['total']:.0f} s cold incl. compile and import (first stage "
                        f"done at {first:.0f} s); {retune['warm']:.1f} s warm (second call); "
                        f"{retune['converged']}/{len(retune_amplitudes)} status ok")
