@@ -154,11 +154,36 @@ def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=N
     return out
 
 
-def _grid_response(system, omegas, amplitudes, settings):
+def _grid_response(system, omegas, amplitudes, settings, tunings=None):
+    """`solve_points` on the grid amplitudes x omegas, arrays shaped like the grid; with
+    `tunings = (stiffness, damping)`, one TID tuning per amplitude."""
     omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
-    flat = solve_points(system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings)
+    if tunings is not None:
+        tunings = tuple(
+            jnp.broadcast_to(jnp.asarray(t)[:, None], amplitude_grid.shape).reshape(-1)
+            for t in tunings
+        )
+    flat = solve_points(
+        system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings, tunings
+    )
     shape = amplitude_grid.shape
     return {key: value.reshape(shape + value.shape[1:]) for key, value in flat.items()}
+
+
+def tuned_response(system, stiffness, damping, amplitudes, omegas, settings) -> FrequencyResponse:
+    """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
+    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch."""
+    amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
+    out = _grid_response(system, omegas, amplitudes, settings, (stiffness, damping))
+    return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out)
+
+
+def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "amps freqs 4"]:
+    """The orbits' states of a `response` over amplitudes x frequencies in the scaled units
+    of `solve_orbit` (displacements in A / K, velocities in omega A / K)."""
+    static = response.amplitudes[:, None] / host_stiffness
+    units = jnp.stack([static + 0 * response.omegas, static * response.omegas] * 2, axis=-1)
+    return response.state / units
 
 
 def frequency_response(

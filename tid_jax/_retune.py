@@ -15,7 +15,8 @@ from ._response import (
     check_grid,
     frequency_response,
     point_response,
-    solve_points,
+    scaled_states,
+    tuned_response,
     with_tuning,
 )
 from ._sharding import map_batch, sharded_batch
@@ -127,25 +128,6 @@ def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
         omega_y=y[1],
         at_edge=x[2],
         converged=jnp.all(response.converged, axis=-1),
-    )
-
-
-def tuned_response(system, stiffness, damping, amplitudes, omegas, settings) -> FrequencyResponse:
-    """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
-    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch."""
-    amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
-    shape = (amplitudes.size, omegas.size)
-
-    def flat(values):
-        return jnp.broadcast_to(values, shape).reshape(-1)
-
-    out = solve_points(
-        system, flat(omegas), flat(amplitudes[:, None]), settings,
-        (flat(jnp.asarray(stiffness)[:, None]), flat(jnp.asarray(damping)[:, None])),
-    )
-    return FrequencyResponse(
-        omegas=omegas, amplitudes=amplitudes,
-        **{key: value.reshape(shape + value.shape[1:]) for key, value in out.items()},
     )
 
 
@@ -399,9 +381,7 @@ def retune(
     say(f"initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
     initial = tuned_response(system, k0, c0, amps, fine, settings)
     before = _peaks_from_response(initial, fine)
-    static = (amps / system.host_stiffness)[:, None, None]
-    units = jnp.stack([static[..., 0] + 0 * band, static[..., 0] * band] * 2, axis=-1)
-    orbits = (initial.state[:, ::CHECK_REFINEMENT] / units,
+    orbits = (scaled_states(initial, system.host_stiffness)[:, ::CHECK_REFINEMENT],
               initial.monodromy[:, ::CHECK_REFINEMENT])
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.

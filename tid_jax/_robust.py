@@ -8,7 +8,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._linear import den_hartog_tuning
-from ._response import check_grid, frequency_response
+from ._response import check_grid, frequency_response, scaled_states
 from ._retune import SHARPNESS, _band, _check_system, peaks, sweep
 from ._steady_state import SolverSettings
 from ._system import FIELD_NAMES, PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
@@ -250,9 +250,7 @@ class _Context:
         omegas = self.omegas * scale
         amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
         response = frequency_response(changed, omegas, amplitudes, settings=self.settings)
-        static = amplitudes[:, None] / float(changed.host_stiffness)
-        units = np.stack([static + 0 * omegas, static * omegas] * 2, axis=-1)
-        return np.asarray(response.state).reshape(units.shape) / units
+        return np.asarray(scaled_states(response, float(changed.host_stiffness)))
 
 
 class _Scenario(NamedTuple):
