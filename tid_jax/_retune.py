@@ -260,6 +260,36 @@ MAX_REJECTED_STEPS = 12
 DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))
 
 
+# Longest step of the optimiser in the scaled design variables (about 10% in k).
+MAX_DESIGN_STEP = 1.0
+
+
+class _CappedNewtonDescent(optx.NewtonDescent):
+    """Newton direction with its two-norm capped at `MAX_DESIGN_STEP` before the line
+    search scales it: where the objective is nearly linear along some direction, BFGS's
+    curvature estimate there is near zero and the plain Newton step would throw the
+    design far off, where the steady states are expensive and the objective meaningless."""
+
+    def query(self, y, f_info, state):
+        state = super().query(y, f_info, state)
+        length = optx.two_norm(state.newton)
+        factor = jnp.minimum(1.0, MAX_DESIGN_STEP / jnp.maximum(length, 1e-300))
+        return eqx.tree_at(lambda s: s.newton, state, factor * state.newton)
+
+
+class _BFGS(optx.AbstractBFGS):
+    """`optx.BFGS` (inverse-Hessian updates, backtracking Armijo line search) with the
+    Newton step capped at `MAX_DESIGN_STEP`."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    use_inverse: bool = True
+    descent: optx.AbstractDescent = _CappedNewtonDescent()
+    search: optx.AbstractSearch = optx.BacktrackingArmijo()
+    verbose: Callable[..., None] = optx.BFGS(rtol=1.0, atol=1.0).verbose
+
+
 @eqx.filter_jit
 def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
     """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
@@ -269,7 +299,7 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
     )
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
-    solver = optx.BFGS(rtol=tol, atol=tol)
+    solver = _BFGS(rtol=tol, atol=tol)
     options = dict(autodiff_mode="fwd")
     tags = frozenset()
 
