@@ -293,7 +293,8 @@ class _BFGS(optx.AbstractBFGS):
 @eqx.filter_jit
 def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
     """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
-    from the orbits `z0` (scaled states and monodromy matrices, of a nearby design); returns
+    from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
+    scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
     the designs, iterations, success and the orbits of the last accepted design."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
@@ -304,18 +305,24 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     tags = frozenset()
 
     def design_sweep(u, amplitude, warm):
-        """Host peaks (m) at every frequency, and the orbits' states and monodromy matrices,
-        shooting by chord iterations from the orbits `warm` of a nearby design."""
+        """Host peaks (m) at every frequency, and the orbits of the design `u`, shooting by
+        chord iterations from the orbits `warm` of a nearby design (tuning, then per
+        frequency the scaled state, monodromy matrix and state derivatives with respect to
+        the tuning), first-order predicted at `u`."""
         k, c = _design_to_tuning(u, k_ref, c_ref)
         tuned = with_tuning(system, k, c)
+        warm_tuning, *orbits = warm
+        change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
 
-        def one(omega, z0, monodromy):
+        def one(omega, z0, monodromy, derivatives):
             orbit, x_max, _ = point_response(
-                tuned, omega, amplitude, settings, z0, monodromy, DESIGN_PARAMETERS
+                tuned, omega, amplitude, settings, z0 + derivatives @ change, monodromy,
+                DESIGN_PARAMETERS,
             )
-            return x_max, (orbit.state, orbit.monodromy)
+            return x_max, (orbit.state, orbit.monodromy, orbit.state_derivatives)
 
-        return jax.vmap(one)(omegas, *warm)
+        xs, orbits = jax.vmap(one)(omegas, *orbits)
+        return xs, (jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
     def one(amplitude, u_start, z_start):
         def objective(u, warm):
@@ -411,8 +418,9 @@ def retune(
     say(f"initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
     initial = tuned_response(system, k0, c0, amps, fine, settings)
     before = _peaks_from_response(initial, fine)
-    orbits = (scaled_states(initial, system.host_stiffness)[:, ::CHECK_REFINEMENT],
-              initial.monodromy[:, ::CHECK_REFINEMENT])
+    states = scaled_states(initial, system.host_stiffness)[:, ::CHECK_REFINEMENT]
+    orbits = (jnp.stack([k0, c0], axis=-1), states, initial.monodromy[:, ::CHECK_REFINEMENT],
+              jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)

@@ -70,6 +70,8 @@ class Orbit(eqx.Module):
     y_samples: Float[Array, " samples"]
     y_velocity_samples: Float[Array, " samples"]
     monodromy: Float[Array, "4 4"]  # dPhi_T/dz at `state`
+    # d state / d p[i] for i in the `directions` of `solve_orbit` (implicit derivatives)
+    state_derivatives: Float[Array, "4 directions"]
     floquet_multipliers: Complex[Array, " 4"]
     residual: Float[Array, ""]  # max |Phi_T(z0) - z0|, scaled
     newton_steps: Int[Array, ""]
@@ -312,7 +314,9 @@ def solve_orbit(
     With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
     at slightly different parameters), chord iterations without tangents bring `z_init`
     to the orbit before the Newton iteration that forms the Jacobians. Derivatives with
-    respect to `p[i]`, `i` in `directions`, reuse the tangents of that iteration."""
+    respect to `p[i]`, `i` in `directions`, reuse the tangents of that iteration; the
+    state's are returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at
+    nearby parameters."""
     scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
     p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
@@ -324,12 +328,15 @@ def solve_orbit(
     orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit["xs"]))
     monodromy = jax.lax.stop_gradient(orbit["monodromy"])
+    eye = jnp.eye(4, dtype=monodromy.dtype)
+    state_derivatives = jnp.linalg.solve(eye - monodromy, jax.lax.stop_gradient(orbit["jz_p"]))
     return Orbit(
         state=orbit["z"],
         x_samples=orbit["xs"],
         y_samples=orbit["ys"],
         y_velocity_samples=orbit["ws"],
         monodromy=monodromy,
+        state_derivatives=state_derivatives,
         floquet_multipliers=jnp.linalg.eigvals(monodromy),
         residual=residual,
         newton_steps=steps,
