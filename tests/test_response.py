@@ -193,3 +193,46 @@ def test_failed_integration_is_flagged_not_nan(system):
     result = tj.frequency_response(system, float(system.host_frequency), 100.0, settings=settings)
     assert not bool(result.converged)
     assert not np.isnan(float(result.x_max))
+
+
+def _orbit_at(system, amplitude, omega, k, c, **kwargs):
+    from tid_jax._dynamics import parameter_vector
+    from tid_jax._steady_state import SolverSettings, solve_orbit
+
+    tuned = system.replace(tid_stiffness=k, tid_damping=c)
+    return solve_orbit(parameter_vector(tuned, amplitude, omega), SolverSettings(), **kwargs)
+
+
+def test_state_derivatives_match_finite_differences(system):
+    # The implicit derivatives of the orbit's state with respect to the tuning (k, c),
+    # against central differences of orbits solved afresh, at 200 N where the inerter
+    # sticks for part of the period.
+    from tid_jax._retune import DESIGN_PARAMETERS
+
+    omega, k, c = 0.95 * float(system.host_frequency), float(system.tid_stiffness), float(
+        system.tid_damping)
+    orbit = _orbit_at(system, 200.0, omega, k, c, directions=DESIGN_PARAMETERS)
+    assert orbit.state_derivatives.shape == (4, 2)
+    for column, (dk, dc) in enumerate([(1e-4 * k, 0.0), (0.0, 1e-4 * c)]):
+        plus = _orbit_at(system, 200.0, omega, k + dk, c + dc).state
+        minus = _orbit_at(system, 200.0, omega, k - dk, c - dc).state
+        fd = np.asarray(plus - minus) / (2 * (dk + dc))
+        np.testing.assert_allclose(np.asarray(orbit.state_derivatives[:, column]), fd,
+                                   rtol=1e-3, atol=1e-3 * np.max(np.abs(fd)))
+
+
+def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
+    # From the orbit (state and monodromy) of a 2% stiffer TID, chord iterations without
+    # tangents reach the orbit that Newton's method finds from the linear guess.
+    from tid_jax._dynamics import parameter_vector
+    from tid_jax._steady_state import SolverSettings, refined_peak, settled_state
+
+    omega, k, c = float(system.host_frequency), float(system.tid_stiffness), float(
+        system.tid_damping)
+    near = _orbit_at(system, 300.0, omega, 1.02 * k, c)
+    exact = _orbit_at(system, 300.0, omega, k, c)
+    p = parameter_vector(system, 300.0, omega)
+    state, samples = settled_state(near.state, p, SolverSettings(), near.monodromy)
+    np.testing.assert_allclose(np.asarray(state), np.asarray(exact.state), atol=1e-5)
+    assert float(refined_peak(samples)) == pytest.approx(float(refined_peak(exact.x_samples)),
+                                                         rel=1e-5)

@@ -83,8 +83,9 @@ def point_response(
     return orbit, x_max, y_max
 
 
-def _point_summary(system, omega, amplitude, settings):
-    orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
+def _point_summary(system, omega, amplitude, settings, z_init=None, monodromy_init=None):
+    orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z_init,
+                                         monodromy_init)
     scale = amplitude / system.host_stiffness
     state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
     velocity = orbit.y_velocity_samples * omega * scale
@@ -115,36 +116,35 @@ CHUNK = 64
 
 
 @eqx.filter_jit
-def _points(system, omegas, amplitudes, settings, stiffness=None, damping=None):
+def _points(system, omegas, amplitudes, settings, tunings=None, warm=None):
     def one(batch):
-        if stiffness is None:
-            w, a = batch
-            return _point_summary(system, w, a, settings)
-        w, a, k, c = batch
-        return _point_summary(with_tuning(system, k, c), w, a, settings)
+        omega, amplitude, tuning, orbit = batch
+        tuned = system if tuning is None else with_tuning(system, *tuning)
+        return _point_summary(tuned, omega, amplitude, settings, *(orbit or ()))
 
-    batch = (omegas, amplitudes) if stiffness is None else (omegas, amplitudes, stiffness, damping)
-    return map_batch(one, batch, CHUNK)
+    return map_batch(one, (omegas, amplitudes, tunings, warm), CHUNK)
 
 
-def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None) -> dict:
+def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None,
+                 warm=None) -> dict:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched;
     with `tunings = (stiffness, damping)`, flat lists too, point i uses the TID stiffness
-    and damping `stiffness[i]`, `damping[i]`. Points that do not converge are solved again,
-    on their own, with `settings.persistent()`; the better attempt is kept. Each batch is
-    sharded over all JAX devices (`sharded_batch`)."""
-    batch = (omegas, amplitudes) + (() if tunings is None else tuple(tunings))
-
-    def solve(settings):
-        return lambda *b: _points(system, *b[:2], settings, *b[2:])
-
-    out = sharded_batch(solve(settings), *batch)
+    and damping `stiffness[i]`, `damping[i]`; with `warm = (states, monodromies)`, point i
+    is shot from the scaled state `states[i]` by chord iterations with `monodromies[i]`
+    (of a nearby orbit) before Newton's. Points that do not converge are solved again, on
+    their own, from the linear steady state with `settings.persistent()`; the better
+    attempt is kept. Each batch is sharded over all JAX devices (`sharded_batch`)."""
+    batch = (omegas, amplitudes, tunings)
+    out = sharded_batch(lambda *b: _points(system, *b[:2], settings, *b[2:]), *batch, warm)
     failed = np.flatnonzero(~np.asarray(out["converged"]))
     if failed.size:
         # Pad the retry batch to a power of two so that few batch sizes are compiled.
         size = 1 << int(np.ceil(np.log2(failed.size)))
         index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
-        retry = sharded_batch(solve(settings.persistent()), *(b[index] for b in batch))
+        retry = sharded_batch(
+            lambda *b: _points(system, *b[:2], settings.persistent(), *b[2:]),
+            *jax.tree.map(lambda b: b[index], batch),
+        )
         better = np.asarray(retry["residual"])[: failed.size] < np.asarray(out["residual"])[failed]
         chosen = failed[better]
         out = {
@@ -154,27 +154,33 @@ def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=N
     return out
 
 
-def _grid_response(system, omegas, amplitudes, settings, tunings=None):
+def _grid_response(system, omegas, amplitudes, settings, tunings=None, warm=None):
     """`solve_points` on the grid amplitudes x omegas, arrays shaped like the grid; with
-    `tunings = (stiffness, damping)`, one TID tuning per amplitude."""
+    `tunings = (stiffness, damping)`, one TID tuning per amplitude; with `warm`, the
+    scaled states and monodromy matrices to start from, shaped like the grid."""
     omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
     if tunings is not None:
         tunings = tuple(
             jnp.broadcast_to(jnp.asarray(t)[:, None], amplitude_grid.shape).reshape(-1)
             for t in tunings
         )
+    if warm is not None:
+        warm = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), tuple(warm))
     flat = solve_points(
-        system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings, tunings
+        system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings, tunings, warm
     )
     shape = amplitude_grid.shape
     return {key: value.reshape(shape + value.shape[1:]) for key, value in flat.items()}
 
 
-def tuned_response(system, stiffness, damping, amplitudes, omegas, settings) -> FrequencyResponse:
+def tuned_response(system, stiffness, damping, amplitudes, omegas, settings,
+                   warm=None) -> FrequencyResponse:
     """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
-    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch."""
+    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch; with
+    `warm = (states, monodromies)` (amplitudes x frequencies), each steady state is shot
+    from that scaled state, with chord iterations on that monodromy matrix first."""
     amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
-    out = _grid_response(system, omegas, amplitudes, settings, (stiffness, damping))
+    out = _grid_response(system, omegas, amplitudes, settings, (stiffness, damping), warm)
     return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out)
 
 

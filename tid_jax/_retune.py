@@ -1,3 +1,4 @@
+import dataclasses
 import functools as ft
 from collections.abc import Callable
 
@@ -8,7 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._dynamics import PARAMETERS
+from ._dynamics import PARAMETERS, parameters
 from ._linear import den_hartog_tuning
 from ._response import (
     FrequencyResponse,
@@ -20,7 +21,7 @@ from ._response import (
     with_tuning,
 )
 from ._sharding import map_batch, sharded_batch
-from ._steady_state import SolverSettings
+from ._steady_state import SolverSettings, refined_peak, settled_state
 from ._system import TIDSystem
 
 # Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
@@ -89,6 +90,22 @@ def smooth_log_peak(values: Float[Array, " freqs"], omegas, sharpness) -> Float[
     candidates = is_peak.at[0].set(True).at[-1].set(True)
     logs = jnp.where(candidates, jnp.log(peaks), -jnp.inf)
     return jax.nn.logsumexp(sharpness * logs) / sharpness
+
+
+# Local maxima of the host response (interior, or band ends) whose three-point stencils
+# take the Newton iteration with tangents inside the optimiser; the others' values enter
+# the smooth maximum without derivatives (their weight there is negligible).
+PEAK_STENCILS = 3
+
+
+def _peak_lanes(values: Float[Array, " freqs"], omegas) -> Int[Array, " lanes"]:
+    """Grid indices of the three-point stencils around the `PEAK_STENCILS` highest refined
+    local maxima (or band ends) of `values`; repeats where there are fewer."""
+    peaks, _, is_peak = _local_peaks(jax.lax.stop_gradient(values), omegas)
+    candidates = is_peak.at[0].set(True).at[-1].set(True)
+    count = min(PEAK_STENCILS, values.shape[0])
+    _, top = jax.lax.top_k(jnp.where(candidates, peaks, -jnp.inf), count)
+    return jnp.clip(top[:, None] + jnp.arange(-1, 2), 0, values.shape[0] - 1).reshape(-1)
 
 
 def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
@@ -305,23 +322,36 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     tags = frozenset()
 
     def design_sweep(u, amplitude, warm):
-        """Host peaks (m) at every frequency, and the orbits of the design `u`, shooting by
-        chord iterations from the orbits `warm` of a nearby design (tuning, then per
-        frequency the scaled state, monodromy matrix and state derivatives with respect to
-        the tuning), first-order predicted at `u`."""
+        """Host peaks (m) at every frequency, and the orbits of the design `u`, from the
+        orbits `warm` of a nearby design (its tuning, then per frequency the scaled state,
+        monodromy matrix and state derivatives with respect to the tuning): every steady
+        state is predicted to first order at `u` and settled by chord iterations without
+        tangents; then only the points around the highest peaks (which alone set the
+        objective and its gradient) take the Newton iteration with tangents, which gives
+        their derivatives and renews their monodromy matrices."""
         k, c = _design_to_tuning(u, k_ref, c_ref)
         tuned = with_tuning(system, k, c)
-        warm_tuning, *orbits = warm
+        warm_tuning, states, monodromies, derivatives = warm
         change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
+        scale = amplitude / system.host_stiffness
 
-        def one(omega, z0, monodromy, derivatives):
-            orbit, x_max, _ = point_response(
-                tuned, omega, amplitude, settings, z0 + derivatives @ change, monodromy,
-                DESIGN_PARAMETERS,
-            )
+        def settle(omega, z0, monodromy, derivative):
+            p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
+            z, x_samples = settled_state(z0 + derivative @ change, p, settings, monodromy)
+            return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
+
+        states, xs = jax.vmap(settle)(omegas, states, monodromies, derivatives)
+        lanes = _peak_lanes(xs, omegas)
+
+        def full(omega, z0):
+            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, None,
+                                              DESIGN_PARAMETERS)
             return x_max, (orbit.state, orbit.monodromy, orbit.state_derivatives)
 
-        xs, orbits = jax.vmap(one)(omegas, *orbits)
+        x_lanes, (z_lanes, m_lanes, d_lanes) = jax.vmap(full)(omegas[lanes], states[lanes])
+        xs = jax.lax.stop_gradient(xs).at[lanes].set(x_lanes)
+        orbits = (states.at[lanes].set(z_lanes), monodromies.at[lanes].set(m_lanes),
+                  derivatives.at[lanes].set(d_lanes))
         return xs, (jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
     def one(amplitude, u_start, z_start):
@@ -364,6 +394,29 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
 
 
+def _check_grid_orbits(states, monodromies):
+    """Starting orbits on the check grid from orbits on the design grid (amplitudes x
+    frequencies): scaled states interpolated linearly between neighbours, the nearer
+    neighbour's monodromy matrix."""
+    f = jnp.arange(CHECK_REFINEMENT) / CHECK_REFINEMENT
+    z = (1 - f[:, None]) * states[:, :-1, None] + f[:, None] * states[:, 1:, None]
+    m = jnp.where((f <= 0.5)[:, None, None], monodromies[:, :-1, None], monodromies[:, 1:, None])
+
+    def merge(inner, design):
+        inner = inner.reshape(inner.shape[:1] + (-1,) + inner.shape[3:])
+        return jnp.concatenate([inner, design[:, -1:]], axis=1)
+
+    return merge(z, states), merge(m, monodromies)
+
+
+def _rows(response: FrequencyResponse, rows) -> FrequencyResponse:
+    """The amplitudes `rows` of a `FrequencyResponse` over amplitudes x frequencies."""
+    fields = {field.name: getattr(response, field.name) for field in dataclasses.fields(response)}
+    return FrequencyResponse(
+        **{name: value if name == "omegas" else value[rows] for name, value in fields.items()}
+    )
+
+
 def retune(
     system: TIDSystem,
     amplitudes: ArrayLike,
@@ -383,16 +436,20 @@ def retune(
     each optimiser stops as soon as it converges; the checks are batched over every
     amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
     maximum of the parabola-refined local peaks whose sharpness grows over `SHARPNESS`
-    (continuation), each stage an optimistix BFGS run (at most `max_steps` iterations,
-    tolerance `tol` for the last stage, `CONTINUATION_TOL` before; a stage also ends,
-    converged, when its line search finds no decrease in `MAX_REJECTED_STEPS` halvings)
-    warm-started from the last, with gradients by implicit differentiation through the
-    periodic orbits. The first stage starts from the initial tuning's orbits on the check
-    grid; every steady state then starts from the orbit of the last accepted design: chord
-    iterations with that orbit's monodromy matrix, then one Newton iteration whose tangents
-    give the derivatives. The result is confirmed on a grid `CHECK_REFINEMENT` times finer; a design
-    whose peak there is above the initial tuning's is replaced by the initial tuning
-    (status 4). `progress`, if given, is called with a one-line message after each stage.
+    (continuation), each stage a BFGS run (optimistix's, with its Newton step capped at
+    `MAX_DESIGN_STEP`; at most `max_steps` iterations, tolerance `tol` for the last stage,
+    `CONTINUATION_TOL` before; a stage also ends, converged, when its line search finds no
+    decrease in `MAX_REJECTED_STEPS` halvings) warm-started from the last, with gradients
+    by implicit differentiation through the periodic orbits. The first stage starts from
+    the initial tuning's orbits on the design grid. At every design, each steady state is
+    predicted to first order from the orbit of the last accepted design and settled by
+    chord iterations with the latest monodromy matrix at its frequency; only the points
+    around the `PEAK_STENCILS` highest peaks then take a Newton iteration whose tangents
+    give the derivatives and renew their monodromy matrices. The initial and retuned
+    designs are then solved afresh (each steady state starting from the design's orbits)
+    on a grid `CHECK_REFINEMENT` times finer; a design whose peak there is above the
+    initial tuning's is replaced by the initial tuning (status 4). `progress`, if given,
+    is called with a one-line message after each stage.
     """
     _check_system(system)
     band = _band(system, omegas)
@@ -409,17 +466,14 @@ def retune(
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
-    # The check grid holds the design grid (every CHECK_REFINEMENT-th point): the initial
-    # tuning's orbits there start the optimiser.
     fraction = np.arange(CHECK_REFINEMENT) / CHECK_REFINEMENT
     design = np.asarray(band)
     fine = jnp.asarray(np.append((design[:-1, None] + np.diff(design)[:, None] * fraction),
                                  design[-1]))
-    say(f"initial tuning on {fine.size} frequencies x {amps.size} amplitudes")
-    initial = tuned_response(system, k0, c0, amps, fine, settings)
-    before = _peaks_from_response(initial, fine)
-    states = scaled_states(initial, system.host_stiffness)[:, ::CHECK_REFINEMENT]
-    orbits = (jnp.stack([k0, c0], axis=-1), states, initial.monodromy[:, ::CHECK_REFINEMENT],
+    say(f"initial tuning on {band.size} frequencies x {amps.size} amplitudes")
+    start = tuned_response(system, k0, c0, amps, band, settings)
+    states = scaled_states(start, system.host_stiffness)
+    orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
               jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
@@ -434,8 +488,16 @@ def retune(
             f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    say(f"checking the retuned designs on {fine.size} frequencies x {amps.size} amplitudes")
-    retuned = tuned_response(system, k, c, amps, fine, settings)
+    say(f"checking the initial and retuned designs on {fine.size} frequencies x {amps.size} "
+        "amplitudes")
+    # Both designs in one batch, every steady state shot from its design's orbits on the
+    # design grid (interpolated in between) and verified afresh.
+    warm = _check_grid_orbits(jnp.concatenate([states, orbits[1]]),
+                              jnp.concatenate([start.monodromy, orbits[2]]))
+    both = tuned_response(system, jnp.concatenate([k0, k]), jnp.concatenate([c0, c]),
+                          jnp.concatenate([amps, amps]), fine, settings, warm)
+    initial, retuned = _rows(both, slice(None, amps.size)), _rows(both, slice(amps.size, None))
+    before = _peaks_from_response(initial, fine)
     after = _peaks_from_response(retuned, fine)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))

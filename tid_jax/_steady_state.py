@@ -177,33 +177,46 @@ def _limited(z, update):
 
 def _chord(z0, p, settings: SolverSettings, monodromy):
     """Chord iterations for z* = Phi_T(z*) with the fixed Jacobian `I - monodromy` (from a
-    nearby orbit): each costs one integration without tangents. Stops once the residual
-    is within `settings.periodicity_tol` or after `settings.max_newton_steps` iterations.
-    Returns the last iterate while the residuals fall, else the best one evaluated (`z0`
-    if none is finite)."""
+    nearby orbit): each costs one integration without tangents, which also samples x over
+    the period. Stops once the residual is within `settings.periodicity_tol` or after
+    `settings.max_newton_steps` iterations. Returns the last iterate while the residuals
+    fall, else the best one evaluated (`z0` if none is finite), and the x samples of the
+    best iterate evaluated."""
     lu = jax.scipy.linalg.lu_factor(jnp.eye(4, dtype=z0.dtype) - monodromy)
     inf = jnp.asarray(jnp.inf, z0.dtype)
+    no_samples = jnp.full(settings.samples, jnp.nan, z0.dtype)
 
     def cond(carry):
-        _, _, best_residual, _, steps = carry
+        _, _, best_residual, _, _, steps = carry
         return (best_residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
 
     def body(carry):
-        z, best, best_residual, _, steps = carry
-        r = _period_map(z, p, settings) - z
+        z, best, best_residual, best_xs, _, steps = carry
+        xs, _, _, z_end = _period_samples(z, p, settings)
+        r = z_end - z
         ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
         residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
         improved = residual < best_residual
         best, best_residual = jnp.where(improved, z, best), jnp.minimum(residual, best_residual)
+        best_xs = jnp.where(improved, xs, best_xs)
         converged = residual <= settings.periodicity_tol
         step = jax.scipy.linalg.lu_solve(lu, jnp.where(ok, r, 0.0))
         z_next = jnp.where(converged | ~ok, z, _limited(z, step))
-        return z_next, best, best_residual, improved, steps + 1
+        return z_next, best, best_residual, best_xs, improved, steps + 1
 
-    z, best, _, improved, _ = jax.lax.while_loop(
-        cond, body, (z0, z0, inf, jnp.asarray(False), 0)
+    z, best, _, best_xs, improved, _ = jax.lax.while_loop(
+        cond, body, (z0, z0, inf, no_samples, jnp.asarray(False), 0)
     )
-    return jnp.where(improved & jnp.all(jnp.isfinite(z)), z, best)
+    return jnp.where(improved & jnp.all(jnp.isfinite(z)), z, best), best_xs
+
+
+def settled_state(z0, p, settings: SolverSettings, monodromy):
+    """The periodic orbit at `p` by chord iterations from `z0` with the monodromy matrix of
+    a nearby orbit (`_chord`; no tangents): the scaled state (the last iterate, or the best
+    one evaluated where the residuals stopped falling) and the x samples over a period of
+    the best iterate evaluated (NaN if none was)."""
+    return _chord(jax.lax.stop_gradient(z0), jax.lax.stop_gradient(p), settings,
+                  jax.lax.stop_gradient(monodromy))
 
 
 def _shoot(z0, p, settings: SolverSettings, directions=()):
@@ -323,7 +336,7 @@ def solve_orbit(
         z_init = _transient(linear_initial_state(p_const), p_const, settings)
     z_init = jax.lax.stop_gradient(z_init)
     if monodromy_init is not None:
-        z_init = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
+        z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
     orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
     orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit["xs"]))
