@@ -64,15 +64,32 @@ def sharded_batch(function, *batch, devices=None):
 def map_batch(function, batch, chunk: int):
     """`jax.vmap(function)(batch)` (a pytree of arrays with leading length n) computed
     `chunk` entries at a time with `jax.lax.map`, so that the while loops of a chunk wait
-    only for that chunk's slowest entry. When n divides evenly over the devices, the batch
-    is first split into one part per device, each mapped on its own: a batch placed by
-    `sharded_batch` then runs in parallel on every device."""
+    only for that chunk's slowest entry. The batch is padded to whole chunks (repeating its
+    last entry), so that one chunk's computation is compiled, not a second one for a
+    remainder. When n divides evenly over the devices, the batch is first split into one
+    part per device, each mapped on its own: a batch placed by `sharded_batch` then runs in
+    parallel on every device."""
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
     parts = len(jax.devices())
     if size % parts:
         parts = 1
     if size <= chunk * parts:
         return jax.vmap(function)(batch)
-    split = jax.tree_util.tree_map(lambda a: a.reshape(parts, size // parts, *a.shape[1:]), batch)
-    out = jax.vmap(lambda part: jax.lax.map(function, part, batch_size=chunk))(split)
-    return jax.tree_util.tree_map(lambda a: a.reshape(size, *a.shape[2:]), out)
+    length = size // parts
+    chunks = -(-length // chunk)
+
+    def split(a):
+        a = a.reshape(parts, length, *a.shape[1:])
+        extra = chunks * chunk - length
+        if extra:
+            a = jax.numpy.concatenate([a, jax.numpy.repeat(a[:, -1:], extra, axis=1)], axis=1)
+        return a.reshape(parts, chunks, chunk, *a.shape[2:])
+
+    def merge(a):
+        a = a.reshape(parts, chunks * chunk, *a.shape[3:])[:, :length]
+        return a.reshape(size, *a.shape[2:])
+
+    out = jax.vmap(lambda part: jax.lax.map(jax.vmap(function), part))(
+        jax.tree_util.tree_map(split, batch)
+    )
+    return jax.tree_util.tree_map(merge, out)
