@@ -439,14 +439,15 @@ def retune(
     (continuation), each stage a BFGS run (optimistix's, with its Newton step capped at
     `MAX_DESIGN_STEP`; at most `max_steps` iterations, tolerance `tol` for the last stage
     (on the scaled design variables and the log peak: the default 1e-4 settles k to about
-    1e-5 and the peak to about 1e-4, relative), `CONTINUATION_TOL` before; a stage also ends, converged, when its line search finds no
-    decrease in `MAX_REJECTED_STEPS` halvings) warm-started from the last, with gradients
-    by implicit differentiation through the periodic orbits. The first stage starts from
-    the initial tuning's orbits on the design grid. At every design, each steady state is
-    predicted to first order from the orbit of the last accepted design and settled by
-    chord iterations with the latest monodromy matrix at its frequency; only the points
-    around the `PEAK_STENCILS` highest peaks then take a Newton iteration whose tangents
-    give the derivatives and renew their monodromy matrices. The initial and retuned
+    1e-5 and the peak to about 1e-4, relative), `CONTINUATION_TOL` before; a stage also
+    ends, converged, when its line search finds no decrease in `MAX_REJECTED_STEPS`
+    halvings) warm-started from the last, with gradients by implicit differentiation
+    through the periodic orbits. The first stage starts from the initial tuning's orbits
+    on the design grid. At every design, each steady state is predicted to first order
+    from the orbit of the last accepted design and settled by chord iterations with the
+    latest monodromy matrix at its frequency; only the points around the `PEAK_STENCILS`
+    highest peaks then take a Newton iteration whose tangents give the derivatives and
+    renew their monodromy matrices. The initial and retuned
     designs are then solved afresh (each steady state starting from the design's orbits)
     on a grid `CHECK_REFINEMENT` times finer; a design whose peak there is above the
     initial tuning's is replaced by the initial tuning (status 4). `progress`, if given,
