@@ -195,12 +195,19 @@ def test_failed_integration_is_flagged_not_nan(system):
     assert not np.isnan(float(result.x_max))
 
 
-def _orbit_at(system, amplitude, omega, k, c, **kwargs):
+def _orbit_at(system, amplitude, omega, directions=()):
+    """Jitted (k, c) -> the orbit of `system` tuned to (k, c), at one forcing point."""
+    import jax
+
     from tid_jax._dynamics import parameter_vector
     from tid_jax._steady_state import SolverSettings, solve_orbit
 
-    tuned = system.replace(tid_stiffness=k, tid_damping=c)
-    return solve_orbit(parameter_vector(tuned, amplitude, omega), SolverSettings(), **kwargs)
+    def orbit(k, c):
+        tuned = system.replace(tid_stiffness=k, tid_damping=c)
+        return solve_orbit(parameter_vector(tuned, amplitude, omega), SolverSettings(),
+                           directions=directions)
+
+    return jax.jit(orbit)
 
 
 def test_state_derivatives_match_finite_differences(system):
@@ -211,11 +218,11 @@ def test_state_derivatives_match_finite_differences(system):
 
     omega, k, c = 0.95 * float(system.host_frequency), float(system.tid_stiffness), float(
         system.tid_damping)
-    orbit = _orbit_at(system, 200.0, omega, k, c, directions=DESIGN_PARAMETERS)
+    orbit = _orbit_at(system, 200.0, omega, DESIGN_PARAMETERS)(k, c)
     assert orbit.state_derivatives.shape == (4, 2)
+    solve = _orbit_at(system, 200.0, omega)
     for column, (dk, dc) in enumerate([(1e-4 * k, 0.0), (0.0, 1e-4 * c)]):
-        plus = _orbit_at(system, 200.0, omega, k + dk, c + dc).state
-        minus = _orbit_at(system, 200.0, omega, k - dk, c - dc).state
+        plus, minus = solve(k + dk, c + dc).state, solve(k - dk, c - dc).state
         fd = np.asarray(plus - minus) / (2 * (dk + dc))
         np.testing.assert_allclose(np.asarray(orbit.state_derivatives[:, column]), fd,
                                    rtol=1e-3, atol=1e-3 * np.max(np.abs(fd)))
@@ -224,15 +231,18 @@ def test_state_derivatives_match_finite_differences(system):
 def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     # From the orbit (state and monodromy) of a 2% stiffer TID, chord iterations without
     # tangents reach the orbit that Newton's method finds from the linear guess.
+    import jax
+
     from tid_jax._dynamics import parameter_vector
     from tid_jax._steady_state import SolverSettings, refined_peak, settled_state
 
     omega, k, c = float(system.host_frequency), float(system.tid_stiffness), float(
         system.tid_damping)
-    near = _orbit_at(system, 300.0, omega, 1.02 * k, c)
-    exact = _orbit_at(system, 300.0, omega, k, c)
+    solve = _orbit_at(system, 300.0, omega)
+    near, exact = solve(1.02 * k, c), solve(k, c)
     p = parameter_vector(system, 300.0, omega)
-    state, samples = settled_state(near.state, p, SolverSettings(), near.monodromy)
+    state, samples = jax.jit(lambda z, m: settled_state(z, p, SolverSettings(), m))(
+        near.state, near.monodromy)
     np.testing.assert_allclose(np.asarray(state), np.asarray(exact.state), atol=1e-5)
     assert float(refined_peak(samples)) == pytest.approx(float(refined_peak(exact.x_samples)),
                                                          rel=1e-5)
