@@ -185,7 +185,8 @@ def test_check_grid_orbits_interpolate_between_design_points():
     index = np.arange(n, dtype=float)
     states = jnp.asarray(np.stack([index, 2 * index, -index, index + 1], axis=-1))[None]
     monodromies = jnp.asarray(index[None, :, None, None] * np.ones((1, n, 4, 4)))
-    z, m = _retune._check_grid_orbits(states, monodromies)
+    z = _retune._on_check_grid(states)
+    m = _retune._on_check_grid(monodromies, nearest=True)
     r = _retune.CHECK_REFINEMENT
     fine = np.arange((n - 1) * r + 1) / r
     np.testing.assert_allclose(np.asarray(z[0]), np.stack([fine, 2 * fine, -fine, fine + 1], -1))

@@ -394,19 +394,14 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
 
 
-def _check_grid_orbits(states, monodromies):
-    """Starting orbits on the check grid from orbits on the design grid (amplitudes x
-    frequencies): scaled states interpolated linearly between neighbours, the nearer
-    neighbour's monodromy matrix."""
-    f = jnp.arange(CHECK_REFINEMENT) / CHECK_REFINEMENT
-    z = (1 - f[:, None]) * states[:, :-1, None] + f[:, None] * states[:, 1:, None]
-    m = jnp.where((f <= 0.5)[:, None, None], monodromies[:, :-1, None], monodromies[:, 1:, None])
-
-    def merge(inner, design):
-        inner = inner.reshape(inner.shape[:1] + (-1,) + inner.shape[3:])
-        return jnp.concatenate([inner, design[:, -1:]], axis=1)
-
-    return merge(z, states), merge(m, monodromies)
+def _on_check_grid(values, nearest: bool = False):
+    """`values` (amplitudes x design frequencies x ...) on the check grid: interpolated
+    linearly between neighbouring design frequencies, or the nearer neighbour's value."""
+    f = jnp.arange(CHECK_REFINEMENT).reshape((-1,) + (1,) * (values.ndim - 2)) / CHECK_REFINEMENT
+    lower, upper = values[:, :-1, None], values[:, 1:, None]
+    inner = jnp.where(f <= 0.5, lower, upper) if nearest else lower + f * (upper - lower)
+    inner = inner.reshape(inner.shape[:1] + (-1,) + inner.shape[3:])
+    return jnp.concatenate([inner, values[:, -1:]], axis=1)
 
 
 def _rows(response: FrequencyResponse, rows) -> FrequencyResponse:
@@ -468,10 +463,7 @@ def retune(
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
-    fraction = np.arange(CHECK_REFINEMENT) / CHECK_REFINEMENT
-    design = np.asarray(band)
-    fine = jnp.asarray(np.append((design[:-1, None] + np.diff(design)[:, None] * fraction),
-                                 design[-1]))
+    fine = _on_check_grid(band[None])[0]
     say(f"initial tuning on {band.size} frequencies x {amps.size} amplitudes")
     start = tuned_response(system, k0, c0, amps, band, settings)
     states = scaled_states(start, system.host_stiffness)
@@ -494,8 +486,9 @@ def retune(
         "amplitudes")
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
-    warm = _check_grid_orbits(jnp.concatenate([states, orbits[1]]),
-                              jnp.concatenate([start.monodromy, orbits[2]]))
+    _, final_states, final_monodromies, _ = orbits
+    warm = (_on_check_grid(jnp.concatenate([states, final_states])),
+            _on_check_grid(jnp.concatenate([start.monodromy, final_monodromies]), nearest=True))
     both = tuned_response(system, jnp.concatenate([k0, k]), jnp.concatenate([c0, c]),
                           jnp.concatenate([amps, amps]), fine, settings, warm)
     initial, retuned = _rows(both, slice(None, amps.size)), _rows(both, slice(amps.size, None))
