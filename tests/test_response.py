@@ -173,7 +173,7 @@ def test_bad_grids_raise(system, omegas, amplitudes, message):
         tj.frequency_response(system, omegas, amplitudes)
 
 
-def test_unconverged_point_is_flagged_not_nan_and_retried(system):
+def test_unconverged_point_is_flagged_and_retried(system):
     # One Newton iteration from the linear guess cannot reach the stick-slip orbit: the
     # batched solve flags the point; frequency_response then solves it again, persistently.
     from tid_jax._response import _points
@@ -183,16 +183,17 @@ def test_unconverged_point_is_flagged_not_nan_and_retried(system):
     first = _points(system, omega, jnp.array([100.0]), settings)
     assert not bool(first["converged"][0])
     assert float(first["residual"][0]) > settings.periodicity_tol
-    assert np.isfinite(float(first["x_max"][0]))
+    # The peaks of an orbit that was not found are not reported as numbers.
+    assert np.isnan(float(first["x_max"][0])) and np.isnan(float(first["y_max"][0]))
     result = tj.frequency_response(system, omega[0], 100.0, settings=settings)
     assert bool(result.converged)
 
 
-def test_failed_integration_is_flagged_not_nan(system):
+def test_failed_integration_is_flagged_and_its_peaks_are_nan(system):
     settings = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
     result = tj.frequency_response(system, float(system.host_frequency), 100.0, settings=settings)
     assert not bool(result.converged)
-    assert not np.isnan(float(result.x_max))
+    assert np.isnan(float(result.x_max)) and np.isnan(float(result.y_max))
 
 
 def _orbit_at(system, amplitude, omega, directions=()):
@@ -246,3 +247,14 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     np.testing.assert_allclose(np.asarray(state), np.asarray(exact.state), atol=1e-5)
     assert float(refined_peak(samples)) == pytest.approx(float(refined_peak(exact.x_samples)),
                                                          rel=1e-5)
+
+
+def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
+    # An integration that runs out of steps leaves an orbit unconverged: every reduction
+    # over frequency reports that band's peak as NaN, never as a finite number.
+    settings = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
+    band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
+    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=settings)))
+    peaks = tj.peaks(system, [100.0], band, settings=settings)
+    assert not bool(peaks.converged[0])
+    assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))

@@ -1,3 +1,4 @@
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -15,9 +16,6 @@ PARAMETERS = (
     "amplitude",
     "omega",
 )
-N_PARAMETERS = len(PARAMETERS)
-OMEGA = PARAMETERS.index("omega")
-AMPLITUDE = PARAMETERS.index("amplitude")
 
 
 def smooth_sign(velocity: Float[Array, "..."], width: Float[Array, "..."]) -> Float[Array, "..."]:
@@ -27,10 +25,13 @@ def smooth_sign(velocity: Float[Array, "..."], width: Float[Array, "..."]) -> Fl
 
 def parameters(system, amplitude, omega) -> list[Float[Array, ""]]:
     """A `TIDSystem`'s fields, the forcing amplitude (N) and frequency (rad/s) as the
-    scalars of `p` (order `PARAMETERS`), in one floating dtype. Kept apart (not stacked),
-    so that derivatives can see which of them depend on a differentiated input."""
-    values = [jnp.asarray(getattr(system, name)) for name in PARAMETERS[:-2]]
-    values += [jnp.asarray(amplitude), jnp.asarray(omega)]
+    scalars of `p` (order `PARAMETERS`), in one floating dtype; the friction width is the
+    system's explicit one or, by default, its rule at this amplitude and frequency
+    (`TIDSystem.width_at`). Kept apart (not stacked), so that derivatives can see which of
+    them depend on a differentiated input."""
+    values = [jnp.asarray(getattr(system, name)) for name in PARAMETERS[:-3]]
+    values += [jnp.asarray(system.width_at(amplitude, omega)), jnp.asarray(amplitude),
+               jnp.asarray(omega)]
     dtype = jnp.result_type(*values, float)
     return [value.astype(dtype) for value in values]
 
@@ -41,21 +42,43 @@ def parameter_vector(system, amplitude, omega) -> Float[Array, " 10"]:
     return jnp.stack(parameters(system, amplitude, omega))
 
 
-def displacement_scale(p: Float[Array, " 10"]) -> Float[Array, ""]:
-    """Static displacement A / K (m): the unit of the scaled state."""
-    return p[AMPLITUDE] / p[1]
+# Eq. (12) in scaled form. Time is the forcing phase `theta = omega t` (one period is
+# 2 pi), displacements are in units of A / K and velocities in units of omega A / K, so
+# `z = (x, x', y, y')` is O(1) for every frequency and amplitude. The field is split into
+# its linear part, the forcing and the friction, so that the variational equations reuse
+# the linear part.
+
+
+def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 10"]) -> tuple[Float[Array, "..."], ...]:
+    """The rows of the linear part `L z` of the scaled vector field, for a state `z` or
+    for columns of states (`z[i]` arrays of one shape), written out elementwise."""
+    mass, stiffness, damping, inertance, _, k, c, _, _, omega = p
+    x, v, y, w = z
+    spring = k * (x - y) + c * omega * (v - w)  # on the inerter terminal, per unit A/K
+    host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
+    return v, host, w, spring / (inertance * omega**2)
+
+
+def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 10"]) -> Float[Array, ""]:
+    """The friction's contribution to the scaled acceleration of the inerter terminal
+    at the scaled terminal velocity `w`."""
+    _, stiffness, _, inertance, friction, _, _, width, amplitude, omega = p
+    scale = amplitude / stiffness
+    return -friction * smooth_sign(omega * scale * w, width) / (scale * inertance * omega**2)
 
 
 def vector_field(theta: Float[Array, ""], z: Float[Array, " 4"], p: Float[Array, " 10"]):
-    """Eq. (12) in scaled form. Time is the forcing phase `theta = omega t` (one period is
-    2 pi), displacements are in units of A / K and velocities in units of omega A / K, so
-    `z = (x, x', y, y')` is O(1) for every frequency and amplitude."""
-    mass, stiffness, damping, inertance, friction, k, c, width, amplitude, omega = p
-    scale = amplitude / stiffness
-    x, v, y, w = z
-    spring = k * (x - y) + c * omega * (v - w)  # N per (A/K), acting on the inerter terminal
-    friction_term = friction * smooth_sign(omega * scale * w, width) / scale
-    host_force = amplitude / scale * jnp.sin(theta) - damping * omega * v - stiffness * x - spring
-    dv = host_force / (mass * omega**2)
-    dw = (spring - friction_term) / (inertance * omega**2)
-    return jnp.stack([v, dv, w, dw])
+    """Eq. (12) in scaled form (see above)."""
+    mass, stiffness, omega = p[0], p[1], p[9]
+    force = stiffness * jnp.sin(theta) / (mass * omega**2)  # A sin(theta) in units of A/K
+    dx, dv, dy, dw = linear_part(z, p)
+    return jnp.stack([dx, dv + force, dy, dw + friction_acceleration(z[3], p)])
+
+
+def tangent_field(theta: Float[Array, ""], z: Float[Array, " 4"], tangents, p):
+    """d/dtheta of `tangents` (4 x n, columns d z / d something) along the orbit through
+    `z`: the linear part plus the friction's slope in `z[3]`."""
+    del theta
+    slope = jax.grad(friction_acceleration)(z[3], p)
+    dx, dv, dy, dw = linear_part(tangents, p)
+    return jnp.stack([dx, dv, dy, dw + slope * tangents[3]])

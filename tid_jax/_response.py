@@ -16,7 +16,8 @@ class FrequencyResponse(eqx.Module):
     scalar inputs dropped). SI units.
 
     - `omegas` (rad/s), `amplitudes` (N): the grid.
-    - `x_max`, `y_max`: peak |x| and |y| over one steady period, m.
+    - `x_max`, `y_max`: peak |x| and |y| over one steady period, m; NaN where the orbit
+      did not converge.
     - `converged`: the periodic orbit was found and verified (|Phi_T(z0) - z0| small).
     - `stable`: all Floquet multipliers inside the unit circle (only meaningful if converged).
     - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s.
@@ -78,9 +79,13 @@ def point_response(
     orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
     scale = amplitude / system.host_stiffness
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
-    x_max = jnp.nan_to_num(refined_peak(orbit.x_samples) * scale, nan=jnp.inf)
-    y_max = jnp.nan_to_num(refined_peak(orbit.y_samples) * scale, nan=jnp.inf)
+    x_max, y_max = (_finite_or_inf(refined_peak(s) * scale)
+                    for s in (orbit.x_samples, orbit.y_samples))
     return orbit, x_max, y_max
+
+
+def _finite_or_inf(value):
+    return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
 
 def _point_summary(system, omega, amplitude, settings, z_init=None, monodromy_init=None):
@@ -89,10 +94,11 @@ def _point_summary(system, omega, amplitude, settings, z_init=None, monodromy_in
     scale = amplitude / system.host_stiffness
     state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
     velocity = orbit.y_velocity_samples * omega * scale
-    stuck = jnp.abs(velocity) < 2 * system.friction_width
+    stuck = jnp.abs(velocity) < 2 * system.width_at(amplitude, omega)
+    # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
     return dict(
-        x_max=x_max,
-        y_max=y_max,
+        x_max=jnp.where(orbit.converged, x_max, jnp.nan),
+        y_max=jnp.where(orbit.converged, y_max, jnp.nan),
         converged=orbit.converged,
         stable=jnp.max(jnp.abs(orbit.floquet_multipliers)) < 1,
         state=state,

@@ -125,7 +125,7 @@ class Peaks(eqx.Module):
     """Peak steady-state responses over a frequency band, per amplitude (SI)."""
 
     amplitudes: Float[Array, " amps"]
-    x_peak: Float[Array, " amps"]  # m
+    x_peak: Float[Array, " amps"]  # m, NaN where a steady state in the band did not converge
     y_peak: Float[Array, " amps"]  # m
     omega_x: Float[Array, " amps"]  # rad/s where the host peak occurs
     omega_y: Float[Array, " amps"]
@@ -137,14 +137,15 @@ def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
     """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas`."""
     x = jax.vmap(lambda v: grid_peak(v, omegas))(response.x_max)
     y = jax.vmap(lambda v: grid_peak(v, omegas))(response.y_max)
+    converged = jnp.all(response.converged, axis=-1)
     return Peaks(
         amplitudes=response.amplitudes,
-        x_peak=x[0],
-        y_peak=y[0],
+        x_peak=jnp.where(converged, x[0], jnp.nan),
+        y_peak=jnp.where(converged, y[0], jnp.nan),
         omega_x=x[1],
         omega_y=y[1],
         at_edge=x[2],
-        converged=jnp.all(response.converged, axis=-1),
+        converged=converged,
     )
 
 
@@ -191,7 +192,8 @@ def peak_response(
     `default_omegas(system)`) at forcing amplitude `amplitude` (N): of the host
     (`response="host"`, max |x|) or of the inerter terminal (`"inerter"`, max |y|, the
     stroke). Differentiable with respect to every field of `system` and `amplitude`
-    (implicit differentiation through the periodic orbits; envelope theorem at the peak)."""
+    (implicit differentiation through the periodic orbits; envelope theorem at the peak).
+    NaN where a steady state in the band did not converge."""
     _check_system(system)
     if response not in ("host", "inerter"):
         raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
@@ -205,8 +207,9 @@ def peak_response(
 
 @eqx.filter_jit
 def _peak_response(system, amplitude, omegas, host, settings):
-    xs, ys, _, _ = sweep(system, amplitude, omegas, settings)
-    return grid_peak(xs if host else ys, omegas)[0]
+    xs, ys, converged, _ = sweep(system, amplitude, omegas, settings)
+    # The maximum over a band with an orbit that was not found is unknown.
+    return jnp.where(jnp.all(converged), grid_peak(xs if host else ys, omegas)[0], jnp.nan)
 
 
 class RetuneResult(eqx.Module):

@@ -6,17 +6,21 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
-from ._dynamics import vector_field
+from ._dynamics import tangent_field, vector_field
 
 
 class SolverSettings(eqx.Module):
     """Numerical settings of the steady-state (shooting) solver. Defaults live here only.
 
-    - `rtol`, `atol`: tolerances of the adaptive Tsit5 integration, on the state scaled by
-      the static displacement A / K.
+    - `rtol`, `atol`: tolerances of the adaptive integration, on the state scaled by the
+      static displacement A / K.
+    - `implicit`: integrate with the implicit Kvaerno5 instead of the explicit Tsit5, for
+      stiff problems (a narrow friction width against slow forcing).
     - `max_steps`: integration steps allowed per forcing period.
     - `transient_periods`: periods integrated from the initial guess before shooting.
     - `max_newton_steps`: Newton iterations allowed.
@@ -33,6 +37,7 @@ class SolverSettings(eqx.Module):
     max_newton_steps: int = 10
     periodicity_tol: float = 1e-6
     samples: int = 128
+    implicit: bool = False
 
     def __check_init__(self):
         for name in ("rtol", "atol", "periodicity_tol"):
@@ -78,17 +83,26 @@ class Orbit(eqx.Module):
     converged: Bool[Array, ""]
 
 
-def _integrate(z0, p, t1, settings: SolverSettings, saveat, max_steps):
+def _solver(settings: SolverSettings):
+    return dfx.Kvaerno5() if settings.implicit else dfx.Tsit5()
+
+
+def _integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
+    """Integrate `field(theta, y, p)` from phase 0 to `t1` from `y0`, a state `z` or a
+    pair `(z, tangents)`; the step size follows the error of `z` alone."""
+    state_norm = lambda error: optx.rms_norm(error[0] if isinstance(error, tuple) else error)
     return dfx.diffeqsolve(
-        dfx.ODETerm(vector_field),
-        dfx.Tsit5(),
+        dfx.ODETerm(field),
+        _solver(settings),
         t0=0.0,
         t1=t1,
         dt0=None,
-        y0=z0,
+        y0=y0,
         args=p,
         saveat=saveat,
-        stepsize_controller=dfx.PIDController(rtol=settings.rtol, atol=settings.atol),
+        stepsize_controller=dfx.PIDController(
+            rtol=settings.rtol, atol=settings.atol, norm=state_norm
+        ),
         adjoint=dfx.ForwardMode(),
         max_steps=max_steps,
         throw=False,
@@ -96,24 +110,68 @@ def _integrate(z0, p, t1, settings: SolverSettings, saveat, max_steps):
 
 
 def _phases(settings: SolverSettings, dtype):
-    # Sample phases in [0, 2 pi), clipped below t1 so none rounds past the end.
-    return jnp.arange(settings.samples, dtype=dtype) * (2 * jnp.pi / settings.samples)
-
-
-def _period_map(z0, p, settings: SolverSettings):
-    """Phi_T: state after one forcing period from `z0`."""
-    sol = _integrate(z0, p, 2 * jnp.pi, settings, dfx.SaveAt(t1=True), settings.max_steps)
-    return sol.ys[-1]
+    # Concrete (NumPy) sample phases, which diffrax checks while tracing, not at run time.
+    return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
 
 
 def _period_samples(z0, p, settings: SolverSettings):
     """x, y and y' sampled over one period from `z0`, and the state after the period."""
     phases = _phases(settings, z0.dtype)
     sol = _integrate(
-        z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True), settings.max_steps
+        vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
+        settings.max_steps,
     )
     ys = sol.ys
     return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1]
+
+
+def _tangent_field(directions: tuple[int, ...]):
+    """The vector field with its variational equations: `(z, tangents)`, where the
+    tangents (4 x (4 + len(directions))) are d z / d (z0, p[directions])."""
+    index = jnp.asarray(directions, dtype=int)
+
+    def field(theta, y, p):
+        z, tangents = y
+        rate = tangent_field(theta, z, tangents, p)
+        if directions:
+            forcing = jax.jacfwd(lambda q: vector_field(theta, z, p.at[index].set(q)))(p[index])
+            rate = rate.at[:, 4:].add(forcing)
+        return vector_field(theta, z, p), rate
+
+    return field
+
+
+def _start_tangents(z, directions):
+    return jnp.eye(4, 4 + len(directions), dtype=z.dtype)
+
+
+def _period_tangents(z, p, settings: SolverSettings, directions=()):
+    """The state after one period from `z` and its Jacobian with respect to `z` (the
+    monodromy matrix) and to `p[i]`, `i` in `directions`, by the variational equations
+    (their step sizes follow the error of the state alone: accurate enough for Newton's
+    iterations, whose answer does not depend on them)."""
+    sol = _integrate(
+        _tangent_field(directions), (z, _start_tangents(z, directions)), p, 2 * jnp.pi,
+        settings, dfx.SaveAt(t1=True), settings.max_steps,
+    )
+    z_end, tangents = (y[-1] for y in sol.ys)
+    return z_end, tangents[:, :4], tangents[:, 4:]
+
+
+def _samples_and_jacobian(z, p, settings, directions=()):
+    """One integration of a period from `z` with tangents along the four state directions
+    and the parameters `p[i]`, `i` in `directions`, differentiating the integration itself
+    (so that the derivatives are those of the computed samples, to rounding): `(xs, ys,
+    ws, z_end)`, their Jacobians with respect to `z` (that of `z_end` is the monodromy
+    matrix) and with respect to those parameters (last axis of size `len(directions)`)."""
+    index = jnp.asarray(directions, dtype=int)
+    fn = lambda z0, q: _period_samples(z0, p.at[index].set(q), settings)
+    basis = jnp.eye(4 + len(directions), dtype=z.dtype)
+    primal, tangents = jax.vmap(
+        lambda t: jax.jvp(fn, (z, p[index]), (t[:4], t[4:])), out_axes=(None, 0)
+    )(basis)
+    tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
+    return primal, tuple(t[..., :4] for t in tangents), tuple(t[..., 4:] for t in tangents)
 
 
 def linear_initial_state(p) -> Float[Array, " 4"]:
@@ -139,6 +197,7 @@ def _transient(z, p, settings: SolverSettings):
     if settings.transient_periods == 0:
         return z
     sol = _integrate(
+        vector_field,
         z,
         p,
         2 * jnp.pi * settings.transient_periods,
@@ -149,30 +208,13 @@ def _transient(z, p, settings: SolverSettings):
     return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
 
 
-def _samples_and_jacobian(z, p, settings, directions=()):
-    """One integration of a period from `z` with tangents along the four state directions
-    and the parameters `p[i]`, `i` in `directions`: `(xs, ys, ws, z_end)`, their Jacobians
-    with respect to `z` (that of `z_end` is the monodromy matrix) and with respect to those
-    parameters (last axis of size `len(directions)`)."""
-    index = jnp.asarray(directions, dtype=int)
-    fn = lambda z0, q: _period_samples(z0, p.at[index].set(q), settings)
-    size = 4 + len(directions)
-    basis = jnp.eye(size, dtype=z.dtype)
-    q = p[index]
-    primal, tangents = jax.vmap(
-        lambda t: jax.jvp(fn, (z, q), (t[:4], t[4:])), out_axes=(None, 0)
-    )(basis)
-    tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
-    return primal, tuple(t[..., :4] for t in tangents), tuple(t[..., 4:] for t in tangents)
-
-
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 
 
 def _limited(z, update):
     size = jnp.max(jnp.abs(update))
     limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
-    return z + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300))
+    return z + update * jnp.minimum(1.0, limit / jnp.maximum(size, jnp.finfo(z.dtype).tiny))
 
 
 def _chord(z0, p, settings: SolverSettings, monodromy):
@@ -219,48 +261,82 @@ def settled_state(z0, p, settings: SolverSettings, monodromy):
                   jax.lax.stop_gradient(monodromy))
 
 
-def _shoot(z0, p, settings: SolverSettings, directions=()):
-    """Newton shooting for z* = Phi_T(z*). Each iteration is one integration of a period
-    with four state tangents (and one per parameter in `directions`), giving the residual
-    Phi_T(z) - z, the monodromy matrix and the samples at once. Once the residual is
-    within `settings.periodicity_tol`, the last Newton update is applied to the state and,
-    to first order, to the samples (their error is then second order in the residual)."""
-    eye = jnp.eye(4, dtype=z0.dtype)
+class _Newton(eqx.Module):
+    z: Float[Array, " 4"]  # the iterate
+    update: Float[Array, " 4"]  # its Newton update (zero where it is not finite)
+    monodromy: Float[Array, "4 4"]
+    residual: Float[Array, ""]  # max |Phi_T(z) - z|, inf where not finite
 
-    def evaluate(z):
-        (xs, ys, ws, z_end), (jx, jy, jw, monodromy), (jx_p, jy_p, jw_p, jz_p) = (
-            _samples_and_jacobian(z, p, settings, directions)
-        )
-        residual = z_end - z
-        update = jnp.linalg.solve(eye - monodromy, residual)
-        finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(xs))
-        finite = finite & jnp.all(jnp.isfinite(ys))
-        return dict(
-            z=z, xs=xs, ys=ys, ws=ws, jx=jx, jy=jy, jw=jw, monodromy=monodromy,
-            jx_p=jx_p, jy_p=jy_p, jw_p=jw_p, jz_p=jz_p,
-            update=jnp.where(finite, update, 0.0),
-            residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
-        )
+
+def _newton(z, p, settings: SolverSettings) -> _Newton:
+    z_end, monodromy, _ = _period_tangents(z, p, settings)
+    residual = z_end - z
+    update = jnp.linalg.solve(jnp.eye(4, dtype=z.dtype) - monodromy, residual)
+    finite = jnp.all(jnp.isfinite(update))
+    return _Newton(
+        z=z,
+        update=jnp.where(finite, update, 0.0),
+        monodromy=monodromy,
+        residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
+    )
+
+
+class _Samples(eqx.Module):
+    """x, y, y' sampled over the period from the orbit's state, and the state after it."""
+
+    xs: Float[Array, " samples"]
+    ys: Float[Array, " samples"]
+    ws: Float[Array, " samples"]
+    z_end: Float[Array, " 4"]
+
+
+class _Periodic(eqx.Module):
+    """A periodic orbit as it passes through `_with_orbit_derivatives`: the state, its
+    samples, the monodromy matrix and, where the shooting formed them, the samples'
+    Jacobians with respect to the state (`state_jacobians`) and to `p[directions]`
+    (`parameter_jacobians`), each a `_Samples` of Jacobians."""
+
+    z: Float[Array, " 4"]
+    samples: _Samples
+    monodromy: Float[Array, "4 4"]
+    state_jacobians: _Samples | None
+    parameter_jacobians: _Samples | None
+
+
+def _sample_jacobians(z, p, settings: SolverSettings, directions):
+    primal, of_state, of_parameters = _samples_and_jacobian(z, p, settings, directions)
+    return _Samples(*primal), _Samples(*of_state), _Samples(*of_parameters)
+
+
+def _shoot(z0, p, settings: SolverSettings, directions=()):
+    """Newton shooting for z* = Phi_T(z*): each iteration integrates one period with the
+    variational equations (the residual Phi_T(z) - z and the monodromy matrix). Once the
+    residual is within `settings.periodicity_tol`, the last update is applied and the
+    orbit is integrated once more to sample it over a period (with the Jacobians with
+    respect to the state and to `p[directions]` when `directions` is not empty); the
+    residual of that integration is the one returned, which decides convergence."""
 
     def cond(carry):
-        state, steps = carry
-        return (state["residual"] > settings.periodicity_tol) & (steps < settings.max_newton_steps)
+        newton, steps = carry
+        return (newton.residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
 
     def body(carry):
-        state, steps = carry
-        return evaluate(_limited(state["z"], state["update"])), steps + 1
+        newton, steps = carry
+        return _newton(_limited(newton.z, newton.update), p, settings), steps + 1
 
-    state, steps = jax.lax.while_loop(cond, body, (evaluate(z0), jnp.array(1)))
-    dz = state["update"]
-    orbit = dict(
-        z=state["z"] + dz,
-        xs=state["xs"] + state["jx"] @ dz,
-        ys=state["ys"] + state["jy"] @ dz,
-        ws=state["ws"] + state["jw"] @ dz,
-        **{key: state[key] for key in ("jx", "jy", "jw", "monodromy", "jx_p", "jy_p", "jw_p",
-                                       "jz_p")},
-    )
-    return orbit, state["residual"], steps
+    newton, steps = jax.lax.while_loop(cond, body, (_newton(z0, p, settings), jnp.array(1)))
+    z = newton.z + newton.update
+    if directions:
+        samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
+        monodromy = of_state.z_end
+    else:
+        samples = _Samples(*_period_samples(z, p, settings))
+        of_state = of_parameters = None
+        monodromy = newton.monodromy
+    finite = jnp.all(jnp.isfinite(samples.z_end)) & jnp.all(jnp.isfinite(samples.xs))
+    finite = finite & jnp.all(jnp.isfinite(samples.ys))
+    residual = jnp.where(finite, jnp.max(jnp.abs(samples.z_end - z)), jnp.inf)
+    return _Periodic(z, samples, monodromy, of_state, of_parameters), residual, steps
 
 
 @ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
@@ -284,26 +360,22 @@ def _orbit_jvp(settings, directions, primals, tangents):
     if not active:
         return orbit, tangent_out
 
-    if set(active) <= set(directions):
+    if orbit.parameter_jacobians is not None and set(active) <= set(directions):
         columns = jnp.asarray([directions.index(i) for i in active], dtype=int)
-        jx_p, jy_p, jw_p, jz_p = (orbit[key][..., columns] for key in
-                                  ("jx_p", "jy_p", "jw_p", "jz_p"))
+        of_state = orbit.state_jacobians
+        of_parameters = jax.tree.map(lambda j: j[..., columns], orbit.parameter_jacobians)
     else:
-        def period(*values):
-            q = list(p)
-            for i, value in zip(active, values, strict=True):
-                q[i] = value
-            return _period_samples(orbit["z"], jnp.stack(q), settings)
-
-        jac = jax.jacfwd(period, argnums=tuple(range(len(active))))(*(p[i] for i in active))
-        jx_p, jy_p, jw_p, jz_p = (jnp.stack(j, axis=-1) for j in jac)
+        _, of_state, of_parameters = _sample_jacobians(
+            orbit.z, jnp.stack(p), settings, tuple(active)
+        )
     p_active_dot = jnp.stack([p_dot[i] for i in active])
-    eye = jnp.eye(4, dtype=orbit["z"].dtype)
-    z_dot = jnp.linalg.solve(eye - orbit["monodromy"], jz_p) @ p_active_dot
-    tangent_out["z"] = z_dot
-    tangent_out["xs"] = orbit["jx"] @ z_dot + jx_p @ p_active_dot
-    tangent_out["ys"] = orbit["jy"] @ z_dot + jy_p @ p_active_dot
-    tangent_out["ws"] = orbit["jw"] @ z_dot + jw_p @ p_active_dot
+    eye = jnp.eye(4, dtype=orbit.z.dtype)
+    z_dot = jnp.linalg.solve(eye - of_state.z_end, of_parameters.z_end) @ p_active_dot
+    samples_dot = jax.tree.map(
+        lambda j_state, j_parameters: j_state @ z_dot + j_parameters @ p_active_dot,
+        of_state, of_parameters,
+    )
+    tangent_out = eqx.tree_at(lambda o: (o.z, o.samples), tangent_out, (z_dot, samples_dot))
     return orbit, tangent_out
 
 
@@ -319,17 +391,17 @@ def solve_orbit(
 ) -> Orbit:
     """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`; or
     the sequence of its scalars, which lets derivatives skip the parameters that do not
-    depend on the differentiated inputs), by
-    shooting from `z_init` (scaled state; default the linear steady state followed by
-    `settings.transient_periods` periods). Differentiable with respect to `p` (implicit
-    differentiation), not with respect to `z_init`.
+    depend on the differentiated inputs), by shooting from `z_init` (scaled state;
+    default the linear steady state followed by `settings.transient_periods` periods).
+    Differentiable with respect to `p` (implicit differentiation), not with respect to
+    `z_init`.
 
     With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
     at slightly different parameters), chord iterations without tangents bring `z_init`
-    to the orbit before the Newton iteration that forms the Jacobians. Derivatives with
-    respect to `p[i]`, `i` in `directions`, reuse the tangents of that iteration; the
-    state's are returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at
-    nearby parameters."""
+    to the orbit before Newton's. Derivatives with respect to `p[i]`, `i` in
+    `directions`, reuse the Jacobians formed with the orbit's samples; the state's are
+    returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at nearby
+    parameters."""
     scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
     p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
@@ -339,15 +411,20 @@ def solve_orbit(
         z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
     orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
     orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
-    converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit["xs"]))
-    monodromy = jax.lax.stop_gradient(orbit["monodromy"])
+    converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit.samples.xs))
+    monodromy = jax.lax.stop_gradient(orbit.monodromy)
     eye = jnp.eye(4, dtype=monodromy.dtype)
-    state_derivatives = jnp.linalg.solve(eye - monodromy, jax.lax.stop_gradient(orbit["jz_p"]))
+    if directions:
+        state_derivatives = jnp.linalg.solve(
+            eye - monodromy, jax.lax.stop_gradient(orbit.parameter_jacobians.z_end)
+        )
+    else:
+        state_derivatives = jnp.zeros((4, 0), monodromy.dtype)
     return Orbit(
-        state=orbit["z"],
-        x_samples=orbit["xs"],
-        y_samples=orbit["ys"],
-        y_velocity_samples=orbit["ws"],
+        state=orbit.z,
+        x_samples=orbit.samples.xs,
+        y_samples=orbit.samples.ys,
+        y_velocity_samples=orbit.samples.ws,
         monodromy=monodromy,
         state_derivatives=state_derivatives,
         floquet_multipliers=jnp.linalg.eigvals(monodromy),

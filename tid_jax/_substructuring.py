@@ -210,10 +210,10 @@ def _harmonic_prediction(kinematics, omega, horizon):
     )
 
 
-def _inerter_force(system, kinematics):
+def _inerter_force(system, point, kinematics):
     """f_s = b y*'' + ff sgn(y*') of the rigidly driven inerter, N."""
     return system.inertance * kinematics[2] + system.friction_force * smooth_sign(
-        kinematics[1], system.friction_width
+        kinematics[1], system.width_at(point.amplitude, point.omega)
     )
 
 
@@ -235,7 +235,9 @@ def _physical_field(system, point, s, state, actuator):
     u, du = state
     position = actuator[0] + actuator[1] * s + 0.5 * actuator[2] * s**2
     spring = point.parasitic_stiffness * (position - u)
-    friction = system.friction_force * smooth_sign(du, system.friction_width)
+    friction = system.friction_force * smooth_sign(
+        du, system.width_at(point.amplitude, point.omega)
+    )
     return jnp.stack([du, (spring - friction) / system.inertance])
 
 
@@ -284,7 +286,7 @@ def _simulate_point(plan: _Plan, controller: _Controller, system: TIDSystem, poi
     past0 = _linear_kinematics(system, point, past_times)[2:].T  # samples n-1, n-2, ...
     delay = point.delay_samples * dt
     actuator0 = _linear_kinematics(system, point, -dt - delay + horizon)[2:]
-    held0 = _fed_back_force(plan, controller, point, start[2:], _inerter_force(system, start[2:]))
+    held0 = _fed_back_force(plan, controller, point, start[2:], _inerter_force(system, point, start[2:]))
     physical0 = start[2:4]
 
     def step(n, carry):
@@ -309,7 +311,7 @@ def _simulate_point(plan: _Plan, controller: _Controller, system: TIDSystem, poi
         if plan.compliant:
             measured = point.parasitic_stiffness * (actuator[0] - physical[0])
         else:
-            measured = _inerter_force(system, actuator)
+            measured = _inerter_force(system, point, actuator)
         force = _fed_back_force(plan, controller, point, actuator, measured)
 
         def field(s, state):
@@ -456,6 +458,8 @@ def _check_system(system) -> None:
         raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
     for name in FIELD_NAMES:
         value = getattr(system, name)
+        if value is None and name == "friction_width":
+            continue
         if isinstance(value, jax.core.Tracer) or np.ndim(value) != 0:
             raise ValueError(f"system.{name} must be a concrete scalar, got {value!r}")
 

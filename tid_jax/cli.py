@@ -20,6 +20,7 @@ import jax
 import numpy as np
 
 from . import __version__, plot
+from ._cache import CACHE_ENVIRONMENT_VARIABLE, enable_compilation_cache
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
@@ -28,7 +29,6 @@ from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_perform
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._system import (
-    DEFAULT_FRICTION_WIDTH,
     PAPER_AMPLITUDES,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -53,7 +53,8 @@ PHYSICAL_INPUTS = (
     ("host_damping", "N s/m", "host damping C (instead of host_damping_ratio)", "non-negative"),
     ("inertance", "kg", "inertance b of the inerter", "positive"),
     ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
-    ("friction_width", "m/s", "velocity scale of the smoothed friction sign", "positive"),
+    ("friction_width", "m/s", "velocity scale of the smoothed friction sign (default: "
+     "0.01 omega A/K at each forcing point)", "positive"),
     ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
     ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
@@ -69,7 +70,6 @@ DEFAULTS = {
     "host_damping_ratio": PAPER_HOST_DAMPING_RATIO,
     "inertance": PAPER_INERTANCE,
     "friction_force": PAPER_FRICTION_FORCE,
-    "friction_width": DEFAULT_FRICTION_WIDTH,
     "stroke_limit": PAPER_STROKE,
     "amplitudes": list(PAPER_AMPLITUDES),
     "n_frequencies": DEFAULT_FREQUENCIES,
@@ -158,6 +158,20 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         help="print the machine-readable result (the saved JSON) on stdout instead of the table",
     )
     group.add_argument("--quiet", action="store_true", help="no progress messages")
+    cache = parser.add_argument_group("compilation cache")
+    cache.add_argument(
+        "--cache-dir",
+        dest="cache_dir",
+        metavar="DIR",
+        help=f"folder of the compiled-program cache that makes later runs start fast "
+        f"(default: ${CACHE_ENVIRONMENT_VARIABLE}, else ~/.cache/tid_jax)",
+    )
+    cache.add_argument(
+        "--no-cache",
+        dest="no_cache",
+        action="store_true",
+        help=f"compile afresh and save nothing (also: {CACHE_ENVIRONMENT_VARIABLE}=off)",
+    )
 
 
 # --- from flags and TOML to library objects ---------------------------------------------
@@ -258,7 +272,7 @@ def _system(inputs: dict) -> TIDSystem:
         friction_force=inputs["friction_force"],
         tid_stiffness=inputs.get("tid_stiffness", k_dh),
         tid_damping=inputs.get("tid_damping", c_dh),
-        friction_width=inputs["friction_width"],
+        friction_width=inputs.get("friction_width"),
     )
 
 
@@ -1390,6 +1404,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return 0
+        if not args.no_cache:
+            enable_compilation_cache(args.cache_dir)
         return _COMMANDS[args.command][1](args)
     except (CLIError, ValueError, OSError) as error:
         print(f"{PROG}: error: {_one_line(error)}", file=sys.stderr)
