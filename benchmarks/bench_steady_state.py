@@ -1,27 +1,29 @@
-"""Steady-state throughput of tid_jax against the scipy LSODA baseline, side by side.
+"""Steady-state speed and reach of tid_jax against the baselines a user would write, side by
+side in one run, every method's peaks judged against the same long-run reference.
 
-Run: `python benchmarks/bench_steady_state.py [--readme benchmarks/README.md]`.
-Prints a markdown table (and, with `--readme`, replaces the table in that file):
+Run: `python benchmarks/bench_steady_state.py [--readme benchmarks/README.md]`. Prints
+markdown tables (and, with `--readme`, replaces the tables in that file):
 
-- baseline: `scipy.integrate.solve_ivp(method="LSODA")` on the same smoothed equations
-  (eq. (12), tanh friction), from rest, one forcing period per call, until the peak |x| of
-  a period changes by less than 1e-6 (relative) from the previous one;
-- tid_jax (`frequency_response`, shooting, batched) on the same points; the peaks must
-  agree within 0.1 %;
-- the 61-frequency x 12-amplitude surface, compile time apart from run time;
-- the 12-amplitude paper retune in a child process with a time limit: cold (import and
-  compile included), then a second, warm call, both at the default tolerance, then warm
-  at tolerance 1e-5 for comparison; and `tid-jax retune` on the paper's
-  defaults, cold and end to end (import, compile, solve, plots, files);
-- peak memory (ru_maxrss) and time per orbit against batch size.
+- the paper's system (friction width 1e-4 m/s) on its 61-frequency x 12-amplitude
+  surface; the reference is a compiled Dormand-Prince transient over 300 periods at rtol
+  1e-11 (`baselines.reference_peaks`);
+- scipy LSODA as one `solve_ivp` call per point over the smallest number of periods that
+  matches the reference within 1e-4 on 16 points spread over the surface (no restarts,
+  samples only in the last period); a numba-compiled serial Dormand-Prince over the same
+  periods; a naive vmapped diffrax transient over the same periods (all 732 points); and
+  `tid_jax.frequency_response` (all 732 points in one call);
+- time per orbit against batch size;
+- the 12-amplitude paper retune in a child process (cold, then warm) and `tid-jax retune`
+  end to end, cold and again with the compilation cache filled by the first run;
+- reach: random structures (`tests/reference/family.py`) at a friction width of 1e-4 m/s,
+  each against the independent transient reference of `tests/reference/transient.py`.
 """
 
 import argparse
 import datetime
-import inspect
 import json
+import os
 import platform
-import resource
 import subprocess
 import sys
 import tempfile
@@ -32,52 +34,20 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
-from scipy.integrate import solve_ivp  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
+from benchmarks import baselines  # noqa: E402
 from tid_jax._retune import DEFAULT_FREQUENCIES  # noqa: E402
 
-DEFAULT_TOL = inspect.signature(tj.retune).parameters["tol"].default
-TIGHT_TOL = 1e-5
-
-RETUNE_TIME_LIMIT_S = 600
-BATCH_SIZES = (1, 10, 100, 1000, 10000)
-
-
-def peak_memory_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
-def lsoda_peak(system, omega, amplitude, *, rtol=1e-5, max_periods=300, samples=2000):
-    """Peak |x| (m) of the steady state at one point, by time integration from rest."""
-    mass, stiffness, damping = system.host_mass, system.host_stiffness, system.host_damping
-    inertance, friction, width = system.inertance, system.friction_force, system.friction_width
-    k, c = system.tid_stiffness, system.tid_damping
-
-    def rhs(t, z):
-        x, v, y, w = z
-        spring = k * (x - y) + c * (v - w)
-        return [
-            v,
-            (amplitude * np.sin(omega * t) - damping * v - stiffness * x - spring) / mass,
-            w,
-            (spring - friction * np.tanh(w / width)) / inertance,
-        ]
-
-    period = 2 * np.pi / omega
-    static = amplitude / stiffness
-    atol = rtol * 0.1 * static * np.array([1.0, omega, 1.0, omega])
-    z, previous = np.zeros(4), np.inf
-    for n in range(max_periods):
-        t0 = n * period
-        sol = solve_ivp(rhs, (t0, t0 + period), z, method="LSODA", rtol=rtol, atol=atol,
-                        dense_output=True)
-        peak = np.max(np.abs(sol.sol(np.linspace(t0, t0 + period, samples))[0]))
-        z = sol.y[:, -1]
-        if abs(peak - previous) < 1e-6 * peak:
-            return peak, n + 1
-        previous = peak
-    return peak, max_periods
+WIDTH = 1e-4  # m/s, the friction width of every method here
+MATCH = 1e-4  # peaks within this of the reference count as matched
+REACH_LIMIT = 1e-3  # a converged point further than this from the reference is wrong
+TIME_LIMIT_S = 900
+BATCH_SIZES = (1, 10, 100, 1000)
+SYSTEM_KEYS = ("host_mass", "host_stiffness", "host_damping", "inertance", "friction_force",
+               "tid_stiffness", "tid_damping")
 
 
 def timed(function):
@@ -96,60 +66,51 @@ def warm_time(function, budget_s=2.0):
     return (time.perf_counter() - start) / runs
 
 
-def run_retune_child(amplitudes, n_frequencies, tight_tol, limit_s):
-    """The 12-amplitude retune in a child process (so that it can be stopped at `limit_s`):
-    cold at the default tolerance (import and compile included), then warm, then warm at
-    `tight_tol` for comparison. Returns the wall times of the cold run's stages and of each
-    run, the largest relative difference of the peaks and designs between the two
-    tolerances, and the child's wall time; None if stopped."""
+def max_error(values, reference):
+    values, reference = np.asarray(values, float), np.asarray(reference, float)
+    error = np.abs(values - reference) / np.abs(reference)
+    return float(np.max(np.where(np.isfinite(error), error, np.inf)))
+
+
+def run_retune_child(limit_s):
+    """The 12-amplitude paper retune on 61 frequencies in a child process: cold (import
+    and compilation included, no compilation cache), then warm. Returns the wall times and
+    the number of amplitudes with status ok, or None if stopped at `limit_s`."""
     code = f"""
 import json, time
 start = time.perf_counter()
 import jax
 jax.config.update("jax_enable_x64", True)
-import numpy as np
 import tid_jax as tj
 system = tj.paper_system()
-stages = []
-say = lambda message: stages.append((round(time.perf_counter() - start, 2), message))
-run = lambda progress, **kwargs: jax.block_until_ready(tj.retune(
-    system, {list(amplitudes)!r}, omegas=tj.default_omegas(system, {n_frequencies}),
-    progress=progress, **kwargs))
-result = run(say)
+omegas = tj.default_omegas(system, {DEFAULT_FREQUENCIES})
+run = lambda: jax.block_until_ready(tj.retune(system, tj.PAPER_AMPLITUDES, omegas=omegas))
+result = run()
 cold = time.perf_counter() - start
 again = time.perf_counter()
-run(None)
-warm = time.perf_counter() - again
-again = time.perf_counter()
-tight = run(None, tol={tight_tol!r})
-warm_tight = time.perf_counter() - again
-difference = lambda name: float(np.max(np.abs(np.asarray(getattr(result, name))
-                                              / np.asarray(getattr(tight, name)) - 1)))
-print(json.dumps(dict(total=cold, warm=warm, warm_tight=warm_tight, stages=stages,
-                      converged=int(result.converged.sum()),
-                      converged_tight=int(tight.converged.sum()),
-                      peak_difference=difference("x_peak"),
-                      stiffness_difference=difference("tid_stiffness"))))
+run()
+print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
+                      ok=int(result.converged.sum()))))
 """
-    start = time.perf_counter()
     try:
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                               timeout=limit_s)
     except subprocess.TimeoutExpired:
-        return None, time.perf_counter() - start
+        return None
     if done.returncode != 0:
         raise RuntimeError(done.stderr[-3000:])
-    return json.loads(done.stdout.strip().splitlines()[-1]), time.perf_counter() - start
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run_cli_retune(limit_s):
-    """Wall time of `tid-jax retune` on the paper's defaults, cold, in a child process
-    writing to a temporary folder; None if stopped at `limit_s`."""
+def run_cli_retune(cache_dir, limit_s):
+    """Wall time of `tid-jax retune` on the paper's defaults, end to end, in a child
+    process, with the compilation cache in `cache_dir`; None if stopped at `limit_s`."""
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         try:
             done = subprocess.run(
-                [sys.executable, "-m", "tid_jax.cli", "retune", "--out", folder, "--quiet"],
+                [sys.executable, "-m", "tid_jax.cli", "retune", "--out", folder, "--quiet",
+                 "--cache-dir", cache_dir],
                 capture_output=True, text=True, timeout=limit_s,
             )
         except subprocess.TimeoutExpired:
@@ -159,123 +120,151 @@ def run_cli_retune(limit_s):
         return time.perf_counter() - start
 
 
+def reach(n, seed):
+    """Random structures at the friction width `WIDTH`: tid_jax against the transient
+    reference. Returns counts and the largest error among converged points."""
+    from tests.reference.family import family
+    from tests.reference.transient import transient_peaks
+
+    cases = family(n, seed)
+    converged, wrong, compared, worst, seconds = 0, 0, 0, 0.0, 0.0
+    for i, case in enumerate(cases):
+        system = tj.TIDSystem(**{key: case[key] for key in SYSTEM_KEYS}, friction_width=WIDTH)
+        response, elapsed = timed(
+            lambda system=system, case=case: tj.frequency_response(
+                system, case["omega"], case["amplitude"]))
+        seconds += elapsed
+        if not bool(response.converged):
+            print(f"reach: case {i} did not converge", flush=True)
+            continue
+        converged += 1
+        reference = transient_peaks(case, WIDTH)
+        if not reference["converged"]:
+            print(f"reach: the reference did not converge for case {i}", flush=True)
+            continue
+        compared += 1
+        error = abs(float(response.x_max) - reference["x_max"]) / reference["x_max"]
+        worst = max(worst, error)
+        wrong += error > REACH_LIMIT
+    return dict(n=n, converged=converged, compared=compared, wrong=wrong, worst=worst,
+                seconds=seconds)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--readme", help="markdown file whose benchmark table is replaced")
+    parser.add_argument("--readme", help="markdown file whose benchmark tables are replaced")
     parser.add_argument("--skip-retune", action="store_true")
+    parser.add_argument("--reach", type=int, default=200, help="random structures (0: none)")
     args = parser.parse_args()
 
-    system = tj.paper_system()
+    system = tj.paper_system(friction_width=WIDTH)
+    plain = dict(system.to_dict())
     surface_omegas = np.asarray(tj.default_omegas(system, 61))
-    surface_amplitudes = np.asarray(tj.PAPER_AMPLITUDES)
+    amplitudes = np.asarray(tj.PAPER_AMPLITUDES)
+    grid_omegas, grid_amplitudes = (a.ravel() for a in np.meshgrid(surface_omegas, amplitudes))
+    orbits = grid_omegas.size
+    spread = np.ravel_multi_index(np.meshgrid([0, 4, 8, 11], [6, 24, 36, 54], indexing="ij"),
+                                  (amplitudes.size, surface_omegas.size)).ravel()
     lines = []
 
     def say(line=""):
         print(line, flush=True)
         lines.append(line)
 
-    # 16 points spread over the surface: 4 amplitudes x 4 frequencies.
-    omegas = surface_omegas[[6, 24, 36, 54]]
-    amplitudes = surface_amplitudes[[0, 4, 8, 11]]
+    baselines.warmup()
+    (reference_x, _), reference_s = timed(
+        lambda: baselines.reference_peaks(plain, grid_omegas, grid_amplitudes, periods=300))
+    print(f"reference: {reference_s:.0f} s", flush=True)
 
-    start = time.perf_counter()
-    baseline = np.empty((amplitudes.size, omegas.size))
-    periods = np.empty_like(baseline, dtype=int)
-    for i, amplitude in enumerate(amplitudes):
-        for j, omega in enumerate(omegas):
-            baseline[i, j], periods[i, j] = lsoda_peak(system, omega, amplitude)
-    scipy_per_orbit = (time.perf_counter() - start) / baseline.size
+    chosen = baselines.choose_lsoda_periods(plain, grid_omegas[spread],
+                                            grid_amplitudes[spread], reference_x[spread],
+                                            tol=MATCH)
+    periods = chosen["periods"]
+    lsoda_per_orbit = chosen["seconds"] / spread.size
+    lsoda_error = chosen["max_rel_err"]
 
-    points = lambda: tj.frequency_response(system, omegas, amplitudes).x_max
-    x_points, points_cold = timed(points)
-    points_warm = warm_time(points)
-    agreement = np.max(np.abs(np.asarray(x_points) - baseline) / baseline)
+    (numba_x, _), numba_s = timed(lambda: baselines.numba_dopri5_peaks(
+        plain, grid_omegas[spread], grid_amplitudes[spread], periods=periods))
+    numba_error = max_error(numba_x, reference_x[spread])
 
-    surface = lambda: tj.frequency_response(system, surface_omegas, surface_amplitudes)
+    naive = lambda: baselines.naive_diffrax_peaks(plain, grid_omegas, grid_amplitudes,
+                                                  periods=periods)
+    (naive_x, _), naive_cold = timed(naive)
+    (naive_x, _), naive_s = timed(naive)
+    naive_error = max_error(naive_x, reference_x)
+
+    surface = lambda: tj.frequency_response(system, surface_omegas, amplitudes)
     response, surface_cold = timed(surface)
     surface_warm = warm_time(surface, budget_s=0)
-    surface_orbits = surface_omegas.size * surface_amplitudes.size
-    surface_converged = int(np.sum(np.asarray(response.converged)))
-    surface_per_orbit = surface_warm / surface_orbits
+    tid_error = max_error(np.asarray(response.x_max).ravel(), reference_x)
+    tid_converged = int(np.sum(np.asarray(response.converged)))
+    tid_per_orbit = surface_warm / orbits
 
     scaling = []
     band = (surface_omegas[0], surface_omegas[-1])
     for size in BATCH_SIZES:
-        n_amp = {1: 1, 10: 1, 100: 10, 1000: 10, 10000: 100}[size]
-        grid_omegas = np.linspace(*band, size // n_amp)
-        grid_amplitudes = np.geomspace(surface_amplitudes[0], surface_amplitudes[-1], n_amp)
-        call = lambda: tj.frequency_response(system, grid_omegas, grid_amplitudes).x_max
+        n_amp = {1: 1, 10: 1, 100: 10, 1000: 10}[size]
+        omegas = np.linspace(*band, size // n_amp)
+        amps = np.geomspace(amplitudes[0], amplitudes[-1], n_amp)
+        call = lambda omegas=omegas, amps=amps: tj.frequency_response(system, omegas, amps).x_max
         _, cold = timed(call)
-        warm = warm_time(call, budget_s=2.0 if size < 1000 else 0)
-        scaling.append((size, cold, warm))
-        print(f"batch {size}: cold {cold:.2f} s, warm {warm:.3f} s", flush=True)
-    memory_after_batches = peak_memory_mb()
+        scaling.append((size, cold, warm_time(call, budget_s=2.0 if size < 1000 else 0)))
 
-    retune_amplitudes = tj.PAPER_AMPLITUDES
-    if args.skip_retune:
-        retune, retune_wall, cli_wall = None, float("nan"), None
-    else:
-        retune, retune_wall = run_retune_child(
-            retune_amplitudes, DEFAULT_FREQUENCIES, TIGHT_TOL, RETUNE_TIME_LIMIT_S
-        )
-        cli_wall = run_cli_retune(RETUNE_TIME_LIMIT_S)
-
-    ratio_points = scipy_per_orbit / (points_warm / baseline.size)
-    ratio_surface = scipy_per_orbit / surface_per_orbit
-    say(f"Date: {datetime.date.today().isoformat()}; machine: {platform.processor() or 'x86_64'}"
-        f" CPU, {len(jax.devices())} JAX device(s), 2 cores; "
-        f"JAX {jax.__version__}, float64.")
-    say()
-    say("| quantity | scipy LSODA | tid_jax | ratio |")
-    say("|---|---|---|---|")
-    say(f"| per orbit, 16 points spread over the surface (tid_jax as one batch of 16) | "
-        f"{scipy_per_orbit * 1e3:.1f} ms | {points_warm / baseline.size * 1e3:.2f} ms | "
-        f"{ratio_points:.0f}x |")
-    say(f"| per orbit, throughput on the 61 x 12 surface (batch of {surface_orbits}) | "
-        f"{scipy_per_orbit * 1e3:.1f} ms | {surface_per_orbit * 1e3:.2f} ms | "
-        f"{ratio_surface:.0f}x |")
-    say(f"| matched accuracy: max relative difference of peak x on the 16 points | - | "
-        f"{agreement:.1e} | (limit 1e-3) |")
-    say(f"| LSODA periods to steady state (median / max) | {int(np.median(periods))} / "
-        f"{int(periods.max())} | shooting, 2 transient periods | |")
-    say(f"| 61 x 12 surface: run (warm) | {surface_orbits * scipy_per_orbit:.0f} s "
-        f"(estimated) | {surface_warm:.2f} s ({surface_converged}/{surface_orbits} converged) | "
-        f"{surface_orbits * scipy_per_orbit / surface_warm:.0f}x |")
-    say(f"| 61 x 12 surface: compile (first call minus warm call) | - | "
-        f"{surface_cold - surface_warm:.2f} s | |")
-    if retune is None and not args.skip_retune:
-        retune_text = f"not finished after {retune_wall:.0f} s (stopped)"
-    elif retune is None:
-        retune_text = "not run"
-    else:
-        first = next((t for t, message in retune["stages"] if "stage 1" in message),
-                     float("nan"))
-        retune_text = (f"{retune['total']:.0f} s cold incl. compile and import (first stage "
-                       f"done at {first:.0f} s); {retune['warm']:.1f} s warm (second call); "
-                       f"{retune['converged']}/{len(retune_amplitudes)} status ok")
-    say(f"| paper retune, {len(retune_amplitudes)} amplitudes, 61 frequencies, default tol "
-        f"{DEFAULT_TOL:g} | - | {retune_text} | |")
-    if retune is not None:
-        say(f"| the same at tol {TIGHT_TOL:g} (warm) | - | {retune['warm_tight']:.1f} s; "
-            f"{retune['converged_tight']}/{len(retune_amplitudes)} status ok; peaks within "
-            f"{retune['peak_difference']:.1e} and k within {retune['stiffness_difference']:.1e} "
-            f"of the default's | |")
+    retune = cli_cold = cli_warm = None
     if not args.skip_retune:
-        cli_text = (f"{cli_wall:.0f} s" if cli_wall is not None
-                    else f"not finished after {RETUNE_TIME_LIMIT_S} s (stopped)")
-        say(f"| `tid-jax retune` (paper defaults), cold, end to end incl. import, plots and "
-            f"files | - | {cli_text} | |")
-    say(f"| peak memory (ru_maxrss, benchmark process, after all batches) | - | "
-        f"{memory_after_batches:.0f} MB | |")
+        retune = run_retune_child(TIME_LIMIT_S)
+        with tempfile.TemporaryDirectory() as cache:
+            cli_cold = run_cli_retune(cache, TIME_LIMIT_S)
+            cli_warm = run_cli_retune(cache, TIME_LIMIT_S)
+    reached = reach(args.reach, 0) if args.reach else None
+
+    say(f"Date: {datetime.date.today().isoformat()}; machine: {platform.processor() or 'x86_64'}"
+        f" CPU, {os.cpu_count()} cores, {len(jax.devices())} JAX device(s); JAX "
+        f"{jax.__version__}, float64. Paper system, friction width {WIDTH:g} m/s, "
+        f"{amplitudes.size} amplitudes x {surface_omegas.size} frequencies; reference: 300 "
+        f"periods at rtol 1e-11 ({reference_s:.0f} s).")
+    say()
+    say("| method | periods | points | time per orbit | vs LSODA | max peak error |")
+    say("|---|---|---|---|---|---|")
+    say(f"| scipy LSODA, rtol 1e-6, one `solve_ivp` call per point | {periods} | "
+        f"{spread.size} | {lsoda_per_orbit * 1e3:.1f} ms | 1x | {lsoda_error:.1e} |")
+    say(f"| numba-compiled serial Dormand-Prince, rtol 1e-8 | {periods} | {spread.size} | "
+        f"{numba_s / spread.size * 1e3:.2f} ms | {lsoda_per_orbit / (numba_s / spread.size):.0f}x"
+        f" | {numba_error:.1e} |")
+    say(f"| naive vmapped diffrax Tsit5, rtol 1e-8 | {periods} | {orbits} | "
+        f"{naive_s / orbits * 1e3:.2f} ms | {lsoda_per_orbit / (naive_s / orbits):.0f}x | "
+        f"{naive_error:.1e} |")
+    say(f"| tid_jax `frequency_response` (shooting; {tid_converged}/{orbits} converged) | - | "
+        f"{orbits} | {tid_per_orbit * 1e3:.2f} ms | {lsoda_per_orbit / tid_per_orbit:.0f}x | "
+        f"{tid_error:.1e} |")
+    say()
+    say(f"Compilation (first call minus warm call): tid_jax {surface_cold - surface_warm:.1f} s,"
+        f" naive diffrax {naive_cold - naive_s:.1f} s. LSODA tried "
+        + ", ".join(f"{n} periods: {e:.1e}" for n, e, _ in chosen["tried"]) + ".")
     say()
     say("| batch size (orbits) | first call (compile + run) | warm call | warm time per orbit |")
     say("|---|---|---|---|")
     for size, cold, warm in scaling:
         say(f"| {size} | {cold:.2f} s | {warm:.3f} s | {warm / size * 1e3:.2f} ms |")
-    if retune is not None:
+    if not args.skip_retune:
         say()
-        say("Retune stages (seconds since the child process started): " + "; ".join(
-            f"{t:.0f} s: {message}" for t, message in retune["stages"]))
+        say("| run | wall time |")
+        say("|---|---|")
+        retune_text = ("stopped" if retune is None else
+                       f"{retune['cold']:.0f} s cold (import and compilation included), "
+                       f"{retune['warm']:.1f} s warm; {retune['ok']}/12 status ok")
+        say(f"| paper retune, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies | {retune_text} |")
+        for name, wall in (("first run, empty compilation cache", cli_cold),
+                           ("second run, compilation cache filled", cli_warm)):
+            text = "stopped" if wall is None else f"{wall:.0f} s"
+            say(f"| `tid-jax retune` end to end (paper defaults), {name} | {text} |")
+    if reached is not None:
+        say()
+        say(f"Reach: {reached['converged']}/{reached['n']} random structures converged "
+            f"(friction width {WIDTH:g} m/s; tid_jax {reached['seconds']:.0f} s in all, one call "
+            f"each); {reached['wrong']} of the {reached['compared']} compared with the "
+            f"transient reference are more than {REACH_LIMIT:g} off (largest error "
+            f"{reached['worst']:.1e}).")
 
     if args.readme:
         with open(args.readme) as f:

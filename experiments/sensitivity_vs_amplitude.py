@@ -21,6 +21,8 @@ def main() -> None:
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
     import tid_jax as tj
+
+    tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
     from tid_jax._io import write_csv
 

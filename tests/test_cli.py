@@ -429,3 +429,39 @@ def test_readme_example_uses_the_public_api():
     assert len(example.strip().splitlines()) <= 10
     names = {name for name in code.co_names if hasattr(tj, name)}
     assert {"paper_system", "retune", "frequency_response", "default_omegas"} <= names
+
+
+def test_compilation_cache_is_filled_and_can_be_turned_off(tmp_path):
+    # The console script saves its compiled programs in --cache-dir (or $TID_JAX_CACHE_DIR),
+    # so that a second run compiles nothing; --no-cache saves none.
+    script = console_script()
+    argv = [script, "frf", "--amplitudes", "200", "--band-hz", "3", "5", "--n-frequencies",
+            "5", "--quiet"]
+    cache = tmp_path / "cache"
+    done = subprocess.run(argv + ["--out", tmp_path / "a", "--cache-dir", cache],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert any(cache.iterdir())
+    moved = tmp_path / "moved"
+    environment = dict(os.environ, TID_JAX_CACHE_DIR=str(moved))
+    done = subprocess.run(argv + ["--out", tmp_path / "b"], capture_output=True, text=True,
+                          timeout=300, env=environment)
+    assert done.returncode == 0, done.stderr
+    assert any(moved.iterdir())
+    off = tmp_path / "off"
+    environment = dict(os.environ, TID_JAX_CACHE_DIR=str(off))
+    done = subprocess.run(argv + ["--out", tmp_path / "c", "--no-cache"], capture_output=True,
+                          text=True, timeout=300, env=environment)
+    assert done.returncode == 0, done.stderr
+    assert not off.exists()
+
+
+@pytest.mark.parametrize("value", ["off", "0", ""])
+def test_cache_environment_variable_turns_the_cache_off(monkeypatch, value):
+    monkeypatch.setenv("TID_JAX_CACHE_DIR", value)
+    assert tj.default_cache_dir() is None
+    monkeypatch.setenv("TID_JAX_CACHE_DIR", "~/elsewhere")
+    assert tj.default_cache_dir() == pathlib.Path.home() / "elsewhere"
+    monkeypatch.delenv("TID_JAX_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/somewhere")
+    assert tj.default_cache_dir() == pathlib.Path("/somewhere/tid_jax")

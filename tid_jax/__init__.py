@@ -1,5 +1,9 @@
 """Design of tuned inerter dampers (TIDs) whose inerter has dry friction."""
 
+from ._cache import (
+    default_cache_dir as default_cache_dir,
+    enable_compilation_cache as enable_compilation_cache,
+)
 from ._linear import (
     LinearReceptance as LinearReceptance,
     den_hartog as den_hartog,

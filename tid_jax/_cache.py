@@ -8,6 +8,7 @@ machine (and the same JAX version) instead of being compiled again.
 import os
 from pathlib import Path
 
+import equinox._errors
 import jax
 
 CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
@@ -37,6 +38,11 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
+    # JAX does not save programs holding host callbacks, and equinox's run-time checks
+    # (diffrax's of its inputs, never failing here: every solve reports its own status)
+    # are host callbacks unless they are set to return NaN, as `EQX_ON_ERROR=nan` does
+    # when set before equinox is imported.
+    equinox._errors.EQX_ON_ERROR = "nan"
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)

@@ -49,7 +49,7 @@ def parameter_vector(system, amplitude, omega) -> Float[Array, " 10"]:
 # the linear part.
 
 
-def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 10"]) -> tuple[Float[Array, "..."], ...]:
+def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 10"]) -> tuple[Array, ...]:
     """The rows of the linear part `L z` of the scaled vector field, for a state `z` or
     for columns of states (`z[i]` arrays of one shape), written out elementwise."""
     mass, stiffness, damping, inertance, _, k, c, _, _, omega = p

@@ -5,8 +5,16 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._dynamics import parameters
-from ._sharding import map_batch, sharded_batch
-from ._steady_state import SolverSettings, refined_peak, solve_orbit
+from ._sharding import map_batch, map_parts, sharded_batch
+from ._steady_state import (
+    SolverSettings,
+    _transient,
+    linear_initial_state,
+    refined_peak,
+    shoot_queue,
+    solve_orbit,
+    verified_samples,
+)
 from ._system import TIDSystem
 
 
@@ -88,28 +96,6 @@ def _finite_or_inf(value):
     return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
 
-def _point_summary(system, omega, amplitude, settings, z_init=None, monodromy_init=None):
-    orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z_init,
-                                         monodromy_init)
-    scale = amplitude / system.host_stiffness
-    state = orbit.state * jnp.stack([scale, omega * scale, scale, omega * scale])
-    velocity = orbit.y_velocity_samples * omega * scale
-    stuck = jnp.abs(velocity) < 2 * system.width_at(amplitude, omega)
-    # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
-    return dict(
-        x_max=jnp.where(orbit.converged, x_max, jnp.nan),
-        y_max=jnp.where(orbit.converged, y_max, jnp.nan),
-        converged=orbit.converged,
-        stable=jnp.max(jnp.abs(orbit.floquet_multipliers)) < 1,
-        state=state,
-        residual=orbit.residual,
-        newton_steps=orbit.newton_steps,
-        floquet_multipliers=orbit.floquet_multipliers,
-        monodromy=orbit.monodromy,
-        stick_fraction=jnp.mean(stuck.astype(x_max.dtype)),
-    )
-
-
 def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
     """`system` with the TID's stiffness k and damping c replaced (traceable, unchecked)."""
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (stiffness, damping))
@@ -123,47 +109,82 @@ CHUNK = 64
 
 @eqx.filter_jit
 def _points(system, omegas, amplitudes, settings, tunings=None, warm=None):
-    def one(batch):
-        omega, amplitude, tuning, orbit = batch
-        tuned = system if tuning is None else with_tuning(system, *tuning)
-        return _point_summary(tuned, omega, amplitude, settings, *(orbit or ()))
+    """Steady states at the points (`omegas[i]`, `amplitudes[i]`): Newton shooting on a
+    work queue (`shoot_queue`, `CHUNK` lanes per device), from the linear steady state
+    after `settings.transient_periods` periods or from the scaled states `warm`; then one
+    integration per orbit samples it and verifies its periodicity."""
 
-    return map_batch(one, (omegas, amplitudes, tunings, warm), CHUNK)
+    def parameter_vector(omega, amplitude, tuning):
+        tuned = system if tuning is None else with_tuning(system, *tuning)
+        return jnp.stack(parameters(tuned, amplitude, omega))
+
+    p = jax.vmap(parameter_vector)(omegas, amplitudes, tunings)
+    if warm is None:
+        z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK)
+    else:
+        z0 = warm
+    shots = map_parts(lambda z, q: shoot_queue(z, q, settings, CHUNK), z0, p)
+    samples, residual = map_batch(
+        lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK
+    )
+    static = amplitudes / system.host_stiffness
+    units = jnp.stack([static, omegas * static] * 2, axis=-1)
+    peak = jax.vmap(refined_peak)
+    converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
+    multipliers = jnp.linalg.eigvals(shots.monodromy)
+    width = jax.vmap(lambda amplitude, omega: system.width_at(amplitude, omega))(
+        amplitudes, omegas
+    )
+    stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) < 2 * width[:, None]
+    # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
+    return dict(
+        x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
+        y_max=jnp.where(converged, peak(samples.ys) * static, jnp.nan),
+        converged=converged,
+        stable=jnp.max(jnp.abs(multipliers), axis=-1) < 1,
+        state=shots.state * units,
+        residual=residual,
+        newton_steps=shots.newton_steps,
+        floquet_multipliers=multipliers,
+        monodromy=shots.monodromy,
+        stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
+    )
 
 
 def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None,
                  warm=None) -> dict:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched;
     with `tunings = (stiffness, damping)`, flat lists too, point i uses the TID stiffness
-    and damping `stiffness[i]`, `damping[i]`; with `warm = (states, monodromies)`, point i
-    is shot from the scaled state `states[i]` by chord iterations with `monodromies[i]`
-    (of a nearby orbit) before Newton's. Points that do not converge are solved again, on
-    their own, from the linear steady state with `settings.persistent()`; the better
-    attempt is kept. Each batch is sharded over all JAX devices (`sharded_batch`)."""
+    and damping `stiffness[i]`, `damping[i]`; with `warm` (scaled states), point i is shot
+    from `warm[i]` (e.g. the orbit of a nearby design). Points that do not converge are solved again, on
+    their own, from the linear steady state with each of `settings.fallbacks()` in turn
+    until they do; the best attempt is kept. Each batch is sharded over all JAX devices
+    (`sharded_batch`)."""
     batch = (omegas, amplitudes, tunings)
     out = sharded_batch(lambda *b: _points(system, *b[:2], settings, *b[2:]), *batch, warm)
-    failed = np.flatnonzero(~np.asarray(out["converged"]))
-    if failed.size:
+    for fallback in settings.fallbacks():
+        failed = np.flatnonzero(~np.asarray(out["converged"]))
+        if not failed.size:
+            break
         # Pad the retry batch to a power of two so that few batch sizes are compiled.
         size = 1 << int(np.ceil(np.log2(failed.size)))
         index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
         retry = sharded_batch(
-            lambda *b: _points(system, *b[:2], settings.persistent(), *b[2:]),
+            lambda *b, fallback=fallback: _points(system, *b[:2], fallback, *b[2:]),
             *jax.tree.map(lambda b: b[index], batch),
         )
-        better = np.asarray(retry["residual"])[: failed.size] < np.asarray(out["residual"])[failed]
+        retry = {key: value[: failed.size] for key, value in retry.items()}
+        better = np.asarray(retry["converged"]) & ~np.asarray(out["converged"])[failed]
+        better |= np.asarray(retry["residual"]) < np.asarray(out["residual"])[failed]
         chosen = failed[better]
-        out = {
-            key: value.at[chosen].set(retry[key][: failed.size][better])
-            for key, value in out.items()
-        }
+        out = {key: value.at[chosen].set(retry[key][better]) for key, value in out.items()}
     return out
 
 
 def _grid_response(system, omegas, amplitudes, settings, tunings=None, warm=None):
     """`solve_points` on the grid amplitudes x omegas, arrays shaped like the grid; with
     `tunings = (stiffness, damping)`, one TID tuning per amplitude; with `warm`, the
-    scaled states and monodromy matrices to start from, shaped like the grid."""
+    scaled states to start from, shaped like the grid."""
     omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
     if tunings is not None:
         tunings = tuple(
@@ -171,7 +192,7 @@ def _grid_response(system, omegas, amplitudes, settings, tunings=None, warm=None
             for t in tunings
         )
     if warm is not None:
-        warm = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), tuple(warm))
+        warm = warm.reshape((-1,) + warm.shape[2:])
     flat = solve_points(
         system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings, tunings, warm
     )
@@ -183,8 +204,8 @@ def tuned_response(system, stiffness, damping, amplitudes, omegas, settings,
                    warm=None) -> FrequencyResponse:
     """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
     (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch; with
-    `warm = (states, monodromies)` (amplitudes x frequencies), each steady state is shot
-    from that scaled state, with chord iterations on that monodromy matrix first."""
+    `warm` (scaled states, amplitudes x frequencies), each steady state is shot from its
+    state there."""
     amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
     out = _grid_response(system, omegas, amplitudes, settings, (stiffness, damping), warm)
     return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out)

@@ -397,12 +397,12 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
 
 
-def _on_check_grid(values, nearest: bool = False):
+def _on_check_grid(values):
     """`values` (amplitudes x design frequencies x ...) on the check grid: interpolated
-    linearly between neighbouring design frequencies, or the nearer neighbour's value."""
+    linearly between neighbouring design frequencies."""
     f = jnp.arange(CHECK_REFINEMENT).reshape((-1,) + (1,) * (values.ndim - 2)) / CHECK_REFINEMENT
     lower, upper = values[:, :-1, None], values[:, 1:, None]
-    inner = jnp.where(f <= 0.5, lower, upper) if nearest else lower + f * (upper - lower)
+    inner = lower + f * (upper - lower)
     inner = inner.reshape(inner.shape[:1] + (-1,) + inner.shape[3:])
     return jnp.concatenate([inner, values[:, -1:]], axis=1)
 
@@ -489,9 +489,8 @@ def retune(
         "amplitudes")
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
-    _, final_states, final_monodromies, _ = orbits
-    warm = (_on_check_grid(jnp.concatenate([states, final_states])),
-            _on_check_grid(jnp.concatenate([start.monodromy, final_monodromies]), nearest=True))
+    _, final_states, _, _ = orbits
+    warm = _on_check_grid(jnp.concatenate([states, final_states]))
     both = tuned_response(system, jnp.concatenate([k0, k]), jnp.concatenate([c0, c]),
                           jnp.concatenate([amps, amps]), fine, settings, warm)
     initial, retuned = _rows(both, slice(None, amps.size)), _rows(both, slice(amps.size, None))

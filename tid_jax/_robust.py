@@ -945,6 +945,13 @@ def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings):
     return x, y, ok.astype(bool)
 
 
+def _same(a: float | None, b: float | None) -> bool:
+    """Two field values agree (`None`, the default friction width, only with itself)."""
+    if a is None or b is None:
+        return a is b
+    return bool(np.isclose(a, b, rtol=1e-12, atol=0.0))
+
+
 def _check_best(best, system: TIDSystem) -> None:
     if not isinstance(best, BestTunings):
         raise ValueError(f"best must be a BestTunings, got {type(best).__name__}")
@@ -954,7 +961,7 @@ def _check_best(best, system: TIDSystem) -> None:
         name
         for name in FIELD_NAMES
         if name not in ("tid_stiffness", "tid_damping")
-        and not np.isclose(nominal[name], given[name], rtol=1e-12, atol=0.0)
+        and not _same(nominal[name], given[name])
     ]
     if different:
         raise ValueError(

@@ -50,17 +50,22 @@ class SolverSettings(eqx.Module):
             if not (isinstance(value, int) and value >= low):
                 raise ValueError(f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
 
-    def persistent(self) -> "SolverSettings":
-        """Settings for a second attempt at points that did not converge: a long transient
-        towards the attracting orbit, then more Newton iterations, on integrations 100 times
-        more accurate (Newton stalls where the integration error of the period map exceeds
-        `periodicity_tol`)."""
-        return eqx.tree_at(
-            lambda s: (s.rtol, s.atol, s.transient_periods, s.max_newton_steps),
+    def fallbacks(self) -> tuple["SolverSettings", ...]:
+        """Settings for further attempts, in turn, at points that did not converge: a
+        long transient towards the attracting orbit, then more Newton iterations, first on
+        integrations 100 times more accurate (Newton stalls where the integration error of
+        the period map exceeds `periodicity_tol`), then with the implicit Kvaerno5 (stiff
+        friction makes an explicit integration run out of steps)."""
+        persistent = eqx.tree_at(
+            lambda s: (s.transient_periods, s.max_newton_steps),
             self,
-            (self.rtol / 100, self.atol / 100, max(40, 4 * self.transient_periods),
-             max(25, 2 * self.max_newton_steps)),
+            (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
         )
+        accurate = eqx.tree_at(lambda s: (s.rtol, s.atol), persistent,
+                               (self.rtol / 100, self.atol / 100))
+        stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
+                            (self.rtol / 10, self.atol / 10, True))
+        return accurate, stiff
 
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
@@ -110,7 +115,6 @@ def _integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
 
 
 def _phases(settings: SolverSettings, dtype):
-    # Concrete (NumPy) sample phases, which diffrax checks while tracing, not at run time.
     return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
 
 
@@ -281,7 +285,88 @@ def _newton(z, p, settings: SolverSettings) -> _Newton:
     )
 
 
-class _Samples(eqx.Module):
+class Shots(eqx.Module):
+    """Newton shooting results for a batch of points (scaled units): the state after the
+    last Newton update, the monodromy matrix of the last iterate, the last residual
+    evaluated (before that update) and the Newton iterations used."""
+
+    state: Float[Array, "points 4"]
+    monodromy: Float[Array, "points 4 4"]
+    residual: Float[Array, " points"]
+    newton_steps: Int[Array, " points"]
+
+
+class _Queue(eqx.Module):
+    point: Int[Array, " slots"]  # the point each slot works on
+    z: Float[Array, "slots 4"]
+    steps: Int[Array, " slots"]
+    active: Bool[Array, " slots"]
+    next_point: Int[Array, ""]
+    shots: Shots
+
+
+def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
+                settings: SolverSettings, slots: int) -> Shots:
+    """Newton shooting for every point (`z0[i]`, `p[i]`) on `slots` lanes that work through
+    the points as a queue: a lane whose point has converged (or run out of iterations)
+    takes the next point at once, so that no lane waits for the slowest point's Newton
+    iterations (each iteration still integrates all lanes together)."""
+    count = z0.shape[0]
+    slots = min(slots, count)
+    inf = jnp.asarray(jnp.inf, z0.dtype)
+    start = _Queue(
+        point=jnp.arange(slots),
+        z=z0[:slots],
+        steps=jnp.zeros(slots, int),
+        active=jnp.ones(slots, bool),
+        next_point=jnp.asarray(slots),
+        shots=Shots(z0, jnp.zeros((count, 4, 4), z0.dtype), jnp.full(count, inf),
+                    jnp.zeros(count, int)),
+    )
+
+    def body(queue):
+        newton = jax.vmap(lambda z, q: _newton(z, q, settings))(queue.z, p[queue.point])
+        steps = queue.steps + 1
+        done = queue.active & ((newton.residual <= settings.periodicity_tol)
+                               | (steps >= settings.max_newton_steps))
+        where = jnp.where(done, queue.point, count)  # out of range: dropped
+        shots = Shots(
+            queue.shots.state.at[where].set(newton.z + newton.update, mode="drop"),
+            queue.shots.monodromy.at[where].set(newton.monodromy, mode="drop"),
+            queue.shots.residual.at[where].set(newton.residual, mode="drop"),
+            queue.shots.newton_steps.at[where].set(steps, mode="drop"),
+        )
+        new_point = queue.next_point + jnp.cumsum(done) - 1
+        takes = done & (new_point < count)
+        point = jnp.where(takes, new_point, queue.point)
+        z = jnp.where(takes[:, None], z0[jnp.minimum(new_point, count - 1)],
+                      jax.vmap(_limited)(newton.z, newton.update))
+        return _Queue(
+            point=point,
+            z=z,
+            steps=jnp.where(takes, 0, steps),
+            active=jnp.where(done, takes, queue.active),
+            next_point=queue.next_point + jnp.sum(done),
+            shots=shots,
+        )
+
+    return jax.lax.while_loop(lambda queue: jnp.any(queue.active), body, start).shots
+
+
+def verified_samples(z: Float[Array, " 4"], p: Float[Array, " 10"], settings: SolverSettings):
+    """x, y, y' sampled over the period from `z`, and the residual |Phi_T(z) - z| of that
+    integration (inf where it is not finite)."""
+    samples = Samples(*_period_samples(z, p, settings))
+    return samples, _residual(samples, z)
+
+
+def _residual(samples, z):
+    finite = jnp.all(jnp.isfinite(samples.z_end)) & jnp.all(jnp.isfinite(samples.xs))
+    finite = finite & jnp.all(jnp.isfinite(samples.ys))
+    return jnp.where(finite, jnp.max(jnp.abs(samples.z_end - z)), jnp.inf)
+
+
+class Samples(eqx.Module):
     """x, y, y' sampled over the period from the orbit's state, and the state after it."""
 
     xs: Float[Array, " samples"]
@@ -294,18 +379,18 @@ class _Periodic(eqx.Module):
     """A periodic orbit as it passes through `_with_orbit_derivatives`: the state, its
     samples, the monodromy matrix and, where the shooting formed them, the samples'
     Jacobians with respect to the state (`state_jacobians`) and to `p[directions]`
-    (`parameter_jacobians`), each a `_Samples` of Jacobians."""
+    (`parameter_jacobians`), each a `Samples` of Jacobians."""
 
     z: Float[Array, " 4"]
-    samples: _Samples
+    samples: Samples
     monodromy: Float[Array, "4 4"]
-    state_jacobians: _Samples | None
-    parameter_jacobians: _Samples | None
+    state_jacobians: Samples | None
+    parameter_jacobians: Samples | None
 
 
 def _sample_jacobians(z, p, settings: SolverSettings, directions):
     primal, of_state, of_parameters = _samples_and_jacobian(z, p, settings, directions)
-    return _Samples(*primal), _Samples(*of_state), _Samples(*of_parameters)
+    return Samples(*primal), Samples(*of_state), Samples(*of_parameters)
 
 
 def _shoot(z0, p, settings: SolverSettings, directions=()):
@@ -329,13 +414,11 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
     if directions:
         samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
         monodromy = of_state.z_end
+        residual = _residual(samples, z)
     else:
-        samples = _Samples(*_period_samples(z, p, settings))
+        samples, residual = verified_samples(z, p, settings)
         of_state = of_parameters = None
         monodromy = newton.monodromy
-    finite = jnp.all(jnp.isfinite(samples.z_end)) & jnp.all(jnp.isfinite(samples.xs))
-    finite = finite & jnp.all(jnp.isfinite(samples.ys))
-    residual = jnp.where(finite, jnp.max(jnp.abs(samples.z_end - z)), jnp.inf)
     return _Periodic(z, samples, monodromy, of_state, of_parameters), residual, steps
 
 

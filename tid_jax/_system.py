@@ -82,10 +82,10 @@ class TIDSystem(eqx.Module):
     - `tid_damping`: c, N s/m.
     - `friction_width`: the velocity scale `width` of the smoothed sign, m/s; `None` (the
       default) takes it relative to each forcing point's motion: `FRICTION_WIDTH_RATIO`
-      (0.01) times omega A / K, the velocity amplitude of the static displacement
+      (0.02) times omega A / K, the velocity amplitude of the static displacement
       (`width_at`). Over structures of 0.1-10 Hz and 1e2-1e7 kg, mass ratios 0.005-0.2,
       any tuning and friction up to 0.6 A, this keeps the peak host displacement within
-      0.2% of exact Coulomb friction (the inerter's within about 4%); an absolute width
+      0.35% of exact Coulomb friction (the inerter's within about 6%). An absolute width
       suits one structure but smooths away most of the friction of slow, small-motion
       ones.
     """
