@@ -17,7 +17,7 @@ SYSTEM_KEYS = ("host_mass", "host_stiffness", "host_damping", "inertance", "fric
                "tid_stiffness", "tid_damping")
 
 
-def _system(case, friction_width=None):
+def _system(case, friction_width):
     return tj.TIDSystem(**{key: case[key] for key in SYSTEM_KEYS}, friction_width=friction_width)
 
 
@@ -36,24 +36,23 @@ def test_random_structure_converges_to_the_transient_steady_state(seed):
 
 @hypothesis_settings(max_examples=4, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_default_width_is_within_half_a_percent_of_coulomb_friction(seed):
+def test_relative_width_is_within_half_a_percent_of_coulomb_friction(seed):
     # Friction drawn against the frictionless inerter force, so that the inerter sticks
     # and slips (against the forcing amplitude it mostly stays stuck).
     case = random_system(np.random.default_rng(seed), friction_scale="inerter")
-    response = tj.frequency_response(_system(case), case["omega"], case["amplitude"])
+    response = tj.frequency_response(_system(case, None), case["omega"], case["amplitude"])
     assert bool(response.converged)
     exact = coulomb_steady_state(**case)
     assert exact["converged"]
     assert float(response.x_max) == pytest.approx(exact["x_max"], rel=5e-3)
 
 
-def test_default_width_is_relative_to_the_static_velocity():
-    system = tj.paper_system()
+def test_relative_width_follows_the_static_velocity():
+    system = tj.paper_system(friction_width=None)
     omega = float(system.host_frequency)
     expected = 0.02 * omega * 300.0 / float(system.host_stiffness)
     assert float(system.width_at(300.0, omega)) == pytest.approx(expected, rel=1e-12)
-    explicit = system.replace(friction_width=1e-4)
-    assert float(explicit.width_at(300.0, omega)) == 1e-4
+    assert float(tj.paper_system().width_at(300.0, omega)) == 1e-4
 
 
 def test_slow_tall_structure_with_high_friction_converges():

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ._system import (
+    DEFAULT_FRICTION_WIDTH,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
     PAPER_HOST_FREQUENCY_HZ,
@@ -43,12 +44,12 @@ def den_hartog_tuning(
 def paper_system(
     *,
     friction_force: float = PAPER_FRICTION_FORCE,
-    friction_width: float | None = None,
+    friction_width: float | None = DEFAULT_FRICTION_WIDTH,
 ) -> TIDSystem:
     """The paper's system (section 4.1): M = 1500 kg, 4 Hz host, 2% host damping,
     b = 75 kg (mu = 0.05), ff = 20 N, with Den Hartog `tid_stiffness`/`tid_damping`
     (42.97 kN/m and 0.479 kN s/m), eqs. (10)-(11); `friction_width` None takes the
-    default relative width (`TIDSystem`)."""
+    relative width (`TIDSystem`)."""
     host_mass = PAPER_HOST_MASS
     host_stiffness = host_mass * (2 * math.pi * PAPER_HOST_FREQUENCY_HZ) ** 2
     host_damping = 2 * PAPER_HOST_DAMPING_RATIO * math.sqrt(host_stiffness * host_mass)

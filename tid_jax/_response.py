@@ -108,11 +108,12 @@ CHUNK = 64
 
 
 @eqx.filter_jit
-def _points(system, omegas, amplitudes, settings, tunings=None, warm=None):
+def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid=None):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`): Newton shooting on a
     work queue (`shoot_queue`, `CHUNK` lanes per device), from the linear steady state
     after `settings.transient_periods` periods or from the scaled states `warm`; then one
-    integration per orbit samples it and verifies its periodicity."""
+    integration per orbit samples it and verifies its periodicity. Points where `valid`
+    is False (padding, after the valid ones) are skipped by the queue."""
 
     def parameter_vector(omega, amplitude, tuning):
         tuned = system if tuning is None else with_tuning(system, *tuning)
@@ -123,7 +124,9 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None):
         z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK)
     else:
         z0 = warm
-    shots = map_parts(lambda z, q: shoot_queue(z, q, settings, CHUNK), z0, p)
+    if valid is None:
+        valid = jnp.ones(omegas.shape, bool)
+    shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, CHUNK, v), z0, p, valid)
     samples, residual = map_batch(
         lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK
     )
@@ -151,29 +154,49 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None):
     )
 
 
+# Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
+# least CHUNK points, so that batches of every size share a few compiled programs.
+BLOCK = 512
+
+
+def _block_sizes(count: int):
+    """(start, stop, padded size) of the blocks of a batch of `count` points."""
+    for start in range(0, count, BLOCK):
+        stop = min(count, start + BLOCK)
+        yield start, stop, max(CHUNK, 1 << (stop - start - 1).bit_length())
+
+
+def _solve_blocks(system, settings, batch, warm=None) -> dict:
+    """`_points` on the flat `batch = (omegas, amplitudes, tunings)`, block by block."""
+    count = jax.tree_util.tree_leaves(batch)[0].shape[0]
+    outs = []
+    for start, stop, size in _block_sizes(count):
+        index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
+        valid = jnp.asarray(np.arange(start, start + size) < stop)
+        part = jax.tree.map(lambda a: a[index], (batch, warm))
+        out = sharded_batch(
+            lambda b, w, v: _points(system, *b[:2], settings, b[2], w, v), *part, valid
+        )
+        outs.append({key: value[: stop - start] for key, value in out.items()})
+    return {key: jnp.concatenate([out[key] for out in outs]) for key in outs[0]}
+
+
 def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None,
                  warm=None) -> dict:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched;
     with `tunings = (stiffness, damping)`, flat lists too, point i uses the TID stiffness
     and damping `stiffness[i]`, `damping[i]`; with `warm` (scaled states), point i is shot
-    from `warm[i]` (e.g. the orbit of a nearby design). Points that do not converge are solved again, on
-    their own, from the linear steady state with each of `settings.fallbacks()` in turn
-    until they do; the best attempt is kept. Each batch is sharded over all JAX devices
-    (`sharded_batch`)."""
+    from `warm[i]` (e.g. the orbit of a nearby design). Points that do not converge are
+    solved again, from the linear steady state, with each of `settings.fallbacks()` in
+    turn until they do; the best attempt is kept. Each block of the batch is sharded over
+    all JAX devices (`sharded_batch`)."""
     batch = (omegas, amplitudes, tunings)
-    out = sharded_batch(lambda *b: _points(system, *b[:2], settings, *b[2:]), *batch, warm)
+    out = _solve_blocks(system, settings, batch, warm)
     for fallback in settings.fallbacks():
         failed = np.flatnonzero(~np.asarray(out["converged"]))
         if not failed.size:
             break
-        # Pad the retry batch to a power of two so that few batch sizes are compiled.
-        size = 1 << int(np.ceil(np.log2(failed.size)))
-        index = np.concatenate([failed, np.full(size - failed.size, failed[0])])
-        retry = sharded_batch(
-            lambda *b, fallback=fallback: _points(system, *b[:2], fallback, *b[2:]),
-            *jax.tree.map(lambda b: b[index], batch),
-        )
-        retry = {key: value[: failed.size] for key, value in retry.items()}
+        retry = _solve_blocks(system, fallback, jax.tree.map(lambda b: b[failed], batch))
         better = np.asarray(retry["converged"]) & ~np.asarray(out["converged"])[failed]
         better |= np.asarray(retry["residual"]) < np.asarray(out["residual"])[failed]
         chosen = failed[better]

@@ -306,22 +306,25 @@ class _Queue(eqx.Module):
 
 
 def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
-                settings: SolverSettings, slots: int) -> Shots:
+                settings: SolverSettings, slots: int,
+                valid: Bool[Array, " points"] | None = None) -> Shots:
     """Newton shooting for every point (`z0[i]`, `p[i]`) on `slots` lanes that work through
     the points as a queue: a lane whose point has converged (or run out of iterations)
     takes the next point at once, so that no lane waits for the slowest point's Newton
-    iterations (each iteration still integrates all lanes together)."""
-    count = z0.shape[0]
-    slots = min(slots, count)
+    iterations (each iteration still integrates all lanes together). Points where `valid`
+    is False, which must come after the valid ones, are skipped."""
+    size = z0.shape[0]
+    slots = min(slots, size)
+    count = size if valid is None else jnp.sum(valid)
     inf = jnp.asarray(jnp.inf, z0.dtype)
     start = _Queue(
         point=jnp.arange(slots),
         z=z0[:slots],
         steps=jnp.zeros(slots, int),
-        active=jnp.ones(slots, bool),
-        next_point=jnp.asarray(slots),
-        shots=Shots(z0, jnp.zeros((count, 4, 4), z0.dtype), jnp.full(count, inf),
-                    jnp.zeros(count, int)),
+        active=jnp.arange(slots) < count,
+        next_point=jnp.minimum(slots, count),
+        shots=Shots(z0, jnp.zeros((size, 4, 4), z0.dtype), jnp.full(size, inf),
+                    jnp.zeros(size, int)),
     )
 
     def body(queue):
@@ -329,7 +332,7 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
         steps = queue.steps + 1
         done = queue.active & ((newton.residual <= settings.periodicity_tol)
                                | (steps >= settings.max_newton_steps))
-        where = jnp.where(done, queue.point, count)  # out of range: dropped
+        where = jnp.where(done, queue.point, size)  # out of range: dropped
         shots = Shots(
             queue.shots.state.at[where].set(newton.z + newton.update, mode="drop"),
             queue.shots.monodromy.at[where].set(newton.monodromy, mode="drop"),
@@ -339,7 +342,7 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
         new_point = queue.next_point + jnp.cumsum(done) - 1
         takes = done & (new_point < count)
         point = jnp.where(takes, new_point, queue.point)
-        z = jnp.where(takes[:, None], z0[jnp.minimum(new_point, count - 1)],
+        z = jnp.where(takes[:, None], z0[jnp.minimum(new_point, size - 1)],
                       jax.vmap(_limited)(newton.z, newton.update))
         return _Queue(
             point=point,
@@ -393,13 +396,35 @@ def _sample_jacobians(z, p, settings: SolverSettings, directions):
     return Samples(*primal), Samples(*of_state), Samples(*of_parameters)
 
 
-def _shoot(z0, p, settings: SolverSettings, directions=()):
-    """Newton shooting for z* = Phi_T(z*): each iteration integrates one period with the
-    variational equations (the residual Phi_T(z) - z and the monodromy matrix). Once the
-    residual is within `settings.periodicity_tol`, the last update is applied and the
-    orbit is integrated once more to sample it over a period (with the Jacobians with
-    respect to the state and to `p[directions]` when `directions` is not empty); the
-    residual of that integration is the one returned, which decides convergence."""
+class _TangentNewton(eqx.Module):
+    z: Float[Array, " 4"]
+    update: Float[Array, " 4"]
+    residual: Float[Array, ""]
+    samples: Samples
+    of_state: Samples
+    of_parameters: Samples
+
+
+def _tangent_newton(z, p, settings: SolverSettings, directions) -> _TangentNewton:
+    samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
+    residual = samples.z_end - z
+    update = jnp.linalg.solve(jnp.eye(4, dtype=z.dtype) - of_state.z_end, residual)
+    finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(samples.xs))
+    finite = finite & jnp.all(jnp.isfinite(samples.ys))
+    return _TangentNewton(
+        z=z,
+        update=jnp.where(finite, update, 0.0),
+        residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
+        samples=samples,
+        of_state=of_state,
+        of_parameters=of_parameters,
+    )
+
+
+def _iterate(evaluate, z0, settings: SolverSettings):
+    """Newton's iterations `evaluate(z)` (with fields `z`, `update`, `residual`) from `z0`
+    until the residual is within `settings.periodicity_tol` or after
+    `settings.max_newton_steps` evaluations: the last evaluation and their count."""
 
     def cond(carry):
         newton, steps = carry
@@ -407,19 +432,35 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
 
     def body(carry):
         newton, steps = carry
-        return _newton(_limited(newton.z, newton.update), p, settings), steps + 1
+        return evaluate(_limited(newton.z, newton.update)), steps + 1
 
-    newton, steps = jax.lax.while_loop(cond, body, (_newton(z0, p, settings), jnp.array(1)))
-    z = newton.z + newton.update
+    return jax.lax.while_loop(cond, body, (evaluate(z0), jnp.array(1)))
+
+
+def _shoot(z0, p, settings: SolverSettings, directions=()):
+    """Newton shooting for z* = Phi_T(z*), returning the orbit once the residual is within
+    `settings.periodicity_tol`, with the last Newton update applied.
+
+    Without `directions`, each iteration integrates one period with the variational
+    equations (the residual Phi_T(z) - z and the monodromy matrix), and the orbit is then
+    integrated once more to sample it over a period; the residual of that integration is
+    the one returned, which decides convergence. With `directions`, each iteration
+    differentiates the integration along the state and `p[directions]`, which gives the
+    samples' Jacobians at once; the last update is applied to the samples to first order
+    (their error is then second order in the residual returned, the last one evaluated)."""
     if directions:
-        samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
-        monodromy = of_state.z_end
-        residual = _residual(samples, z)
-    else:
-        samples, residual = verified_samples(z, p, settings)
-        of_state = of_parameters = None
-        monodromy = newton.monodromy
-    return _Periodic(z, samples, monodromy, of_state, of_parameters), residual, steps
+        last, steps = _iterate(
+            lambda z: _tangent_newton(z, p, settings, directions), z0, settings
+        )
+        samples = jax.tree.map(lambda value, jacobian: value + jacobian @ last.update,
+                               last.samples, last.of_state)
+        orbit = _Periodic(last.z + last.update, samples, last.of_state.z_end, last.of_state,
+                          last.of_parameters)
+        return orbit, last.residual, steps
+    last, steps = _iterate(lambda z: _newton(z, p, settings), z0, settings)
+    z = last.z + last.update
+    samples, residual = verified_samples(z, p, settings)
+    return _Periodic(z, samples, last.monodromy, None, None), residual, steps
 
 
 @ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))

@@ -13,8 +13,9 @@ PAPER_FRICTION_FORCE = 20.0  # N
 PAPER_AMPLITUDES = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0,
                     1500.0, 3000.0)  # N
 PAPER_STROKE = 0.07  # m, inerter stroke limit (+-)
-# The default friction width, per forcing point: this ratio times the velocity amplitude
-# omega A / K of the static displacement (see `TIDSystem.width_at`).
+DEFAULT_FRICTION_WIDTH = 1e-4  # m/s
+# The relative friction width (`friction_width=None`), per forcing point: this ratio times
+# the velocity amplitude omega A / K of the static displacement (`TIDSystem.width_at`).
 FRICTION_WIDTH_RATIO = 0.02
 
 # (field name, allowed) with allowed "positive" (> 0) or "non-negative" (>= 0).
@@ -80,14 +81,15 @@ class TIDSystem(eqx.Module):
     - `friction_force`: ff, N (0 gives the ideal linear TID).
     - `tid_stiffness`: k, N/m.
     - `tid_damping`: c, N s/m.
-    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s; `None` (the
-      default) takes it relative to each forcing point's motion: `FRICTION_WIDTH_RATIO`
-      (0.02) times omega A / K, the velocity amplitude of the static displacement
-      (`width_at`). Over structures of 0.1-10 Hz and 1e2-1e7 kg, mass ratios 0.005-0.2,
-      any tuning and friction up to 0.6 A, this keeps the peak host displacement within
-      0.35% of exact Coulomb friction (the inerter's within about 6%). An absolute width
-      suits one structure but smooths away most of the friction of slow, small-motion
-      ones.
+    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s (default
+      1e-4 m/s, within 0.5% of exact Coulomb friction on the paper's structure). `None`
+      takes it relative to each forcing point's motion: `FRICTION_WIDTH_RATIO` (0.02)
+      times omega A / K, the velocity amplitude of the static displacement (`width_at`).
+      Over structures of 0.1-10 Hz and 1e2-1e7 kg, mass ratios 0.005-0.2, any tuning and
+      friction up to 0.6 A, the relative width keeps the peak host displacement within
+      0.35% of exact Coulomb friction (the inerter's within about 6%), where 1e-4 m/s,
+      which smooths away most of the friction of slow, small-motion structures, errs by
+      up to 48%.
     """
 
     host_mass: Float[Array, ""]
@@ -108,7 +110,7 @@ class TIDSystem(eqx.Module):
         friction_force: ArrayLike,
         tid_stiffness: ArrayLike,
         tid_damping: ArrayLike,
-        friction_width: ArrayLike | None = None,
+        friction_width: ArrayLike | None = DEFAULT_FRICTION_WIDTH,
     ):
         values = locals()
         for name, allowed in _FIELD_RULES:
@@ -134,8 +136,8 @@ class TIDSystem(eqx.Module):
 
     def width_at(self, amplitude: ArrayLike, omega: ArrayLike) -> Float[Array, "..."]:
         """The friction width (m/s) used at forcing amplitude `amplitude` (N) and
-        frequency `omega` (rad/s): `friction_width`, or by default `FRICTION_WIDTH_RATIO`
-        times omega A / K."""
+        frequency `omega` (rad/s): `friction_width`, or where it is `None`,
+        `FRICTION_WIDTH_RATIO` times omega A / K."""
         if self.friction_width is not None:
             return self.friction_width
         return FRICTION_WIDTH_RATIO * jnp.asarray(omega) * amplitude / self.host_stiffness
@@ -151,7 +153,7 @@ class TIDSystem(eqx.Module):
 
     def to_dict(self) -> dict[str, float | None]:
         """Fields as plain Python floats (for JSON/TOML; `friction_width` None for the
-        default relative width); requires scalar fields."""
+        relative width); requires scalar fields."""
         return {
             name: None if getattr(self, name) is None else float(np.asarray(getattr(self, name)))
             for name in FIELD_NAMES
