@@ -19,6 +19,8 @@ self-check on the paper system.
 from __future__ import annotations
 
 import math
+import os
+import sys
 import time
 
 import jax
@@ -42,6 +44,8 @@ __all__ = [
     "warmup",
 ]
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
 _KEYS = (
     "host_mass",
     "host_stiffness",
@@ -59,25 +63,9 @@ _KEYS = (
 
 def paper_system() -> dict:
     """Paper system: 1500 kg host at 4 Hz, 2 % damping, TID with mu = 0.05, ff = 20 N, eps = 1e-4 m/s."""
-    M = 1500.0
-    K = M * (2.0 * math.pi * 4.0) ** 2
-    C = 2.0 * 0.02 * math.sqrt(K * M)
-    b = 75.0
-    mu = b / M
-    alpha = 1.0 / (1.0 + mu) ** 2
-    xi = math.sqrt(3.0 * mu / (8.0 * (1.0 + mu)))
-    k = mu * alpha * K
-    c = 2.0 * xi * math.sqrt(k * b)
-    return dict(
-        host_mass=M,
-        host_stiffness=K,
-        host_damping=C,
-        inertance=b,
-        friction_force=20.0,
-        tid_stiffness=k,
-        tid_damping=c,
-        friction_width=1e-4,
-    )
+    from tests.reference.coulomb import paper_parameters
+
+    return dict(paper_parameters(), friction_width=1e-4)
 
 
 def _points(omegas, amplitudes):
