@@ -129,37 +129,24 @@ def _period_samples(z0, p, settings: SolverSettings):
     return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1]
 
 
-def _tangent_field(directions: tuple[int, ...]):
-    """The vector field with its variational equations: `(z, tangents)`, where the
-    tangents (4 x (4 + len(directions))) are d z / d (z0, p[directions])."""
-    index = jnp.asarray(directions, dtype=int)
-
-    def field(theta, y, p):
-        z, tangents = y
-        rate = tangent_field(theta, z, tangents, p)
-        if directions:
-            forcing = jax.jacfwd(lambda q: vector_field(theta, z, p.at[index].set(q)))(p[index])
-            rate = rate.at[:, 4:].add(forcing)
-        return vector_field(theta, z, p), rate
-
-    return field
+def _field_and_tangents(theta, y, p):
+    """The vector field with its variational equations: `y = (z, tangents)`, where the
+    tangents (4 x 4) are d z / d z0."""
+    z, tangents = y
+    return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
 
 
-def _start_tangents(z, directions):
-    return jnp.eye(4, 4 + len(directions), dtype=z.dtype)
-
-
-def _period_tangents(z, p, settings: SolverSettings, directions=()):
+def _period_tangents(z, p, settings: SolverSettings):
     """The state after one period from `z` and its Jacobian with respect to `z` (the
-    monodromy matrix) and to `p[i]`, `i` in `directions`, by the variational equations
-    (their step sizes follow the error of the state alone: accurate enough for Newton's
-    iterations, whose answer does not depend on them)."""
+    monodromy matrix), by the variational equations (their step sizes follow the error of
+    the state alone: accurate enough for Newton's iterations, whose answer does not depend
+    on them)."""
     sol = _integrate(
-        _tangent_field(directions), (z, _start_tangents(z, directions)), p, 2 * jnp.pi,
-        settings, dfx.SaveAt(t1=True), settings.max_steps,
+        _field_and_tangents, (z, jnp.eye(4, dtype=z.dtype)), p, 2 * jnp.pi, settings,
+        dfx.SaveAt(t1=True), settings.max_steps,
     )
-    z_end, tangents = (y[-1] for y in sol.ys)
-    return z_end, tangents[:, :4], tangents[:, 4:]
+    z_end, monodromy = (y[-1] for y in sol.ys)
+    return z_end, monodromy
 
 
 def _samples_and_jacobian(z, p, settings, directions=()):
@@ -273,7 +260,7 @@ class _Newton(eqx.Module):
 
 
 def _newton(z, p, settings: SolverSettings) -> _Newton:
-    z_end, monodromy, _ = _period_tangents(z, p, settings)
+    z_end, monodromy = _period_tangents(z, p, settings)
     residual = z_end - z
     update = jnp.linalg.solve(jnp.eye(4, dtype=z.dtype) - monodromy, residual)
     finite = jnp.all(jnp.isfinite(update))
