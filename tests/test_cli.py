@@ -441,7 +441,7 @@ def test_compilation_cache_is_filled_and_can_be_turned_off(tmp_path):
     done = subprocess.run(argv + ["--out", tmp_path / "a", "--cache-dir", cache],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert any(cache.iterdir())
+    assert any(cache.iterdir()) and any((cache / "programs").iterdir())
     moved = tmp_path / "moved"
     environment = dict(os.environ, TID_JAX_CACHE_DIR=str(moved))
     done = subprocess.run(argv + ["--out", tmp_path / "b"], capture_output=True, text=True,

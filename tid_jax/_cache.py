@@ -1,18 +1,34 @@
-"""JAX's persistent compilation cache, for entry points (the CLI, experiment scripts).
+"""Compiled programs kept on disk, for entry points (the CLI, experiment scripts).
 
-Compiling the batched steady-state and retuning programs takes most of a short run. With
-the cache on, a compiled program is saved on disk and loaded by later runs on the same
-machine (and the same JAX version) instead of being compiled again.
+Tracing, lowering and compiling the batched steady-state and retuning programs takes
+most of a short run. With the cache on, every program is kept on disk twice over:
+
+- JAX's persistent compilation cache keeps the compiled executable;
+- `compiled` keeps the traced and lowered program itself (a serialized `jax.export`),
+  under a key made of its static arguments, the shapes and dtypes of its arrays, the
+  sources of this package and the versions of JAX and its libraries.
+
+A later run on the same machine then neither traces nor compiles it again.
 """
 
+import functools as ft
+import hashlib
+import importlib.metadata
 import os
+import pickle
+import tempfile
 from pathlib import Path
 
+import equinox as eqx
 import equinox._errors
 import jax
 
 CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
 _OFF = ("", "0", "off", "false", "no", "none")
+_LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
+PROGRAMS = "programs"
+
+_programs_folder: Path | None = None
 
 
 def default_cache_dir() -> Path | None:
@@ -27,23 +43,122 @@ def default_cache_dir() -> Path | None:
 
 
 def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path | None:
-    """Turn on JAX's persistent compilation cache in `directory` (default
-    `default_cache_dir()`), for every program that takes more than 0.1 s to compile.
+    """Keep compiled programs in `directory` (default `default_cache_dir()`): JAX's
+    persistent compilation cache for every program that takes more than 0.1 s to
+    compile, and the traced programs of this package's entry points in its `programs/`.
     Call it before the first computation. Returns the folder, or `None` (and changes
     nothing) when the cache is turned off or its folder cannot be created."""
+    global _programs_folder
     folder = default_cache_dir() if directory is None else Path(directory).expanduser()
     if folder is None:
         return None
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        (folder / PROGRAMS).mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
-    # JAX does not save programs holding host callbacks, and equinox's run-time checks
-    # (diffrax's of its inputs, never failing here: every solve reports its own status)
-    # are host callbacks unless they are set to return NaN, as `EQX_ON_ERROR=nan` does
-    # when set before equinox is imported.
+    # JAX neither saves nor exports programs holding host callbacks, and equinox's run-time
+    # checks (diffrax's of its inputs, never failing here: every solve reports its own
+    # status) are host callbacks unless they are set to return NaN, as `EQX_ON_ERROR=nan`
+    # does when set before equinox is imported.
     equinox._errors.EQX_ON_ERROR = "nan"
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    _programs_folder = folder / PROGRAMS
     return folder
+
+
+@ft.cache
+def _fingerprint() -> str:
+    """Hash of this package's sources, the versions of JAX and its libraries, and the
+    platform and precision JAX computes with: a kept program is valid only for these."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.rglob("*.py")):
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    for library in _LIBRARIES:
+        digest.update(f"{library}={importlib.metadata.version(library)}".encode())
+    digest.update(f"{jax.default_backend()} x64={jax.config.jax_enable_x64}".encode())
+    return digest.hexdigest()
+
+
+def _is_traced(tree) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(tree))
+
+
+class _Program:
+    """`eqx.filter_jit(function)` whose traced programs are kept on disk while the cache
+    is on (`enable_compilation_cache`). Calls inside a transformation (arguments that are
+    tracers), on several devices, or of programs that cannot be exported (holding host
+    callbacks) go to `eqx.filter_jit` as usual."""
+
+    def __init__(self, function):
+        self.function = function
+        self.jitted = eqx.filter_jit(function)
+        self.loaded = {}
+        ft.update_wrapper(self, function)
+
+    def __call__(self, *args, **kwargs):
+        folder = _programs_folder
+        if folder is None or len(jax.devices()) > 1 or _is_traced((args, kwargs)):
+            return self.jitted(*args, **kwargs)
+        dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+        leaves, structure = jax.tree.flatten(dynamic)
+        description = [
+            _fingerprint(), self.function.__module__, self.function.__qualname__,
+            str(structure), str(jax.tree.structure(static)), repr(jax.tree.leaves(static)),
+        ] + [f"{leaf.shape} {leaf.dtype} {getattr(leaf, 'weak_type', False)}" for leaf in leaves]
+        key = hashlib.sha256("\n".join(description).encode()).hexdigest()[:32]
+        if key not in self.loaded:
+            self.loaded[key] = self._load(folder / f"{self.function.__name__}-{key}.bin",
+                                          static, structure, leaves)
+        run, out_structure = self.loaded[key]
+        if run is None:
+            return self.jitted(*args, **kwargs)
+        return jax.tree.unflatten(out_structure, run(*leaves))
+
+    def _load(self, path: Path, static, structure, leaves):
+        """The kept program at `path`, else the program exported now and kept there:
+        `(run, out_structure)`, with `run` None if it cannot be exported."""
+        skip = path.with_suffix(".skip")  # marks a program that cannot be exported
+        if skip.exists():
+            return None, None
+        if not path.exists():
+            blob = self._export(static, structure, leaves)
+            if blob is None:
+                skip.touch()
+                return None, None
+            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as file:
+                file.write(blob)
+            os.replace(file.name, path)
+        # A new program runs as later runs will load it, so that they find it compiled.
+        try:
+            exported, out_structure = pickle.loads(path.read_bytes())
+            return jax.jit(jax.export.deserialize(exported).call), out_structure
+        except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
+            return None, None
+
+    def _export(self, static, structure, leaves) -> bytes | None:
+        """The serialized program and the structure of its output, or None for a program
+        that cannot be exported (holding a host callback, or an output that cannot be
+        pickled)."""
+        boxes = []
+
+        def flat(*dynamic_leaves):
+            dynamic = jax.tree.unflatten(structure, dynamic_leaves)
+            args, kwargs = eqx.combine(dynamic, static)
+            out_leaves, out_structure = jax.tree.flatten(self.function(*args, **kwargs))
+            boxes.append(out_structure)
+            return out_leaves
+
+        try:
+            exported = jax.export.export(jax.jit(flat))(*leaves)
+            return pickle.dumps((exported.serialize(), boxes[-1]))
+        except (ImportError, ValueError, TypeError, NotImplementedError, pickle.PicklingError):
+            return None
+
+
+def compiled(function):
+    """Decorator: `eqx.filter_jit`, with the traced program kept on disk while the cache
+    is on (see `enable_compilation_cache`)."""
+    return _Program(function)

@@ -4,6 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
+from ._cache import compiled
 from ._dynamics import parameters
 from ._sharding import map_batch, map_parts, sharded_batch
 from ._steady_state import (
@@ -107,7 +108,7 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
 CHUNK = 64
 
 
-@eqx.filter_jit
+@compiled
 def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid=None):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`): Newton shooting on a
     work queue (`shoot_queue`, `CHUNK` lanes per device), from the linear steady state
@@ -155,15 +156,19 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
 
 
 # Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
-# least CHUNK points, so that batches of every size share a few compiled programs.
+# least CHUNK points (SMALL_BLOCK points for the smallest batches, which would mostly
+# integrate padding), so that batches of every size share a few compiled programs.
 BLOCK = 512
+SMALL_BLOCK = 8
 
 
 def _block_sizes(count: int):
     """(start, stop, padded size) of the blocks of a batch of `count` points."""
     for start in range(0, count, BLOCK):
         stop = min(count, start + BLOCK)
-        yield start, stop, max(CHUNK, 1 << (stop - start - 1).bit_length())
+        size = stop - start
+        yield start, stop, SMALL_BLOCK if size <= SMALL_BLOCK else max(
+            CHUNK, 1 << (size - 1).bit_length())
 
 
 def _solve_blocks(system, settings, batch, warm=None) -> dict:

@@ -9,6 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._cache import compiled
 from ._dynamics import PARAMETERS, parameters
 from ._linear import den_hartog_tuning
 from ._response import (
@@ -205,7 +206,7 @@ def peak_response(
     return _peak_response(system, amplitude, band, response == "host", settings)
 
 
-@eqx.filter_jit
+@compiled
 def _peak_response(system, amplitude, omegas, host, settings):
     xs, ys, converged, _ = sweep(system, amplitude, omegas, settings)
     # The maximum over a band with an orbit that was not found is unknown.
@@ -310,7 +311,7 @@ class _BFGS(optx.AbstractBFGS):
     verbose: Callable[..., None] = optx.BFGS(rtol=1.0, atol=1.0).verbose
 
 
-@eqx.filter_jit
+@compiled
 def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
     """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
     from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
@@ -460,8 +461,9 @@ def retune(
         raise ValueError(f"tol must be a positive float, got {tol!r}")
     say = progress if progress is not None else (lambda message: None)
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
-    k0 = jnp.broadcast_to(system.tid_stiffness, amps.shape)
-    c0 = jnp.broadcast_to(system.tid_damping, amps.shape)
+    # Strongly typed, as every later design is: one program serves every stage.
+    k0 = jnp.broadcast_to(jnp.asarray(system.tid_stiffness, band.dtype), amps.shape)
+    c0 = jnp.broadcast_to(jnp.asarray(system.tid_damping, band.dtype), amps.shape)
     # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
@@ -493,9 +495,17 @@ def retune(
     warm = _on_check_grid(jnp.concatenate([states, final_states]))
     both = tuned_response(system, jnp.concatenate([k0, k]), jnp.concatenate([c0, c]),
                           jnp.concatenate([amps, amps]), fine, settings, warm)
-    initial, retuned = _rows(both, slice(None, amps.size)), _rows(both, slice(amps.size, None))
-    before = _peaks_from_response(initial, fine)
-    after = _peaks_from_response(retuned, fine)
+    return _checked_result(both, k0, c0, k, c, ok, iterations, c_ref)
+
+
+@eqx.filter_jit
+def _checked_result(both: FrequencyResponse, k0, c0, k, c, ok, iterations, c_ref):
+    """The `RetuneResult` from the check `both` of the initial designs (`k0`, `c0`, its first
+    half of amplitudes) and the retuned ones (`k`, `c`, the second half)."""
+    n = k0.shape[0]
+    initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
+    before = _peaks_from_response(initial, both.omegas)
+    after = _peaks_from_response(retuned, both.omegas)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )
@@ -507,7 +517,7 @@ def retune(
     after = jax.tree.map(lambda b, a: jnp.where(worse, b, a), before, after)
     x_response = jnp.where(worse[:, None], initial.x_max, retuned.x_max)
     return RetuneResult(
-        amplitudes=amps,
+        amplitudes=initial.amplitudes,
         tid_stiffness=k,
         tid_damping=c,
         initial_stiffness=k0,
@@ -517,7 +527,7 @@ def retune(
         y_peak=after.y_peak,
         y_peak_initial=before.y_peak,
         omega_peak=after.omega_x,
-        check_omegas=fine,
+        check_omegas=both.omegas,
         x_response=x_response,
         x_response_initial=initial.x_max,
         iterations=iterations,

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._cache import compiled
 from ._linear import den_hartog_tuning
 from ._response import check_grid, frequency_response, scaled_states
 from ._retune import SHARPNESS, _band, _check_system, peaks, sweep
@@ -122,7 +123,7 @@ def _point_curves(system, theta, scale, omegas, settings, z_init):
     return (log_x, log_y), (log_x, log_y, peak_x, peak_y, mask_x, mask_y, converged, states)
 
 
-@eqx.filter_jit
+@compiled
 def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init):
     """`_CHUNK` points at once, shooting from the scaled states `z_init`: for each, the log
     refined peaks, candidate masks and their Jacobians with respect to `theta` (forward

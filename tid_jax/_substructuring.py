@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ._cache import compiled
 from ._dynamics import smooth_sign
 from ._linear import linear_receptance
 from ._response import point_response
@@ -384,7 +385,7 @@ def _simulate_point(plan: _Plan, controller: _Controller, system: TIDSystem, poi
     )
 
 
-@eqx.filter_jit
+@compiled
 def _simulate_batch(plan: _Plan, controller: _Controller, system: TIDSystem, points: _Point):
     return jax.vmap(lambda point: _simulate_point(plan, controller, system, point))(points)
 
@@ -395,7 +396,7 @@ def _first_harmonic_phase(samples):
     return jnp.arctan2(jnp.sum(samples * jnp.cos(theta)), jnp.sum(samples * jnp.sin(theta)))
 
 
-@eqx.filter_jit
+@compiled
 def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSettings):
     def one(omega, amplitude):
         orbit, x_max, y_max = point_response(system, omega, amplitude, settings)

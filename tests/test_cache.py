@@ -1,0 +1,80 @@
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+# Each run is a fresh process (as a second `tid-jax` run is): it counts how often the
+# decorated functions are traced, and prints their results.
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import tid_jax as tj
+    from tid_jax._cache import compiled
+
+    traces = {"plain": 0, "callback": 0}
+
+    @compiled
+    def plain(x, power, *, shift):
+        traces["plain"] += 1
+        return {"y": jnp.sin(x) ** power + shift, "n": (x.shape[0], jnp.sum(x > 0))}
+
+    @compiled
+    def callback(x):
+        traces["callback"] += 1
+        return jax.pure_callback(lambda v: v * 2, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
+
+    if sys.argv[1] != "off":
+        tj.enable_compilation_cache(sys.argv[1])
+    x = jnp.linspace(-1.0, 2.0, 7)
+    out = [plain(x, 2, shift=0.5), plain(x, 3, shift=0.5), plain(x, 3, shift=0.5), callback(x)]
+    print(json.dumps({
+        "traces": traces,
+        "y": [[float(v) for v in o["y"]] for o in out[:3]],
+        "n": [[int(v) for v in o["n"]] for o in out[:3]],
+        "callback": [float(v) for v in out[3]],
+    }))
+    """
+)
+
+
+def _run(cache) -> dict:
+    done = subprocess.run([sys.executable, "-c", SCRIPT, str(cache)], capture_output=True,
+                          text=True, timeout=300, env=dict(os.environ))
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
+    off = _run("off")
+    # Without the cache: one trace per distinct static argument, as with `eqx.filter_jit`.
+    assert off["traces"] == {"plain": 2, "callback": 1}
+    first = _run(tmp_path)
+    kept = sorted(path.name for path in (tmp_path / "programs").iterdir())
+    # Two programs of `plain` (powers 2 and 3); the host callback cannot be kept, and is
+    # marked so that later runs do not try again.
+    named = [(name.split("-")[0], name.rsplit(".", 1)[1]) for name in kept]
+    assert named == [("callback", "skip"), ("plain", "bin"), ("plain", "bin")], kept
+    second = _run(tmp_path)
+    # The second process loads both programs: `plain` is not traced again.
+    assert second["traces"] == {"plain": 0, "callback": 1}
+    for run in (first, second):
+        assert run["y"] == off["y"] and run["n"] == off["n"]
+        assert run["callback"] == off["callback"]
+    # A kept program of other sources or library versions is never loaded: the key holds
+    # a fingerprint of both, so a changed file name means a changed program.
+    assert sorted(path.name for path in (tmp_path / "programs").iterdir()) == kept
+
+
+def test_a_damaged_program_file_is_replaced(tmp_path):
+    _run(tmp_path)
+    for path in (tmp_path / "programs").iterdir():
+        if path.suffix == ".bin":
+            path.write_bytes(b"not a program")
+    # Unreadable programs are not used: the functions are traced afresh, results unchanged.
+    again = _run(tmp_path)
+    assert again["traces"]["plain"] == 2
+    assert again["y"] == _run("off")["y"]
