@@ -115,6 +115,9 @@ class _Program:
         run, out_structure = self.loaded[key]
         if run is None:
             return self.jitted(*args, **kwargs)
+        # Arrays placed on the device (committed) at every call, as the outputs of an
+        # earlier program are: one compilation serves both.
+        leaves = jax.device_put(leaves, jax.devices()[0])
         return jax.tree.unflatten(out_structure, run(*leaves))
 
     def _load(self, path: Path, static, structure, leaves):

@@ -109,12 +109,14 @@ CHUNK = 64
 
 
 @compiled
-def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid=None):
+def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid=None,
+            use_warm=None):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`): Newton shooting on a
     work queue (`shoot_queue`, `CHUNK` lanes per device), from the linear steady state
-    after `settings.transient_periods` periods or from the scaled states `warm`; then one
-    integration per orbit samples it and verifies its periodicity. Points where `valid`
-    is False (padding, after the valid ones) are skipped by the queue."""
+    after `settings.transient_periods` periods or, where `use_warm` (default: everywhere
+    if `warm` is given), from the scaled states `warm`; then one integration per orbit
+    samples it and verifies its periodicity. Points where `valid` is False (padding,
+    after the valid ones) are skipped by the queue."""
 
     def parameter_vector(omega, amplitude, tuning):
         tuned = system if tuning is None else with_tuning(system, *tuning)
@@ -123,8 +125,14 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
     p = jax.vmap(parameter_vector)(omegas, amplitudes, tunings)
     if warm is None:
         z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK)
-    else:
+    elif use_warm is None:
         z0 = warm
+    else:
+        def start(q, z, warm_start):
+            z = jnp.where(warm_start, z, linear_initial_state(q))
+            return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
+
+        z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK)
     if valid is None:
         valid = jnp.ones(omegas.shape, bool)
     shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, CHUNK, v), z0, p, valid)
@@ -163,24 +171,35 @@ SMALL_BLOCK = 8
 
 
 def _block_sizes(count: int):
-    """(start, stop, padded size) of the blocks of a batch of `count` points."""
-    for start in range(0, count, BLOCK):
-        stop = min(count, start + BLOCK)
+    """(start, stop, padded size) of the blocks of a batch of `count` points: as few as
+    hold `BLOCK` points each, of equal sizes."""
+    blocks = -(-count // BLOCK)
+    for i in range(blocks):
+        start, stop = i * count // blocks, (i + 1) * count // blocks
         size = stop - start
         yield start, stop, SMALL_BLOCK if size <= SMALL_BLOCK else max(
             CHUNK, 1 << (size - 1).bit_length())
 
 
 def _solve_blocks(system, settings, batch, warm=None) -> dict:
-    """`_points` on the flat `batch = (omegas, amplitudes, tunings)`, block by block."""
-    count = jax.tree_util.tree_leaves(batch)[0].shape[0]
+    """`_points` on the flat `batch = (omegas, amplitudes, tunings)`, block by block: every
+    block is shot from the states `warm` (if given) with the given tunings (or the
+    system's own), so that one compiled program serves every kind of call."""
+    omegas, amplitudes, tunings = batch
+    count = omegas.shape[0]
+    if tunings is None:
+        tunings = tuple(jnp.broadcast_to(jnp.asarray(t, omegas.dtype), omegas.shape)
+                        for t in (system.tid_stiffness, system.tid_damping))
+    use_warm = jnp.full(count, warm is not None)
+    if warm is None:
+        warm = jnp.zeros((count, 4), omegas.dtype)
     outs = []
     for start, stop, size in _block_sizes(count):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = jnp.asarray(np.arange(start, start + size) < stop)
-        part = jax.tree.map(lambda a: a[index], (batch, warm))
+        part = jax.tree.map(lambda a: a[index], ((omegas, amplitudes, tunings), warm, use_warm))
         out = sharded_batch(
-            lambda b, w, v: _points(system, *b[:2], settings, b[2], w, v), *part, valid
+            lambda b, w, u, v: _points(system, *b[:2], settings, b[2], w, v, u), *part, valid
         )
         outs.append({key: value[: stop - start] for key, value in out.items()})
     return {key: jnp.concatenate([out[key] for out in outs]) for key in outs[0]}
@@ -202,11 +221,17 @@ def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=N
         if not failed.size:
             break
         retry = _solve_blocks(system, fallback, jax.tree.map(lambda b: b[failed], batch))
-        better = np.asarray(retry["converged"]) & ~np.asarray(out["converged"])[failed]
-        better |= np.asarray(retry["residual"]) < np.asarray(out["residual"])[failed]
-        chosen = failed[better]
-        out = {key: value.at[chosen].set(retry[key][better]) for key, value in out.items()}
+        out = _keep_better(out, retry, failed)
     return out
+
+
+def _keep_better(out: dict, retry: dict, points) -> dict:
+    """`out` with the results `retry` at its `points` where they converged and `out`'s did
+    not, or where their residual is smaller."""
+    better = np.asarray(retry["converged"]) & ~np.asarray(out["converged"])[points]
+    better |= np.asarray(retry["residual"]) < np.asarray(out["residual"])[points]
+    chosen = points[better]
+    return {key: value.at[chosen].set(retry[key][better]) for key, value in out.items()}
 
 
 def _grid_response(system, omegas, amplitudes, settings, tunings=None, warm=None):

@@ -183,15 +183,16 @@ def linear_initial_state(p) -> Float[Array, " 4"]:
     return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real])
 
 
-def _transient(z, p, settings: SolverSettings):
-    """Integrate `settings.transient_periods` periods from `z` (keeps `z` if that fails)."""
+def _transient(z, p, settings: SolverSettings, periods=None):
+    """Integrate `periods` (default `settings.transient_periods`, at most that; may be
+    traced) periods from `z` (keeps `z` if that fails)."""
     if settings.transient_periods == 0:
         return z
     sol = _integrate(
         vector_field,
         z,
         p,
-        2 * jnp.pi * settings.transient_periods,
+        2 * jnp.pi * (settings.transient_periods if periods is None else periods),
         settings,
         dfx.SaveAt(t1=True),
         settings.max_steps * settings.transient_periods,
@@ -273,9 +274,11 @@ def _newton(z, p, settings: SolverSettings) -> _Newton:
 
 
 class Shots(eqx.Module):
-    """Newton shooting results for a batch of points (scaled units): the state after the
-    last Newton update, the monodromy matrix of the last iterate, the last residual
-    evaluated (before that update) and the Newton iterations used."""
+    """Newton shooting results for a batch of points (scaled units): the last iterate
+    evaluated, its monodromy matrix and residual, and the Newton iterations used. (The
+    last Newton update is not applied: the variational monodromy matrix is only as
+    accurate as the integration, and where the friction is steep an update from a point
+    already within the periodicity tolerance can leave it.)"""
 
     state: Float[Array, "points 4"]
     monodromy: Float[Array, "points 4 4"]
@@ -321,7 +324,7 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
                                | (steps >= settings.max_newton_steps))
         where = jnp.where(done, queue.point, size)  # out of range: dropped
         shots = Shots(
-            queue.shots.state.at[where].set(newton.z + newton.update, mode="drop"),
+            queue.shots.state.at[where].set(newton.z, mode="drop"),
             queue.shots.monodromy.at[where].set(newton.monodromy, mode="drop"),
             queue.shots.residual.at[where].set(newton.residual, mode="drop"),
             queue.shots.newton_steps.at[where].set(steps, mode="drop"),
@@ -426,12 +429,12 @@ def _iterate(evaluate, z0, settings: SolverSettings):
 
 def _shoot(z0, p, settings: SolverSettings, directions=()):
     """Newton shooting for z* = Phi_T(z*), returning the orbit once the residual is within
-    `settings.periodicity_tol`, with the last Newton update applied.
+    `settings.periodicity_tol`.
 
     Without `directions`, each iteration integrates one period with the variational
-    equations (the residual Phi_T(z) - z and the monodromy matrix), and the orbit is then
-    integrated once more to sample it over a period; the residual of that integration is
-    the one returned, which decides convergence. With `directions`, each iteration
+    equations (the residual Phi_T(z) - z and the monodromy matrix); the last iterate
+    evaluated is then integrated once more to sample it over a period, and the residual
+    of that integration is the one returned, which decides convergence. With `directions`, each iteration
     differentiates the integration along the state and `p[directions]`, which gives the
     samples' Jacobians at once; the last update is applied to the samples to first order
     (their error is then second order in the residual returned, the last one evaluated)."""
@@ -445,7 +448,7 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
                           last.of_parameters)
         return orbit, last.residual, steps
     last, steps = _iterate(lambda z: _newton(z, p, settings), z0, settings)
-    z = last.z + last.update
+    z = last.z  # as in `shoot_queue`: the last iterate evaluated, without its update
     samples, residual = verified_samples(z, p, settings)
     return _Periodic(z, samples, last.monodromy, None, None), residual, steps
 
