@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 
+import jax
 import numpy as np
 import pytest
 
@@ -18,6 +19,7 @@ SCRIPT = """
 import json
 import jax
 jax.config.update("jax_enable_x64", True)
+import jax
 import numpy as np
 import tid_jax as tj
 import tid_jax._response
@@ -99,3 +101,22 @@ def test_retune_on_four_devices_matches_one(runs):
     for key in ("retune_stiffness", "retune_damping"):
         np.testing.assert_allclose(sharded[key], single[key], rtol=1e-4, atol=0)
     np.testing.assert_allclose(sharded["retune_x_peak"], single["retune_x_peak"], rtol=1e-5)
+
+
+def test_map_batch_matches_vmap_and_skips_chunks_without_valid_entries():
+    from tid_jax._sharding import map_batch
+
+    x = jax.numpy.arange(23.0)
+    valid = x < 9  # chunks of 4: entries 0-8 valid, chunks from the fourth on all padding
+    def square(v):
+        return {"square": v**2, "sign": jax.numpy.sign(v)}
+
+    out = jax.jit(lambda a, m: map_batch(square, a, 4, m))(x, valid)
+    np.testing.assert_array_equal(out["square"][:9], np.arange(9.0) ** 2)
+    np.testing.assert_array_equal(out["sign"][:9], np.sign(np.arange(9.0)))
+    # A chunk holding a valid entry is computed in full (padding included); a chunk without
+    # one is skipped and reads zero.
+    np.testing.assert_array_equal(out["square"][9:12], np.arange(9.0, 12.0) ** 2)
+    assert not np.any(np.asarray(out["square"][12:]))
+    everything = map_batch(square, x, 4)
+    np.testing.assert_array_equal(everything["square"], np.arange(23.0) ** 2)

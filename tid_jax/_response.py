@@ -123,8 +123,11 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
         return jnp.stack(parameters(tuned, amplitude, omega))
 
     p = jax.vmap(parameter_vector)(omegas, amplitudes, tunings)
+    if valid is None:
+        valid = jnp.ones(omegas.shape, bool)
     if warm is None:
-        z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK)
+        z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK,
+                       valid)
     elif use_warm is None:
         z0 = warm
     else:
@@ -132,12 +135,10 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
             z = jnp.where(warm_start, z, linear_initial_state(q))
             return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
 
-        z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK)
-    if valid is None:
-        valid = jnp.ones(omegas.shape, bool)
+        z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK, valid)
     shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, CHUNK, v), z0, p, valid)
     samples, residual = map_batch(
-        lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK
+        lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK, valid
     )
     static = amplitudes / system.host_stiffness
     units = jnp.stack([static, omegas * static] * 2, axis=-1)

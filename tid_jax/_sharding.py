@@ -61,14 +61,15 @@ def sharded_batch(function, *batch, devices=None):
     return jax.tree_util.tree_map(lambda value: value[:size], out)
 
 
-def map_batch(function, batch, chunk: int):
+def map_batch(function, batch, chunk: int, valid=None):
     """`jax.vmap(function)(batch)` (a pytree of arrays with leading length n) computed
     `chunk` entries at a time with `jax.lax.map`, so that the while loops of a chunk wait
     only for that chunk's slowest entry. The batch is padded to whole chunks (repeating its
     last entry), so that one chunk's computation is compiled, not a second one for a
-    remainder. When n divides evenly over the devices, the batch is first split into one
-    part per device, each mapped on its own: a batch placed by `sharded_batch` then runs in
-    parallel on every device."""
+    remainder. Where `valid` (a boolean per entry) is False throughout a chunk, that
+    chunk is skipped and its outputs are zero (on one device). When n divides evenly
+    over the devices, the batch is first split into one part per device, each mapped on
+    its own: a batch placed by `sharded_batch` then runs in parallel on every device."""
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
     parts = len(jax.devices())
     if size % parts:
@@ -77,6 +78,8 @@ def map_batch(function, batch, chunk: int):
         return jax.vmap(function)(batch)
     length = size // parts
     chunks = -(-length // chunk)
+    if valid is None:
+        valid = jax.numpy.ones(size, bool)
 
     def split(a):
         a = a.reshape(parts, length, *a.shape[1:])
@@ -89,9 +92,23 @@ def map_batch(function, batch, chunk: int):
         a = a.reshape(parts, chunks * chunk, *a.shape[3:])[:, :length]
         return a.reshape(size, *a.shape[2:])
 
-    out = jax.vmap(lambda part: jax.lax.map(jax.vmap(function), part))(
-        jax.tree_util.tree_map(split, batch)
-    )
+    mapped = jax.vmap(function)
+    shapes = jax.eval_shape(mapped, jax.tree.map(lambda a: a[:chunk], batch))
+
+    def one_chunk(args):
+        part_batch, part_valid = args
+        return jax.lax.cond(
+            jax.numpy.any(part_valid), mapped,
+            lambda _: jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), shapes),
+            part_batch,
+        )
+
+    split_batch = jax.tree_util.tree_map(split, (batch, valid))
+    if parts == 1:  # no vmap over parts, which would turn the skipping `cond` into a select
+        out = jax.tree.map(lambda a: a[None], jax.lax.map(
+            one_chunk, jax.tree.map(lambda a: a[0], split_batch)))
+    else:
+        out = jax.vmap(lambda part: jax.lax.map(one_chunk, part))(split_batch)
     return jax.tree_util.tree_map(merge, out)
 
 
