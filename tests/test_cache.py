@@ -3,6 +3,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 
 # Each run is a fresh process (as a second `tid-jax` run is): it counts how often the
 # decorated functions are traced, and prints their results.
@@ -67,6 +68,24 @@ def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
     # A kept program of other sources or library versions is never loaded: the key holds
     # a fingerprint of both, so a changed file name means a changed program.
     assert sorted(path.name for path in (tmp_path / "programs").iterdir()) == kept
+
+
+def test_programs_unused_for_a_month_are_deleted(tmp_path):
+    _run(tmp_path)
+    programs = tmp_path / "programs"
+    old, recent = programs / "older-sources.bin", programs / "other-version.bin"
+    old.write_bytes(b"")
+    recent.write_bytes(b"")
+    month_ago = time.time() - 31 * 86400
+    os.utime(old, (month_ago, month_ago))
+    kept = sorted(path for path in programs.iterdir() if path not in (old, recent))
+    for path in kept:  # unused for a month too, but loaded again by this run
+        os.utime(path, (month_ago, month_ago))
+    again = _run(tmp_path)
+    assert not old.exists() and recent.exists()
+    # The programs this run used were deleted too (last used a month ago) and kept again.
+    assert again["traces"]["plain"] == 2
+    assert sorted(programs.iterdir()) == sorted([*kept, recent])
 
 
 def test_a_damaged_program_file_is_replaced(tmp_path):

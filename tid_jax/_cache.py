@@ -17,6 +17,7 @@ import importlib.metadata
 import os
 import pickle
 import tempfile
+import time
 from pathlib import Path
 
 import equinox as eqx
@@ -29,6 +30,9 @@ _LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 PROGRAMS = "programs"
 
 _programs_folder: Path | None = None
+# Kept programs unused for this long are deleted (those of older sources or library
+# versions, which no key can reach again), when the cache is turned on.
+STALE_DAYS = 30
 
 
 def default_cache_dir() -> Path | None:
@@ -65,7 +69,26 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _programs_folder = folder / PROGRAMS
+    _prune(_programs_folder, time.time() - STALE_DAYS * 86400)
     return folder
+
+
+def _used(path: Path) -> None:
+    """Mark the kept program at `path` as in use (not stale)."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
+def _prune(folder: Path, before: float) -> None:
+    """Delete the kept programs in `folder` last used before the time `before`."""
+    for path in folder.iterdir():
+        try:
+            if path.stat().st_mtime < before:
+                path.unlink()
+        except OSError:  # gone already, or not ours to delete
+            pass
 
 
 @ft.cache
@@ -125,6 +148,7 @@ class _Program:
         `(run, out_structure)`, with `run` None if it cannot be exported."""
         skip = path.with_suffix(".skip")  # marks a program that cannot be exported
         if skip.exists():
+            _used(skip)
             return None, None
         if not path.exists():
             blob = self._export(static, structure, leaves)
@@ -137,6 +161,7 @@ class _Program:
         # A new program runs as later runs will load it, so that they find it compiled.
         try:
             exported, out_structure = pickle.loads(path.read_bytes())
+            _used(path)
             return jax.jit(jax.export.deserialize(exported).call), out_structure
         except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
             return None, None
