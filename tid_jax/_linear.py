@@ -5,7 +5,6 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ._system import (
-    DEFAULT_FRICTION_WIDTH,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
     PAPER_HOST_FREQUENCY_HZ,
@@ -44,7 +43,7 @@ def den_hartog_tuning(
 def paper_system(
     *,
     friction_force: float = PAPER_FRICTION_FORCE,
-    friction_width: float | None = DEFAULT_FRICTION_WIDTH,
+    friction_width: float | None = None,
 ) -> TIDSystem:
     """The paper's system (section 4.1): M = 1500 kg, 4 Hz host, 2% host damping,
     b = 75 kg (mu = 0.05), ff = 20 N, with Den Hartog `tid_stiffness`/`tid_damping`

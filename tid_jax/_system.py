@@ -13,9 +13,9 @@ PAPER_FRICTION_FORCE = 20.0  # N
 PAPER_AMPLITUDES = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0,
                     1500.0, 3000.0)  # N
 PAPER_STROKE = 0.07  # m, inerter stroke limit (+-)
-DEFAULT_FRICTION_WIDTH = 1e-4  # m/s
-# The relative friction width (`friction_width=None`), per forcing point: this ratio times
-# the velocity amplitude omega A / K of the static displacement (`TIDSystem.width_at`).
+# The relative friction width (`friction_width=None`, the default), per forcing point:
+# this ratio times the velocity amplitude omega A / K of the static displacement
+# (`TIDSystem.width_at`).
 FRICTION_WIDTH_RATIO = 0.02
 
 # (field name, allowed) with allowed "positive" (> 0) or "non-negative" (>= 0).
@@ -81,15 +81,14 @@ class TIDSystem(eqx.Module):
     - `friction_force`: ff, N (0 gives the ideal linear TID).
     - `tid_stiffness`: k, N/m.
     - `tid_damping`: c, N s/m.
-    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s (default
-      1e-4 m/s, within 0.5% of exact Coulomb friction on the paper's structure). `None`
-      takes it relative to each forcing point's motion: `FRICTION_WIDTH_RATIO` (0.02)
-      times omega A / K, the velocity amplitude of the static displacement (`width_at`).
-      Over structures of 0.1-10 Hz and 1e2-1e7 kg, mass ratios 0.005-0.2, any tuning and
-      friction up to 0.6 A, the relative width keeps the peak host displacement within
-      0.35% of exact Coulomb friction (the inerter's within about 6%), where 1e-4 m/s,
-      which smooths away most of the friction of slow, small-motion structures, errs by
-      up to 48%.
+    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s, or `None`
+      (the default) to take it relative to each forcing point's motion:
+      `FRICTION_WIDTH_RATIO` (0.02) times omega A / K, the velocity amplitude of the
+      static displacement (`width_at`). Over structures of 0.1-10 Hz and 1e2-1e7 kg,
+      mass ratios 0.005-0.2, any tuning and friction up to 0.6 A, the relative width
+      keeps the peak host displacement within 0.35% of exact Coulomb friction (the
+      inerter's within about 6%), where a fixed 1e-4 m/s, which smooths away most of the
+      friction of slow, small-motion structures, errs by up to 48%.
     """
 
     host_mass: Float[Array, ""]
@@ -110,7 +109,7 @@ class TIDSystem(eqx.Module):
         friction_force: ArrayLike,
         tid_stiffness: ArrayLike,
         tid_damping: ArrayLike,
-        friction_width: ArrayLike | None = DEFAULT_FRICTION_WIDTH,
+        friction_width: ArrayLike | None = None,
     ):
         values = locals()
         for name, allowed in _FIELD_RULES:

@@ -29,7 +29,6 @@ from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_perform
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._system import (
-    DEFAULT_FRICTION_WIDTH,
     PAPER_AMPLITUDES,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -54,7 +53,8 @@ PHYSICAL_INPUTS = (
     ("host_damping", "N s/m", "host damping C (instead of host_damping_ratio)", "non-negative"),
     ("inertance", "kg", "inertance b of the inerter", "positive"),
     ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
-    ("friction_width", "m/s", "velocity scale of the smoothed friction sign", "positive"),
+    ("friction_width", "m/s", "velocity scale of the smoothed friction sign (default: "
+     "0.02 omega A/K at each forcing point)", "positive"),
     ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
     ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
@@ -70,7 +70,6 @@ DEFAULTS = {
     "host_damping_ratio": PAPER_HOST_DAMPING_RATIO,
     "inertance": PAPER_INERTANCE,
     "friction_force": PAPER_FRICTION_FORCE,
-    "friction_width": DEFAULT_FRICTION_WIDTH,
     "stroke_limit": PAPER_STROKE,
     "amplitudes": list(PAPER_AMPLITUDES),
     "n_frequencies": DEFAULT_FREQUENCIES,
@@ -273,7 +272,7 @@ def _system(inputs: dict) -> TIDSystem:
         friction_force=inputs["friction_force"],
         tid_stiffness=inputs.get("tid_stiffness", k_dh),
         tid_damping=inputs.get("tid_damping", c_dh),
-        friction_width=inputs["friction_width"],
+        friction_width=inputs.get("friction_width"),
     )
 
 
