@@ -126,16 +126,14 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
     if valid is None:
         valid = jnp.ones(omegas.shape, bool)
     if warm is None:
-        z0 = map_batch(lambda q: _transient(linear_initial_state(q), q, settings), p, CHUNK,
-                       valid)
-    elif use_warm is None:
-        z0 = warm
-    else:
-        def start(q, z, warm_start):
-            z = jnp.where(warm_start, z, linear_initial_state(q))
-            return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
+        warm, use_warm = jnp.zeros(omegas.shape + (4,), omegas.dtype), False
+    use_warm = jnp.broadcast_to(True if use_warm is None else use_warm, omegas.shape)
 
-        z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK, valid)
+    def start(q, z, warm_start):
+        z = jnp.where(warm_start, z, linear_initial_state(q))
+        return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
+
+    z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK, valid)
     shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, CHUNK, v), z0, p, valid)
     samples, residual = map_batch(
         lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK, valid
