@@ -176,11 +176,11 @@ def test_bad_grids_raise(system, omegas, amplitudes, message):
 def test_unconverged_point_is_flagged_and_retried(system):
     # One Newton iteration from the linear guess cannot reach the stick-slip orbit: the
     # batched solve flags the point; frequency_response then solves it again, persistently.
-    from tid_jax._response import _points
+    from tid_jax._response import _solve_blocks, batched
 
     settings = tj.SolverSettings(transient_periods=0, max_newton_steps=1)
     omega = jnp.array([0.95 * float(system.host_frequency)])
-    first = _points(system, omega, jnp.array([100.0]), settings)
+    first = _solve_blocks(settings, (omega, jnp.array([100.0]), batched(system, 1)))
     assert not bool(first["converged"][0])
     assert float(first["residual"][0]) > settings.periodicity_tol
     # The peaks of an orbit that was not found are not reported as numbers.

@@ -91,6 +91,24 @@ def test_elasticities_obey_scaling_laws(sensitivity):
         assert e[a] + e[f] == pytest.approx(0.0, abs=3e-3)
 
 
+def _reoptimised_log_differences(system, amplitude, band, name, value, rel, amplitudes=None):
+    """Central differences, in ln p, of the optimum found afresh (`best_tunings` at
+    `amplitudes`, default `amplitude` alone, polished by `sensitivities`) at p (1 +- rel):
+    of its smooth peak, k* and c*."""
+    ends = []
+    for sign in (1, -1):
+        changed = system.replace(**{name: value * (1 + sign * rel)})
+        best = tj.best_tunings(changed, amplitudes or [amplitude], omegas=band, tol=1e-6)
+        optimum = tj.sensitivities(changed, amplitude, omegas=band, best=best).optimum
+        assert bool(optimum.converged)
+        ends.append(optimum)
+
+    def d_log(field):
+        return float(np.log(getattr(ends[0], field) / getattr(ends[1], field)) / (2 * rel))
+
+    return d_log
+
+
 def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensitivity):
     optimum = sensitivity.optimum
     assert bool(optimum.converged)
@@ -101,20 +119,10 @@ def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensi
     assert float(optimum.smooth_peak) <= float(optimum.host_peak) * 1.003
     for name in ("friction_force", "host_damping"):
         i = index[name]
-        value = float(sensitivity.values[i])
-        rel = 1e-3
-        ends = []
-        for sign in (1, -1):
-            changed = system.replace(**{name: value * (1 + sign * rel)})
-            ends.append(tj.best_tunings(changed, [SENSITIVITY_AMPLITUDE], omegas=band))
-        assert all(bool(end.converged[0, 0]) for end in ends)
-
-        def d_log(field, ends=ends, rel=rel):
-            ratio = getattr(ends[0], field)[0, 0] / getattr(ends[1], field)[0, 0]
-            return float(np.log(ratio) / (2 * rel))
-
-        host = (float(ends[0].objective[0, 0]) - float(ends[1].objective[0, 0])) / (2 * rel)
-        assert float(optimum.host_elasticity[i]) == pytest.approx(host, rel=1e-3), name
+        d_log = _reoptimised_log_differences(
+            system, SENSITIVITY_AMPLITUDE, band, name, float(sensitivity.values[i]), 1e-3
+        )
+        assert float(optimum.host_elasticity[i]) == pytest.approx(d_log("smooth_peak"), rel=1e-3)
         if name == "friction_force":
             # Implicit derivatives of the optimal tuning, looser: the optimum's damping lies
             # along a flat valley, so re-optimised differences of it carry the optimiser's
@@ -125,6 +133,38 @@ def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensi
             assert float(optimum.damping_elasticity[i]) == pytest.approx(
                 d_log("tid_damping"), rel=0.02
             )
+
+
+def test_optimum_at_the_damping_bound_and_at_3000_n(system):
+    # On the default band. At 100 N the optimal damping is 0 (the friction damps enough):
+    # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the
+    # elasticities of c* are undefined; k* moves as re-optimised differences say. At 3000 N,
+    # nearly linear, the optimum converges too.
+    band = np.asarray(tj.default_omegas(system))
+    amplitudes = [100.0, 3000.0]
+    best = tj.best_tunings(system, amplitudes, omegas=band)
+    assert bool(best.damping_at_bound[0, 0]) and not bool(best.damping_at_bound[0, 1])
+    low = tj.sensitivities(system, 100.0, omegas=band, best=best)
+    high = tj.sensitivities(system, 3000.0, omegas=band, best=best)
+    assert bool(high.optimum.converged) and not bool(high.optimum.damping_at_bound)
+    assert np.all(np.isfinite(np.asarray(high.optimum.damping_elasticity)))
+    optimum = low.optimum
+    assert bool(optimum.converged) and bool(optimum.damping_at_bound)
+    assert float(optimum.tid_damping) == 0.0
+    assert np.all(np.asarray(optimum.damping_derivative) == 0.0)
+    assert np.all(np.isnan(np.asarray(optimum.damping_elasticity)))
+    index = {name: i for i, name in enumerate(low.parameters)}
+    for name in ("friction_force", "host_mass"):
+        i = index[name]
+        d_log = _reoptimised_log_differences(
+            system, 100.0, band, name, float(low.values[i]), 1e-3, amplitudes
+        )
+        assert float(optimum.stiffness_elasticity[i]) == pytest.approx(
+            d_log("tid_stiffness"), rel=0.02, abs=1e-3
+        ), name
+        assert float(optimum.host_elasticity[i]) == pytest.approx(
+            d_log("smooth_peak"), rel=1e-3
+        ), name
 
 
 def test_optimum_is_a_minimum_of_the_peak(system, band, sensitivity):

@@ -33,11 +33,13 @@ retuned = tj.retune(system, [200.0, 600.0], omegas=np.linspace(0.8, 1.2, 9) * fl
     system.host_frequency), tol=1e-5)
 seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
 # The solve itself, on the same (already compiled) padded batch: where did its outputs live?
-from tid_jax._response import _points
+from tid_jax._response import _points, batched
 flat_w, flat_a = (g.reshape(-1) for g in np.meshgrid(omegas, [100.0, 400.0]))
 solved = []
 sharded_batch(
-    lambda w, a: solved.append(_points(system, w, a, tj.SolverSettings())) or solved[-1],
+    lambda w, a: solved.append(_points(
+        batched(system, w.shape[0]), w, a, tj.SolverSettings(), jax.numpy.zeros(w.shape + (4,)),
+        jax.numpy.ones(w.shape, bool), jax.numpy.zeros(w.shape, bool))) or solved[-1],
     jax.numpy.asarray(flat_w), jax.numpy.asarray(flat_a),
 )
 sharding = batch_sharding()

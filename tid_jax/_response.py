@@ -1,3 +1,5 @@
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -50,6 +52,9 @@ class FrequencyResponse(eqx.Module):
     floquet_multipliers: Complex[Array, "*grid 4"]
     monodromy: Float[Array, "*grid 4 4"]
     stick_fraction: Float[Array, "*grid"]
+
+
+_GRID_FIELDS = tuple(f.name for f in dataclasses.fields(FrequencyResponse))[2:]
 
 
 def check_grid(name: str, values: ArrayLike) -> np.ndarray:
@@ -109,25 +114,15 @@ CHUNK = 64
 
 
 @compiled
-def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid=None,
-            use_warm=None):
-    """Steady states at the points (`omegas[i]`, `amplitudes[i]`): Newton shooting on a
-    work queue (`shoot_queue`, `CHUNK` lanes per device), from the linear steady state
-    after `settings.transient_periods` periods or, where `use_warm` (default: everywhere
-    if `warm` is given), from the scaled states `warm`; then one integration per orbit
-    samples it and verifies its periodicity. Points where `valid` is False (padding,
-    after the valid ones) are skipped by the queue."""
-
-    def parameter_vector(omega, amplitude, tuning):
-        tuned = system if tuning is None else with_tuning(system, *tuning)
-        return jnp.stack(parameters(tuned, amplitude, omega))
-
-    p = jax.vmap(parameter_vector)(omegas, amplitudes, tunings)
-    if valid is None:
-        valid = jnp.ones(omegas.shape, bool)
-    if warm is None:
-        warm, use_warm = jnp.zeros(omegas.shape + (4,), omegas.dtype), False
-    use_warm = jnp.broadcast_to(True if use_warm is None else use_warm, omegas.shape)
+def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
+    """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
+    (one per point, its fields batched): Newton shooting on a work queue (`shoot_queue`,
+    `CHUNK` lanes per device), from the linear steady state after
+    `settings.transient_periods` periods or, where `use_warm`, from the scaled states
+    `warm`; then one integration per orbit samples it and verifies its periodicity.
+    Points where `valid` is False (padding, after the valid ones) are skipped by the
+    queue."""
+    p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
 
     def start(q, z, warm_start):
         z = jnp.where(warm_start, z, linear_initial_state(q))
@@ -138,13 +133,13 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
     samples, residual = map_batch(
         lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK, valid
     )
-    static = amplitudes / system.host_stiffness
+    static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * 2, axis=-1)
     peak = jax.vmap(refined_peak)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
     multipliers = jnp.linalg.eigvals(shots.monodromy)
-    width = jax.vmap(lambda amplitude, omega: system.width_at(amplitude, omega))(
-        amplitudes, omegas
+    width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
+        systems, amplitudes, omegas
     )
     stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) < 2 * width[:, None]
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
@@ -160,6 +155,13 @@ def _points(system, omegas, amplitudes, settings, tunings=None, warm=None, valid
         monodromy=shots.monodromy,
         stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
     )
+
+
+def batched(system: TIDSystem, count: int) -> TIDSystem:
+    """`system` repeated `count` times: every field an array of `count` equal entries (the
+    batched form, one system per point, that `solve_points` takes)."""
+    return jax.tree.map(lambda leaf: jnp.broadcast_to(jnp.asarray(leaf, float), (count,)),
+                        system)
 
 
 # Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
@@ -180,15 +182,12 @@ def _block_sizes(count: int):
             CHUNK, 1 << (size - 1).bit_length())
 
 
-def _solve_blocks(system, settings, batch, warm=None) -> dict:
-    """`_points` on the flat `batch = (omegas, amplitudes, tunings)`, block by block: every
-    block is shot from the states `warm` (if given) with the given tunings (or the
-    system's own), so that one compiled program serves every kind of call."""
-    omegas, amplitudes, tunings = batch
+def _solve_blocks(settings, batch, warm=None) -> dict:
+    """`_points` on the flat `batch = (omegas, amplitudes, systems)`, block by block: every
+    block is shot from the states `warm` if given (else from the linear state after a
+    transient), so that one compiled program serves every kind of call."""
+    omegas = batch[0]
     count = omegas.shape[0]
-    if tunings is None:
-        tunings = tuple(jnp.broadcast_to(jnp.asarray(t, omegas.dtype), omegas.shape)
-                        for t in (system.tid_stiffness, system.tid_damping))
     use_warm = jnp.full(count, warm is not None)
     if warm is None:
         warm = jnp.zeros((count, 4), omegas.dtype)
@@ -196,30 +195,30 @@ def _solve_blocks(system, settings, batch, warm=None) -> dict:
     for start, stop, size in _block_sizes(count):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = jnp.asarray(np.arange(start, start + size) < stop)
-        part = jax.tree.map(lambda a: a[index], ((omegas, amplitudes, tunings), warm, use_warm))
+        part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))
         out = sharded_batch(
-            lambda b, w, u, v: _points(system, *b[:2], settings, b[2], w, v, u), *part, valid
+            lambda b, w, u, v: _points(b[2], b[0], b[1], settings, w, v, u), *part, valid
         )
         outs.append({key: value[: stop - start] for key, value in out.items()})
     return {key: jnp.concatenate([out[key] for out in outs]) for key in outs[0]}
 
 
-def solve_points(system, omegas, amplitudes, settings: SolverSettings, tunings=None,
+def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSettings,
                  warm=None) -> dict:
-    """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`), batched;
-    with `tunings = (stiffness, damping)`, flat lists too, point i uses the TID stiffness
-    and damping `stiffness[i]`, `damping[i]`; with `warm` (scaled states), point i is shot
-    from `warm[i]` (e.g. the orbit of a nearby design). Points that do not converge are
-    solved again, from the linear steady state, with each of `settings.fallbacks()` in
-    turn until they do; the best attempt is kept. Each block of the batch is sharded over
-    all JAX devices (`sharded_batch`)."""
-    batch = (omegas, amplitudes, tunings)
-    out = _solve_blocks(system, settings, batch, warm)
+    """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`) of the
+    systems `systems` (one per point: its fields are arrays, entry i for point i; see
+    `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
+    (e.g. the orbit of a nearby design). Points that do not converge are solved again,
+    from the linear steady state, with each of `settings.fallbacks()` in turn until they
+    do; the best attempt is kept. Each block of the batch is sharded over all JAX devices
+    (`sharded_batch`)."""
+    batch = (omegas, amplitudes, systems)
+    out = _solve_blocks(settings, batch, warm)
     for fallback in settings.fallbacks():
         failed = np.flatnonzero(~np.asarray(out["converged"]))
         if not failed.size:
             break
-        retry = _solve_blocks(system, fallback, jax.tree.map(lambda b: b[failed], batch))
+        retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
         out = _keep_better(out, retry, failed)
     return out
 
@@ -233,40 +232,29 @@ def _keep_better(out: dict, retry: dict, points) -> dict:
     return {key: value.at[chosen].set(retry[key][better]) for key, value in out.items()}
 
 
-def _grid_response(system, omegas, amplitudes, settings, tunings=None, warm=None):
-    """`solve_points` on the grid amplitudes x omegas, arrays shaped like the grid; with
-    `tunings = (stiffness, damping)`, one TID tuning per amplitude; with `warm`, the
-    scaled states to start from, shaped like the grid."""
-    omega_grid, amplitude_grid = jnp.meshgrid(omegas, amplitudes)
-    if tunings is not None:
-        tunings = tuple(
-            jnp.broadcast_to(jnp.asarray(t)[:, None], amplitude_grid.shape).reshape(-1)
-            for t in tunings
-        )
-    if warm is not None:
-        warm = warm.reshape((-1,) + warm.shape[2:])
-    flat = solve_points(
-        system, omega_grid.reshape(-1), amplitude_grid.reshape(-1), settings, tunings, warm
-    )
-    shape = amplitude_grid.shape
-    return {key: value.reshape(shape + value.shape[1:]) for key, value in flat.items()}
-
-
-def tuned_response(system, stiffness, damping, amplitudes, omegas, settings,
-                   warm=None) -> FrequencyResponse:
-    """`FrequencyResponse` over `omegas` (amplitudes x frequencies) of the TID design
-    (`stiffness[i]`, `damping[i]`) at `amplitudes[i]`, every design in one batch; with
-    `warm` (scaled states, amplitudes x frequencies), each steady state is shot from its
+def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
+                  warm=None) -> FrequencyResponse:
+    """`FrequencyResponse` over lanes x frequencies: lane i is the system `systems[i]` (its
+    fields batched, see `batched`) at the amplitude `amplitudes[i]` over the frequencies
+    `omegas` (one grid for every lane, or one row per lane), every lane in one batch;
+    with `warm` (scaled states, lanes x frequencies), each steady state is shot from its
     state there."""
     amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
-    out = _grid_response(system, omegas, amplitudes, settings, (stiffness, damping), warm)
+    shape = amplitudes.shape + omegas.shape[-1:]
+    flat = lambda a: jnp.broadcast_to(a, shape).reshape(-1)
+    lanes = jax.tree.map(lambda leaf: flat(leaf[:, None]), systems)
+    if warm is not None:
+        warm = warm.reshape((-1,) + warm.shape[2:])
+    out = solve_points(lanes, flat(omegas), flat(amplitudes[:, None]), settings, warm)
+    out = {key: value.reshape(shape + value.shape[1:]) for key, value in out.items()}
     return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out)
 
 
 def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "amps freqs 4"]:
     """The orbits' states of a `response` over amplitudes x frequencies in the scaled units
-    of `solve_orbit` (displacements in A / K, velocities in omega A / K)."""
-    static = response.amplitudes[:, None] / host_stiffness
+    of `solve_orbit` (displacements in A / K, velocities in omega A / K); `host_stiffness`
+    K is one value or one per amplitude (lane)."""
+    static = response.amplitudes[:, None] / jnp.reshape(host_stiffness, (-1, 1))
     units = jnp.stack([static + 0 * response.omegas, static * response.omegas] * 2, axis=-1)
     return response.state / units
 
@@ -296,12 +284,10 @@ def frequency_response(
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)
-    out = _grid_response(
-        system,
-        jnp.asarray(np.atleast_1d(omega_array), dtype=dtype),
-        jnp.asarray(np.atleast_1d(amplitude_array), dtype=dtype),
-        settings,
-    )
+    amps = jnp.asarray(np.atleast_1d(amplitude_array), dtype=dtype)
+    response = lane_response(batched(system, amps.size), amps,
+                             jnp.asarray(np.atleast_1d(omega_array), dtype=dtype), settings)
+    out = {name: getattr(response, name) for name in _GRID_FIELDS}
     index = (0 if amplitude_array.ndim == 0 else slice(None),
              0 if omega_array.ndim == 0 else slice(None))
     out = {key: value[index] for key, value in out.items()}

@@ -14,11 +14,12 @@ from ._dynamics import PARAMETERS, parameters
 from ._linear import den_hartog_tuning
 from ._response import (
     FrequencyResponse,
+    batched,
     check_grid,
     frequency_response,
+    lane_response,
     point_response,
     scaled_states,
-    tuned_response,
     with_tuning,
 )
 from ._sharding import map_batch, sharded_batch
@@ -135,9 +136,11 @@ class Peaks(eqx.Module):
 
 
 def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
-    """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas`."""
-    x = jax.vmap(lambda v: grid_peak(v, omegas))(response.x_max)
-    y = jax.vmap(lambda v: grid_peak(v, omegas))(response.y_max)
+    """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas` (one grid, or one row
+    per amplitude)."""
+    omegas = jnp.broadcast_to(omegas, response.x_max.shape)
+    x = jax.vmap(grid_peak)(response.x_max, omegas)
+    y = jax.vmap(grid_peak)(response.y_max, omegas)
     converged = jnp.all(response.converged, axis=-1)
     return Peaks(
         amplitudes=response.amplitudes,
@@ -235,7 +238,7 @@ class RetuneResult(eqx.Module):
     converged: Bool[Array, " amps"]
     damping_at_bound: Bool[Array, " amps"]
     status: Int[Array, " amps"]
-    check_omegas: Float[Array, " check"]  # rad/s, the check grid
+    check_omegas: Float[Array, "*lanes check"]  # rad/s, the check grid (one per lane)
     x_response: Float[Array, "amps check"]  # m, peak |x| over a period on the check grid
     x_response_initial: Float[Array, "amps check"]  # m, the same for the initial tuning
 
@@ -312,20 +315,20 @@ class _BFGS(optx.AbstractBFGS):
 
 
 @compiled
-def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
-    """BFGS per amplitude from the design `u0` on the smooth log peak over `omegas`, shooting
+def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
+    """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
+    the frequencies `omegas[i]`) from the design `u0[i]` on the smooth log peak, shooting
     from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
     scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
     the designs, iterations, success and the orbits of the last accepted design."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
     )
-    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
     solver = _BFGS(rtol=tol, atol=tol)
     options = dict(autodiff_mode="fwd")
     tags = frozenset()
 
-    def design_sweep(u, amplitude, warm):
+    def design_sweep(system, omegas, u, amplitude, warm):
         """Host peaks (m) at every frequency, and the orbits of the design `u`, from the
         orbits `warm` of a nearby design (its tuning, then per frequency the scaled state,
         monodromy matrix and state derivatives with respect to the tuning): every steady
@@ -333,6 +336,8 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
         tangents; then only the points around the highest peaks (which alone set the
         objective and its gradient) take the Newton iteration with tangents, which gives
         their derivatives and renews their monodromy matrices."""
+        k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
+                                         system.inertance)
         k, c = _design_to_tuning(u, k_ref, c_ref)
         tuned = with_tuning(system, k, c)
         warm_tuning, states, monodromies, derivatives = warm
@@ -358,9 +363,9 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
                   derivatives.at[lanes].set(d_lanes))
         return xs, (jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
-    def one(amplitude, u_start, z_start):
+    def one(system, amplitude, omegas, u_start, z_start):
         def objective(u, warm):
-            xs, orbits = design_sweep(u, amplitude, warm)
+            xs, orbits = design_sweep(system, omegas, u, amplitude, warm)
             static = amplitude / system.host_stiffness
             return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(orbits)
 
@@ -395,7 +400,7 @@ def _optimise_stage(system, amplitudes, u0, z0, omegas, sharpness, settings, max
     # One amplitude after another (each vmapped over its frequencies; with several devices,
     # one sequence per device): an amplitude's optimiser stops when it converges, and its
     # integrations wait only for its own stiffest steady state, not for every amplitude's.
-    return map_batch(lambda args: one(*args), (amplitudes, u0, z0), 1)
+    return map_batch(lambda args: one(*args), (systems, amplitudes, omegas, u0, z0), 1)
 
 
 def _on_check_grid(values):
@@ -411,9 +416,10 @@ def _on_check_grid(values):
 def _rows(response: FrequencyResponse, rows) -> FrequencyResponse:
     """The amplitudes `rows` of a `FrequencyResponse` over amplitudes x frequencies."""
     fields = {field.name: getattr(response, field.name) for field in dataclasses.fields(response)}
-    return FrequencyResponse(
-        **{name: value if name == "omegas" else value[rows] for name, value in fields.items()}
-    )
+    return FrequencyResponse(**{
+        name: value if name == "omegas" and value.ndim == 1 else value[rows]
+        for name, value in fields.items()
+    })
 
 
 def retune(
@@ -455,46 +461,74 @@ def retune(
     _check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
-    if not (isinstance(max_steps, int) and max_steps >= 1):
+    check_optimiser_options(max_steps, tol)
+    bands = jnp.broadcast_to(band, amps.shape + band.shape)
+    result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
+                             max_steps=max_steps, tol=tol, progress=progress)
+    return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
+
+
+def check_optimiser_options(max_steps, tol) -> None:
+    if not (isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1):
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-    if not (isinstance(tol, float) and tol > 0):
+    if not (isinstance(tol, float) and np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive float, got {tol!r}")
+
+
+def optimal_tunings(
+    systems: TIDSystem,
+    amplitudes,
+    bands,
+    *,
+    settings: SolverSettings,
+    max_steps: int,
+    tol: float,
+    progress: Callable[[str], None] | None = None,
+) -> RetuneResult:
+    """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
+    fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
+    frequencies `bands[i]`, every lane in one batch. `check_omegas` of the result is one
+    check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
-    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    amps = jnp.asarray(amplitudes)
+    k_ref, c_ref = den_hartog_tuning(systems.host_mass, systems.host_stiffness, systems.inertance)
     # Strongly typed, as every later design is: one program serves every stage.
-    k0 = jnp.broadcast_to(jnp.asarray(system.tid_stiffness, band.dtype), amps.shape)
-    c0 = jnp.broadcast_to(jnp.asarray(system.tid_damping, band.dtype), amps.shape)
+    k0 = jnp.asarray(systems.tid_stiffness, amps.dtype)
+    c0 = jnp.asarray(systems.tid_damping, amps.dtype)
     # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
-    fine = _on_check_grid(band[None])[0]
-    say(f"initial tuning on {band.size} frequencies x {amps.size} amplitudes")
-    start = tuned_response(system, k0, c0, amps, band, settings)
-    states = scaled_states(start, system.host_stiffness)
+    fine = _on_check_grid(bands)
+    say(f"initial tuning on {bands.shape[-1]} frequencies x {amps.size} lanes")
+    start = lane_response(systems, amps, bands, settings)
+    states = scaled_states(start, systems.host_stiffness)
     orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
               jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
         stage_run = ft.partial(
-            _optimise_stage, system, omegas=band, sharpness=jnp.asarray(sharpness),
-            settings=settings, max_steps=max_steps, tol=jnp.asarray(stage_tol),
+            _optimise_stage, sharpness=jnp.asarray(sharpness), settings=settings,
+            max_steps=max_steps, tol=jnp.asarray(stage_tol),
         )
-        u, steps, ok, orbits = sharded_batch(stage_run, amps, u, orbits)
+        u, steps, ok, orbits = sharded_batch(
+            lambda s, a, w, u, z: stage_run(s, a, u, z, w), systems, amps, bands, u, orbits)
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
-            f"{int(jnp.sum(ok))}/{amps.size} amplitudes converged, "
+            f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    say(f"checking the initial and retuned designs on {fine.size} frequencies x {amps.size} "
-        "amplitudes")
+    say(f"checking the initial and retuned designs on {fine.shape[-1]} frequencies x "
+        f"{amps.size} lanes")
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
     _, final_states, _, _ = orbits
     warm = _on_check_grid(jnp.concatenate([states, final_states]))
-    both = tuned_response(system, jnp.concatenate([k0, k]), jnp.concatenate([c0, c]),
-                          jnp.concatenate([amps, amps]), fine, settings, warm)
+    both_systems = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), systems,
+                                with_tuning(systems, k, c))
+    both = lane_response(both_systems, jnp.concatenate([amps, amps]),
+                         jnp.concatenate([fine, fine]), settings, warm)
     return _checked_result(both, k0, c0, k, c, ok, iterations, c_ref)
 
 
@@ -504,8 +538,8 @@ def _checked_result(both: FrequencyResponse, k0, c0, k, c, ok, iterations, c_ref
     half of amplitudes) and the retuned ones (`k`, `c`, the second half)."""
     n = k0.shape[0]
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
-    before = _peaks_from_response(initial, both.omegas)
-    after = _peaks_from_response(retuned, both.omegas)
+    before = _peaks_from_response(initial, initial.omegas)
+    after = _peaks_from_response(retuned, retuned.omegas)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )
@@ -527,7 +561,7 @@ def _checked_result(both: FrequencyResponse, k0, c0, k, c, ok, iterations, c_ref
         y_peak=after.y_peak,
         y_peak_initial=before.y_peak,
         omega_peak=after.omega_x,
-        check_omegas=both.omegas,
+        check_omegas=retuned.omegas,
         x_response=x_response,
         x_response_initial=initial.x_max,
         iterations=iterations,

@@ -9,8 +9,18 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._cache import compiled
 from ._linear import den_hartog_tuning
-from ._response import check_grid, frequency_response, scaled_states
-from ._retune import SHARPNESS, _band, _check_system, peaks, sweep
+from ._response import batched, check_grid, frequency_response, scaled_states
+from ._retune import CHECK_REFINEMENT as RETUNE_CHECK_REFINEMENT
+from ._retune import (
+    SHARPNESS,
+    _band,
+    _check_system,
+    check_optimiser_options,
+    grid_peak,
+    optimal_tunings,
+    peaks,
+    sweep,
+)
 from ._steady_state import SolverSettings
 from ._system import FIELD_NAMES, PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
@@ -42,6 +52,7 @@ _MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
 _MIN_STEP = 1e-8  # trust radius at which a stage gives up
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
+POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the polishing
 # The optimiser aims at a Newton decrement below `tol`; the noise of the orbit solver in the
 # gradients, and jumps of ~1e-8 in the log peak where a sample's concavity flips, can hold
 # it above that (most where peaks of different amplitudes balance). Within
@@ -266,7 +277,8 @@ def _stencil(u, central: bool) -> list[np.ndarray]:
     return [np.asarray(u, dtype=float)] + [u + np.asarray(step) for step in steps]
 
 
-def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str):
+def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str,
+                 candidates: str = "concave"):
     """Log peaks, their gradients in the coordinates (u0, u1, parameters `_OTHER`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
     scenario, from the curves at the designs `_stencil(u, central)` (central when there
@@ -288,7 +300,10 @@ def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str):
         dgrad[:, i, 2:] = d_jac[:, _OTHER]
     curves = stencil[0]
     values = getattr(curves, f"log_{response}")
-    mask = getattr(curves, f"mask_{response}")
+    mask = getattr(curves, f"{'mask' if candidates == 'concave' else 'peak'}_{response}")
+    if candidates == "peak":  # `retune`'s candidates: local maxima and the band ends
+        mask = mask.copy()
+        mask[[0, -1]] = True
     return values, mask, grad, dgrad
 
 
@@ -324,10 +339,13 @@ class _Evaluation(NamedTuple):
         return all(curves.converged for curves in self.centres())
 
 
-def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> _Evaluation:
+def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False,
+                     candidates="concave") -> _Evaluation:
     """Curves at the design u and its stencil for every scenario (shooting from `z_inits`,
     one state array per scenario), and the terms of the smooth maxima: each scenario's log
-    host peaks less its offset, and its log inerter peaks."""
+    host peaks less its offset, and its log inerter peaks; `candidates` "concave" (the
+    vertices at every concave sample, continuous as a peak moves past a sample) or "peak"
+    (those at local maxima, `retune`'s)."""
     designs = _stencil(u, central)
     points = []
     for scenario, z in zip(scenarios, z_inits, strict=True):
@@ -339,7 +357,7 @@ def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> _Evaluatio
     stencils = [curves[i : i + n] for i in range(0, len(curves), n)]
     host, stroke = [], []
     for scenario, stencil in zip(scenarios, stencils, strict=True):
-        values, mask, grad, dgrad = _coordinates(ctx, designs[0], stencil, "x")
+        values, mask, grad, dgrad = _coordinates(ctx, designs[0], stencil, "x", candidates)
         host.append((values - scenario.offset, mask, grad, dgrad))
         stroke.append(_coordinates(ctx, designs[0], stencil, "y"))
 
@@ -675,29 +693,44 @@ class Sensitivities(eqx.Module):
         }
 
 
-def _optimum_sensitivities(ctx, scenario, theta, minimum: _Minimum, z_inits, tol):
-    # Central differences for the curvature; at most _POLISH Newton steps with it first.
-    final = _evaluate_design(ctx, minimum.evaluation.u, [scenario], z_inits, central=True)
-    log_smooth, g, hess = _smooth_max(*final.host_terms, SHARPNESS[-1])
+def _polished(ctx, scenario, u, z_init, at_bound, tol):
+    """The evaluation (central stencil) at the optimum of the smooth log peak of `retune`
+    near u, its smooth maximum, gradient and derivatives: at most `_POLISH` Newton steps
+    from u (along u0 alone, with u1 = 0, where the damping is at its bound)."""
+    final = _evaluate_design(ctx, u, [scenario], [z_init], central=True, candidates="peak")
+    model = _Model(*_smooth_max(*final.host_terms, SHARPNESS[-1]))
+    free = slice(0, 1) if at_bound else slice(0, 2)
     for _ in range(_POLISH):
-        h_uu = 0.5 * (hess[:, :2] + hess[:, :2].T)
-        if _decrement(g[:2], h_uu) < tol:
+        g, h = model.grad[free], model.curvature()[free, free]
+        if _decrement(g, h) < tol:
             break
-        trial = _evaluate_design(
-            ctx,
-            final.u + _trust_step(g[:2], h_uu, _MAX_STEP),
-            [scenario],
-            [curves.states for curves in final.centres()],
-            central=True,
-        )
-        t_value, t_g, t_hess = _smooth_max(*trial.host_terms, SHARPNESS[-1])
-        if not t_value < log_smooth:
+        step = np.zeros(2)
+        step[free] = _trust_step(g, h, _MAX_STEP)
+        trial = _evaluate_design(ctx, final.u + step, [scenario],
+                                 [curves.states for curves in final.centres()], central=True,
+                                 candidates="peak")
+        trial_model = _Model(*_smooth_max(*trial.host_terms, SHARPNESS[-1]))
+        if not trial_model.value < model.value:
             break
-        final, log_smooth, g, hess = trial, t_value, t_g, t_hess
+        final, model = trial, trial_model
+    return final, model
+
+
+def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol):
+    """`OptimumSensitivities` at the best tuning `best[index]`, polished (see `_polished`)
+    and differentiated through its stationarity condition: in (u0, u1), or where the
+    damping is at its bound, in u0 alone with dc*/dp = 0 (the bound stays active)."""
+    at_bound = bool(best.damping_at_bound[index])
+    k, c = float(best.tid_stiffness[index]), float(best.tid_damping[index])
+    u = ctx.design(k, 0.0 if at_bound else c)
+    z_init = ctx.cold_states(k, c, [scenario.amplitude], scenario.scale)[0]
+    final, model = _polished(ctx, scenario, u, z_init, at_bound, tol)
     u = final.u
     k, c = ctx.tuning(u)
-    h_uu = 0.5 * (hess[:, :2] + hess[:, :2].T)
-    du_dp = -np.linalg.solve(h_uu, hess[:, 2:])  # [2, _OTHER]
+    g, h_uu = model.grad, model.curvature()
+    free = [0] if at_bound else [0, 1]
+    du_dp = np.zeros((2, len(_OTHER)))
+    du_dp[free] = -np.linalg.solve(h_uu[np.ix_(free, free)], model.hess[free, 2:])
     centre = final.centres()[0]
     values, _, stroke_grads, _ = _coordinates(ctx, u, final.stencils[0], "y")
     stroke_grad = stroke_grads[int(np.argmax(np.where(centre.peak_y, values, -np.inf)))]
@@ -711,13 +744,15 @@ def _optimum_sensitivities(ctx, scenario, theta, minimum: _Minimum, z_inits, tol
     dk[list(_OTHER)] = k * du_dp[0]
     dc[list(_OTHER)] = 2 * ctx.c_ref * u[1] * du_dp[1]
     host_peak, stroke_peak = centre.host_peak(), centre.stroke_peak()
-    stationary = _decrement(g[:2], h_uu) < NOISE_FACTOR * tol
+    stationary = _decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
+    # At the bound the peak must rise with the damping (a positive curvature in u1).
+    stationary &= not at_bound or h_uu[1, 1] > 0
     return OptimumSensitivities(
         tid_stiffness=jnp.asarray(k),
         tid_damping=jnp.asarray(c),
         host_peak=jnp.asarray(host_peak),
         stroke_peak=jnp.asarray(stroke_peak),
-        smooth_peak=jnp.asarray(float(np.exp(log_smooth))),
+        smooth_peak=jnp.asarray(float(np.exp(model.value))),
         host_derivative=jnp.asarray(host_peak * d_log_host),
         host_elasticity=jnp.asarray(theta * d_log_host),
         stroke_derivative=jnp.asarray(stroke_peak * d_log_stroke),
@@ -725,12 +760,28 @@ def _optimum_sensitivities(ctx, scenario, theta, minimum: _Minimum, z_inits, tol
         stiffness_derivative=jnp.asarray(dk),
         stiffness_elasticity=jnp.asarray(theta * dk / k),
         damping_derivative=jnp.asarray(dc),
-        damping_elasticity=jnp.asarray(theta * dc / c if c > 0 else np.zeros(n)),
-        gradient_norm=jnp.asarray(float(np.linalg.norm(g[:2]))),
-        iterations=jnp.asarray(minimum.steps),
-        converged=jnp.asarray(stationary and final.converged()),
-        damping_at_bound=jnp.asarray(c < DAMPING_BOUND_RATIO * ctx.c_ref),
+        # The elasticity of a quantity held at zero is undefined.
+        damping_elasticity=jnp.asarray(np.full(n, np.nan) if at_bound else theta * dc / c),
+        gradient_norm=jnp.asarray(float(np.linalg.norm(g[free]))),
+        iterations=jnp.asarray(int(best.iterations[index])),
+        converged=jnp.asarray(bool(stationary and final.converged()
+                                   and best.converged[index])),
+        damping_at_bound=jnp.asarray(at_bound),
     )
+
+
+def _best_index(best: "BestTunings", system, band, amplitude) -> tuple[int, int]:
+    """Where `best` holds the nominal scenario at `amplitude`, else `ValueError`."""
+    _check_best(best, system)
+    if best.omegas.shape != band.shape or not np.allclose(best.omegas, band, rtol=1e-12):
+        raise ValueError("omegas differ from the band best was computed on")
+    scales, amps = np.asarray(best.host_frequency_scales), np.asarray(best.amplitudes)
+    i, j = np.flatnonzero(np.isclose(scales, 1.0, rtol=1e-12)), np.flatnonzero(
+        np.isclose(amps, amplitude, rtol=1e-12))
+    if not (i.size and j.size):
+        raise ValueError(f"best holds no tuning for {amplitude:g} N at the nominal host "
+                         f"frequency (amplitudes {amps.tolist()}, scales {scales.tolist()})")
+    return int(i[0]), int(j[0])
 
 
 def sensitivities(
@@ -739,9 +790,10 @@ def sensitivities(
     *,
     omegas: ArrayLike | None = None,
     optimum: bool = True,
+    best: "BestTunings | None" = None,
     settings: SolverSettings = SolverSettings(),
-    max_steps: int = 40,
-    tol: float = 1e-9,
+    max_steps: int = 60,
+    tol: float = 1e-4,
 ) -> Sensitivities:
     """Sensitivities of the peak steady-state host displacement and inerter stroke over the
     band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
@@ -749,17 +801,19 @@ def sensitivities(
     forward-mode implicit differentiation through the periodic orbits.
 
     With `optimum=True` also at the retuned optimum (see `OptimumSensitivities`): the
-    tuning minimising the smooth peak (see `best_tunings`; from the system's tuning) is
-    found by Newton's method (at most `max_steps` steps per smooth-max stage, aiming at a
-    Newton decrement below `tol` and converged within `NOISE_FACTOR * tol`), then
-    differentiated through its stationarity condition rather than re-optimised.
+    tuning that `retune` finds (from `best`, a `BestTunings` of this system and band
+    holding `amplitude`, or else from `best_tunings` with `max_steps` and `tol`), polished
+    by at most `_POLISH` Newton steps on the same objective (aiming at a Newton decrement
+    below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
+    through its stationarity condition rather than re-optimised. Where the optimal damping
+    is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
     """
     _check_system(system)
     amplitude = _check_amplitude(amplitude)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
-    _check_options(max_steps, tol)
+    check_optimiser_options(max_steps, tol)
     ctx = _Context(system, band, settings)
     scenario = _Scenario(amplitude, 1.0, 0.0)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
@@ -770,10 +824,11 @@ def sensitivities(
     log_stroke, d_log_stroke = given.top("y")
     optimal = None
     if optimum:
-        start = ctx.design(k, c, floor=_MIN_DAMPING_START)
-        minimum = _minimise(ctx, [scenario], start, z_inits=[z_given], max_steps=max_steps, tol=tol)
-        states = [curves.states for curves in minimum.evaluation.centres()]
-        optimal = _optimum_sensitivities(ctx, scenario, theta, minimum, states, tol)
+        if best is None:
+            best = best_tunings(system, [amplitude], omegas=band, settings=settings,
+                                max_steps=max_steps, tol=tol)
+        index = _best_index(best, system, band, amplitude)
+        optimal = _optimum_sensitivities(ctx, scenario, theta, best, index, POLISH_TOL)
     host_peak, stroke_peak = np.exp(log_host), np.exp(log_stroke)
     return Sensitivities(
         parameters=PARAMETERS,
@@ -793,17 +848,22 @@ def sensitivities(
 
 
 class BestTunings(eqx.Module):
-    """For each host-frequency scale and forcing amplitude, the tuning that minimises the
-    smooth maximum over the band of the host displacement, found by Newton's method, and
-    the peaks it achieves. Arrays are `[scales, amps]`; SI.
+    """For each host-frequency scale and forcing amplitude, the retuned optimum: the tuning
+    that `retune` finds (the minimiser of the smooth maximum over the band of the host
+    displacement), and the peaks it achieves. Arrays are `[scales, amps]`; SI.
 
     - `system`: the nominal system; a scale s multiplies its host stiffness by s**2 (host
       frequency by s) and its band `omegas` (rad/s) by s.
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
-    - `host_peak`, `stroke_peak`: peak |x| and |y| over the band with it, m.
-    - `objective`: its smooth log peak (ln m), the reference of the worst-case ratio.
-    - `iterations`: Newton steps; `stationary`: the Newton decrement fell below the
-      tolerance; `converged`: stationary and every steady state in the band converged.
+    - `host_peak`: peak |x| over the band with it, m; `stroke_peak`: peak |y|, m, on the
+      check grid of `retune` (`CHECK_REFINEMENT` times finer than the band).
+    - `objective`: the smooth maximum (sharpness `SHARPNESS[-1]`) over the band of the log
+      refined host peaks at every concave sample (ln m), the reference of the worst-case
+      ratio of `robust_tune`.
+    - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
+      `converged`: `retune`'s status is ok (stationary, every steady state converged, the
+      peak inside the band and no higher than the starting tuning's on the check grid);
+      `damping_at_bound`: c = 0 is optimal.
     """
 
     system: TIDSystem
@@ -818,12 +878,31 @@ class BestTunings(eqx.Module):
     iterations: Int[Array, "scales amps"]
     stationary: Bool[Array, "scales amps"]
     converged: Bool[Array, "scales amps"]
+    damping_at_bound: Bool[Array, "scales amps"]
 
 
-def _scaled_start(ctx: _Context, system: TIDSystem, scale: float):
-    # Den Hartog's k scales with K and c with sqrt(k b): keep the frequency ratio.
-    k, c = float(system.tid_stiffness) * scale**2, float(system.tid_damping) * scale
-    return ctx.design(k, c, floor=_MIN_DAMPING_START)
+def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
+    """One system per scale s (batched fields): host stiffness times s**2 and, keeping the
+    TID's frequency ratio and damping ratio (Den Hartog's k scales with K and c with
+    sqrt(k b)), TID stiffness times s**2 and damping times s."""
+    scales = jnp.asarray(scales, float)
+    lanes = batched(system, scales.size)
+    return eqx.tree_at(
+        lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
+        lanes,
+        (lanes.host_stiffness * scales**2, lanes.tid_stiffness * scales**2,
+         lanes.tid_damping * scales),
+    )
+
+
+def _smooth_objective(values, omegas) -> np.ndarray:
+    """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
+    out = []
+    for row, grid in zip(np.asarray(values), np.asarray(omegas), strict=True):
+        logs, _, mask = (np.asarray(a) for a in _log_candidates(jnp.asarray(row), grid))
+        out.append(_smooth_max(logs, mask, np.zeros((row.size, 2)),
+                               np.zeros((row.size, 2, 2)), SHARPNESS[-1])[0])
+    return np.asarray(out)
 
 
 def best_tunings(
@@ -833,70 +912,48 @@ def best_tunings(
     host_frequency_scales: ArrayLike = (1.0,),
     omegas: ArrayLike | None = None,
     settings: SolverSettings = SolverSettings(),
-    max_steps: int = 40,
-    tol: float = 1e-9,
+    max_steps: int = 60,
+    tol: float = 1e-4,
     progress: Callable[[str], None] | None = None,
 ) -> BestTunings:
     """The best achievable peak host displacement for each forcing amplitude (N) and host
     frequency scale (host stiffness times scale**2), over the band `omegas` (rad/s, for
     the nominal system; default `default_omegas(system)`) scaled with the host frequency.
 
-    The objective is that of `retune`, a smooth maximum (sharpness rising over
-    `SHARPNESS`) of the log host peaks refined by parabolas through three samples, except
-    that the parabola vertices at every concave sample count, not only at local maxima:
-    this keeps it continuous when a peak moves past a sample, where `retune`'s jumps. It
-    is minimised from the system's tuning (k times scale**2, c times scale) by a
-    trust-region Newton method (curvature of each refined peak from differences of its
-    exact gradient), aiming at a Newton decrement below `tol` (converged within
-    `NOISE_FACTOR * tol`), at most `max_steps` steps per stage. `progress`, if given,
-    gets a line per scenario."""
+    Every scenario is retuned by `retune`'s optimiser (`max_steps`, `tol` as there), all
+    of them in one batch, from the system's tuning (k times scale**2, c times scale).
+    `progress`, if given, gets a line per optimiser stage."""
     _check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
     band = _band(system, omegas)
-    _check_options(max_steps, tol)
-    ctx = _Context(system, band, settings)
+    check_optimiser_options(max_steps, tol)
+    lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
+    bands = jnp.asarray(lane_scales[:, None] * np.asarray(band)[None])
+    result = optimal_tunings(
+        _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
+        max_steps=max_steps, tol=tol, progress=progress,
+    )
+    # The check grid holds the band's frequencies at every CHECK_REFINEMENT-th point.
+    on_band = np.asarray(result.x_response)[:, ::RETUNE_CHECK_REFINEMENT]
+    band_peaks = np.asarray(jax.vmap(lambda v, w: grid_peak(v, w)[0])(
+        jnp.asarray(on_band), bands))
     shape = (scales.size, amps.size)
-    out = {name: np.zeros(shape) for name in ("k", "c", "x", "y", "objective")}
-    steps = np.zeros(shape, dtype=int)
-    stationary, converged = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
-    for i, scale in enumerate(scales):
-        start = _scaled_start(ctx, system, float(scale))
-        states = ctx.cold_states(*ctx.tuning(start), amps, float(scale))
-        for j, amplitude in enumerate(amps):
-            scenario = _Scenario(float(amplitude), float(scale), 0.0)
-            minimum = _minimise(
-                ctx, [scenario], start, z_inits=[states[j]], max_steps=max_steps, tol=tol
-            )
-            centre = minimum.evaluation.centres()[0]
-            out["k"][i, j], out["c"][i, j] = ctx.tuning(minimum.evaluation.u)
-            out["x"][i, j], out["y"][i, j] = centre.host_peak(), centre.stroke_peak()
-            out["objective"][i, j] = minimum.objective.value
-            steps[i, j] = minimum.steps
-            stationary[i, j] = minimum.converged
-            converged[i, j] = minimum.converged and minimum.evaluation.converged()
-            if progress is not None:
-                progress(
-                    f"best tuning {i * amps.size + j + 1}/{scales.size * amps.size} "
-                    f"(A = {amplitude:g} N, host frequency x {scale:g}): "
-                    f"k/k_ref = {out['k'][i, j] / ctx.k_ref:.4f}, "
-                    f"c/c_ref = {out['c'][i, j] / ctx.c_ref:.4f}, {minimum.steps} steps"
-                    + ("" if stationary[i, j] else ", not stationary")
-                    + ("" if minimum.evaluation.converged() else ", steady states failed")
-                )
+    grid = lambda a: jnp.asarray(np.asarray(a).reshape(shape))
     return BestTunings(
         system=system,
         omegas=band,
         amplitudes=jnp.asarray(amps),
         host_frequency_scales=jnp.asarray(scales),
-        tid_stiffness=jnp.asarray(out["k"]),
-        tid_damping=jnp.asarray(out["c"]),
-        host_peak=jnp.asarray(out["x"]),
-        stroke_peak=jnp.asarray(out["y"]),
-        objective=jnp.asarray(out["objective"]),
-        iterations=jnp.asarray(steps),
-        stationary=jnp.asarray(stationary),
-        converged=jnp.asarray(converged),
+        tid_stiffness=grid(result.tid_stiffness),
+        tid_damping=grid(result.tid_damping),
+        host_peak=grid(band_peaks),
+        stroke_peak=grid(result.y_peak),
+        objective=grid(_smooth_objective(on_band, bands)),
+        iterations=grid(result.iterations),
+        stationary=grid(np.asarray(result.status) != 1),
+        converged=grid(result.converged),
+        damping_at_bound=grid(result.damping_at_bound),
     )
 
 
@@ -1118,8 +1175,6 @@ def robust_tune(
             host_frequency_scales=scales,
             omegas=omegas,
             settings=settings,
-            max_steps=max_steps,
-            tol=tol,
             progress=progress,
         )
     else:

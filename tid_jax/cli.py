@@ -25,7 +25,13 @@ from ._io import check_writable_dir, json_text, write_csv, write_json, write_tom
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
-from ._robust import PARAMETER_UNITS, robust_tune, sensitivities, tuning_performance
+from ._robust import (
+    PARAMETER_UNITS,
+    best_tunings,
+    robust_tune,
+    sensitivities,
+    tuning_performance,
+)
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._system import (
@@ -1011,6 +1017,7 @@ SENSITIVITY_COLUMNS = (
     "optimum_damping_elasticity",
     "converged",
     "optimum_converged",
+    "optimum_damping_at_bound",
 )
 
 
@@ -1046,12 +1053,16 @@ def _run_sensitivity(args) -> int:
         f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
         f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
     )
+    best = None
+    if not args.no_optimum:
+        output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
+        best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
+                            progress=output.say)
     results = []
     for i, amplitude in enumerate(amplitudes):
         results.append(
-            sensitivities(
-                system, amplitude, omegas=omegas, optimum=not args.no_optimum, settings=settings
-            )
+            sensitivities(system, amplitude, omegas=omegas, optimum=not args.no_optimum,
+                          best=best, settings=settings)
         )
         output.say(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
 
@@ -1059,6 +1070,7 @@ def _run_sensitivity(args) -> int:
     for amplitude, result in zip(amplitudes, results, strict=True):
         optimum = result.optimum
         for i, name in enumerate(result.parameters):
+            at_bound = optimum is not None and bool(optimum.damping_at_bound)
             optimal = (
                 [None] * 8
                 if optimum is None
@@ -1068,8 +1080,9 @@ def _run_sensitivity(args) -> int:
                     float(optimum.host_elasticity[i]),
                     float(optimum.stroke_elasticity[i]),
                     float(optimum.stiffness_elasticity[i]),
-                    float(optimum.damping_elasticity[i]),
-                    None,
+                    # Undefined (c* held at 0 by its bound): left empty.
+                    None if at_bound else float(optimum.damping_elasticity[i]),
+                    at_bound,
                     bool(optimum.converged),
                 ]
             )
@@ -1087,6 +1100,7 @@ def _run_sensitivity(args) -> int:
                 *optimal[:6],
                 bool(result.converged),
                 optimal[7],
+                optimal[6],
             ]
             records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
 
@@ -1151,7 +1165,8 @@ def _run_sensitivity(args) -> int:
                     f"{r['optimum_host_elasticity']:.4f}",
                     f"{r['optimum_stroke_elasticity']:.4f}",
                     f"{r['optimum_stiffness_elasticity']:.4f}",
-                    f"{r['optimum_damping_elasticity']:.4f}",
+                    "c* at 0" if r["optimum_damping_at_bound"]
+                    else f"{r['optimum_damping_elasticity']:.4f}",
                 ]
             rows.append(row)
     unconverged = [
@@ -1162,7 +1177,8 @@ def _run_sensitivity(args) -> int:
     title = (
         f"Sensitivities of the peak responses ({_describe(system)}); e_x, e_y: elasticities "
         f"d ln(peak) / d ln(p) of the host peak and the inerter stroke; 'retuned': at the "
-        f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c; ranked by |e_x|"
+        f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c ('c* at 0': the "
+        f"optimal damping is at its bound 0, where it stays); ranked by |e_x|"
         + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
     )
     return output.finish(data, title + "\n" + _format_table(header, rows))
