@@ -15,10 +15,12 @@ from ._retune import (
     SHARPNESS,
     _band,
     _check_system,
+    _local_peaks,
     check_optimiser_options,
     grid_peak,
     optimal_tunings,
     peaks,
+    smooth_log_peak,
     sweep,
 )
 from ._steady_state import SolverSettings
@@ -79,30 +81,11 @@ ROBUST_STATUS_MESSAGES = {
 
 
 def _log_candidates(values, omegas):
-    """Log of the parabola-refined value at every grid point of `values` over `omegas`, and
-    two masks: the points `_retune.grid_peak` chooses among (interior local maxima and the
-    band ends), and the candidates of the smooth worst case (every interior point where the
-    samples are concave, and the band ends). At a local maximum the value is the vertex of
-    the parabola through the point and its neighbours, clipped to between the neighbours;
-    keeping the vertices of concave points beside a peak makes the smooth maximum continuous
-    as the peak moves past a grid point, where the local maximum changes hands."""
-    v0, v1, v2 = values[:-2], values[1:-1], values[2:]
-    w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
-    h0, h1 = w1 - w0, w2 - w1
-    d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
-    curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
-    concave = curvature < 0
-    safe = jnp.where(concave, curvature, -1.0)
-    slope = d0 + curvature * h0
-    shift = jnp.clip(-slope / (2 * safe), -h0, h1)
-    vertex = jnp.where(concave, jnp.maximum(v1 + slope * shift + safe * shift**2, v1), v1)
-    is_peak = (v1 >= v0) & (v1 >= v2) & concave
-    true = jnp.ones(1, dtype=bool)
-    return (
-        jnp.log(jnp.concatenate([values[:1], vertex, values[-1:]])),
-        jnp.concatenate([true, is_peak, true]),
-        jnp.concatenate([true, concave, true]),
-    )
+    """Log of the parabola-refined value at every grid point of `values` over `omegas`
+    (`_retune._local_peaks`), and the candidates of the smooth worst case: the points
+    `_retune.grid_peak` chooses among (interior local maxima and the band ends)."""
+    peaks, _, is_peak = _local_peaks(values, omegas)
+    return jnp.log(peaks), is_peak.at[0].set(True).at[-1].set(True)
 
 
 def _changed_system(system, theta, scale):
@@ -129,9 +112,9 @@ def _point_curves(system, theta, scale, omegas, settings, z_init):
     `PARAMETERS`), with the host stiffness multiplied by `scale**2`."""
     changed = _changed_system(system, theta, scale)
     xs, ys, converged, states = sweep(changed, theta[-1], omegas, settings, z_init)
-    log_x, peak_x, mask_x = _log_candidates(xs, omegas)
-    log_y, peak_y, mask_y = _log_candidates(ys, omegas)
-    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, mask_x, mask_y, converged, states)
+    log_x, peak_x = _log_candidates(xs, omegas)
+    log_y, peak_y = _log_candidates(ys, omegas)
+    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, converged, states)
 
 
 @compiled
@@ -158,15 +141,13 @@ def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init):
 
 class _Curves(NamedTuple):
     """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency,
-    the masks of `_log_candidates`, Jacobians `[freqs, PARAMETERS]`, convergence of every
+    the candidate masks of `_log_candidates`, Jacobians `[freqs, PARAMETERS]`, convergence of every
     orbit, and the orbits' states."""
 
     log_x: np.ndarray
     log_y: np.ndarray
     peak_x: np.ndarray
     peak_y: np.ndarray
-    mask_x: np.ndarray
-    mask_y: np.ndarray
     jac_x: np.ndarray
     jac_y: np.ndarray
     converged: bool
@@ -214,7 +195,21 @@ class _Context:
         return theta
 
     def evaluate(self, points: Sequence[tuple]) -> list[_Curves]:
-        """`_Curves` at each `(theta, scale, z_init)`, `_CHUNK` points per compiled call."""
+        """`_Curves` at each `(theta, scale, z_init)`; points where a steady state did not
+        converge are tried again with each of `SolverSettings.fallbacks()` in turn."""
+        results = self._evaluate(points, self.settings)
+        for settings in self.settings.fallbacks():
+            failed = [i for i, curves in enumerate(results) if not curves.converged]
+            if not failed:
+                break
+            retried = self._evaluate([points[i] for i in failed], settings)
+            for i, curves in zip(failed, retried, strict=True):
+                if curves.converged:
+                    results[i] = curves
+        return results
+
+    def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
+        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call."""
         results = []
         for start in range(0, len(points), _CHUNK):
             chunk = list(points[start : start + _CHUNK])
@@ -226,13 +221,13 @@ class _Context:
                 jnp.asarray(thetas),
                 jnp.asarray(scales, dtype=float),
                 self.ratio_grid,
-                self.settings,
+                settings,
                 jnp.asarray(z_init),
             )
             jac_x, jac_y = np.asarray(jac_x), np.asarray(jac_y)
             aux = [np.asarray(a) for a in aux]
             for i in range(used):
-                log_x, log_y, peak_x, peak_y, mask_x, mask_y, converged, states = (
+                log_x, log_y, peak_x, peak_y, converged, states = (
                     a[i] for a in aux
                 )
                 results.append(
@@ -241,8 +236,6 @@ class _Context:
                         log_y,
                         peak_x,
                         peak_y,
-                        mask_x,
-                        mask_y,
                         jac_x[i],
                         jac_y[i],
                         bool(np.all(converged)),
@@ -277,8 +270,7 @@ def _stencil(u, central: bool) -> list[np.ndarray]:
     return [np.asarray(u, dtype=float)] + [u + np.asarray(step) for step in steps]
 
 
-def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str,
-                 candidates: str = "concave"):
+def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str):
     """Log peaks, their gradients in the coordinates (u0, u1, parameters `_OTHER`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
     scenario, from the curves at the designs `_stencil(u, central)` (central when there
@@ -300,11 +292,7 @@ def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str,
         dgrad[:, i, 2:] = d_jac[:, _OTHER]
     curves = stencil[0]
     values = getattr(curves, f"log_{response}")
-    mask = getattr(curves, f"{'mask' if candidates == 'concave' else 'peak'}_{response}")
-    if candidates == "peak":  # `retune`'s candidates: local maxima and the band ends
-        mask = mask.copy()
-        mask[[0, -1]] = True
-    return values, mask, grad, dgrad
+    return values, getattr(curves, f"peak_{response}"), grad, dgrad
 
 
 def _smooth_max(values, mask, grad, dgrad, sharpness):
@@ -339,13 +327,10 @@ class _Evaluation(NamedTuple):
         return all(curves.converged for curves in self.centres())
 
 
-def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False,
-                     candidates="concave") -> _Evaluation:
+def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> _Evaluation:
     """Curves at the design u and its stencil for every scenario (shooting from `z_inits`,
     one state array per scenario), and the terms of the smooth maxima: each scenario's log
-    host peaks less its offset, and its log inerter peaks; `candidates` "concave" (the
-    vertices at every concave sample, continuous as a peak moves past a sample) or "peak"
-    (those at local maxima, `retune`'s)."""
+    host peaks less its offset, and its log inerter peaks."""
     designs = _stencil(u, central)
     points = []
     for scenario, z in zip(scenarios, z_inits, strict=True):
@@ -357,7 +342,7 @@ def _evaluate_design(ctx, u, scenarios, z_inits, *, central=False,
     stencils = [curves[i : i + n] for i in range(0, len(curves), n)]
     host, stroke = [], []
     for scenario, stencil in zip(scenarios, stencils, strict=True):
-        values, mask, grad, dgrad = _coordinates(ctx, designs[0], stencil, "x", candidates)
+        values, mask, grad, dgrad = _coordinates(ctx, designs[0], stencil, "x")
         host.append((values - scenario.offset, mask, grad, dgrad))
         stroke.append(_coordinates(ctx, designs[0], stencil, "y"))
 
@@ -488,6 +473,11 @@ def _step(f: _Model, c: _Model | None, radius) -> np.ndarray:
     return to_line + np.clip(t, -reach, reach) * n
 
 
+def _finite(model: _Model) -> bool:
+    return bool(np.isfinite(model.value) and model.grad is not None
+                and np.all(np.isfinite(model.grad)) and np.all(np.isfinite(model.hess)))
+
+
 def _merit(f: _Model, c: _Model | None, weight) -> float:
     return f.value + (weight * max(c.value, 0.0) if c is not None else 0.0)
 
@@ -534,7 +524,10 @@ def _minimise(
             )
             steps += 1
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
-            actual = _merit(f, c, weight) - _merit(t_f, t_c, weight)
+            # A design where a steady state failed, or whose model is not finite, is a
+            # rejected step: its peaks are unknown.
+            usable = trial.converged() and all(_finite(m) for m in (t_f, t_c) if m is not None)
+            actual = _merit(f, c, weight) - _merit(t_f, t_c, weight) if usable else -np.inf
             ratio = actual / predicted if np.isfinite(actual) else -np.inf
             length = np.linalg.norm(step)
             if ratio < 0.25:
@@ -697,7 +690,7 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol):
     """The evaluation (central stencil) at the optimum of the smooth log peak of `retune`
     near u, its smooth maximum, gradient and derivatives: at most `_POLISH` Newton steps
     from u (along u0 alone, with u1 = 0, where the damping is at its bound)."""
-    final = _evaluate_design(ctx, u, [scenario], [z_init], central=True, candidates="peak")
+    final = _evaluate_design(ctx, u, [scenario], [z_init], central=True)
     model = _Model(*_smooth_max(*final.host_terms, SHARPNESS[-1]))
     free = slice(0, 1) if at_bound else slice(0, 2)
     for _ in range(_POLISH):
@@ -707,8 +700,7 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol):
         step = np.zeros(2)
         step[free] = _trust_step(g, h, _MAX_STEP)
         trial = _evaluate_design(ctx, final.u + step, [scenario],
-                                 [curves.states for curves in final.centres()], central=True,
-                                 candidates="peak")
+                                 [curves.states for curves in final.centres()], central=True)
         trial_model = _Model(*_smooth_max(*trial.host_terms, SHARPNESS[-1]))
         if not trial_model.value < model.value:
             break
@@ -857,9 +849,9 @@ class BestTunings(eqx.Module):
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
     - `host_peak`: peak |x| over the band with it, m; `stroke_peak`: peak |y|, m, on the
       check grid of `retune` (`CHECK_REFINEMENT` times finer than the band).
-    - `objective`: the smooth maximum (sharpness `SHARPNESS[-1]`) over the band of the log
-      refined host peaks at every concave sample (ln m), the reference of the worst-case
-      ratio of `robust_tune`.
+    - `objective`: `retune`'s smooth log peak (`smooth_log_peak`, sharpness
+      `SHARPNESS[-1]`) over the band (ln m), the reference of the worst-case ratio of
+      `robust_tune`.
     - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
       `converged`: `retune`'s status is ok (stationary, every steady state converged, the
       peak inside the band and no higher than the starting tuning's on the check grid);
@@ -897,12 +889,8 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
 
 def _smooth_objective(values, omegas) -> np.ndarray:
     """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
-    out = []
-    for row, grid in zip(np.asarray(values), np.asarray(omegas), strict=True):
-        logs, _, mask = (np.asarray(a) for a in _log_candidates(jnp.asarray(row), grid))
-        out.append(_smooth_max(logs, mask, np.zeros((row.size, 2)),
-                               np.zeros((row.size, 2, 2)), SHARPNESS[-1])[0])
-    return np.asarray(out)
+    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, SHARPNESS[-1]))
+    return np.asarray(smooth(jnp.asarray(values), jnp.asarray(omegas)))
 
 
 def best_tunings(
