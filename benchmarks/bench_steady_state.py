@@ -15,8 +15,10 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
   and looser integration tolerances (a row of its own for the fastest whose peaks all
   match the reference within 1e-4 on all 732 points, where that beats the default);
 - time per orbit against batch size;
-- the 12-amplitude paper retune in a child process (cold, then warm) and `tid-jax retune`
-  end to end, cold and again with the compilation cache filled by the first run;
+- the 12-amplitude paper retune in a child process (cold, then warm), and `tid-jax
+  retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
+  cold and again with the compilation cache filled by the first run (`--cli-only`: this
+  table alone, written to its own block of `--readme`);
 - reach: random structures (`tests/reference/family.py`) at a friction width of 1e-4 m/s,
   each against the independent transient reference of `tests/reference/transient.py`.
 """
@@ -127,14 +129,17 @@ print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run_cli_retune(cache_dir, limit_s):
-    """Wall time of `tid-jax retune` on the paper's defaults, end to end, in a child
+CLI_COMMANDS = ("retune", "sensitivity", "robust")
+
+
+def run_cli(command, cache_dir, limit_s):
+    """Wall time of `tid-jax COMMAND` on the paper's defaults, end to end, in a child
     process, with the compilation cache in `cache_dir`; None if stopped at `limit_s`."""
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         try:
             done = subprocess.run(
-                [sys.executable, "-m", "tid_jax.cli", "retune", "--out", folder, "--quiet",
+                [sys.executable, "-m", "tid_jax.cli", command, "--out", folder, "--quiet",
                  "--cache-dir", cache_dir],
                 capture_output=True, text=True, timeout=limit_s,
             )
@@ -143,6 +148,20 @@ def run_cli_retune(cache_dir, limit_s):
         if done.returncode != 0:
             raise RuntimeError(done.stderr[-3000:])
         return time.perf_counter() - start
+
+
+def cli_table(limit_s) -> list[str]:
+    """`tid-jax retune`, `sensitivity` and `robust` on the paper's defaults, each with an
+    empty compilation cache and again with the cache its first run filled: table rows."""
+    rows = ["| command (paper defaults, end to end) | first run, empty cache | "
+            "second run, cache filled |", "|---|---|---|"]
+    for command in CLI_COMMANDS:
+        with tempfile.TemporaryDirectory() as cache:
+            cold = run_cli(command, cache, limit_s)
+            warm = run_cli(command, cache, limit_s)
+        text = ["stopped" if wall is None else f"{wall:.0f} s" for wall in (cold, warm)]
+        rows.append(f"| `tid-jax {command}` | {text[0]} | {text[1]} |")
+    return rows
 
 
 def reach(n, seed):
@@ -180,7 +199,15 @@ def main():
     parser.add_argument("--readme", help="markdown file whose benchmark tables are replaced")
     parser.add_argument("--skip-retune", action="store_true")
     parser.add_argument("--reach", type=int, default=200, help="random structures (0: none)")
+    parser.add_argument("--cli-only", action="store_true",
+                        help="only the command-line table (its own block in --readme)")
     args = parser.parse_args()
+    if args.cli_only:
+        lines = cli_table(TIME_LIMIT_S)
+        print("\n".join(lines))
+        if args.readme:
+            replace_block(args.readme, "cli-table", lines)
+        return
 
     system = tj.paper_system(friction_width=WIDTH)
     plain = dict(system.to_dict())
@@ -237,12 +264,10 @@ def main():
         _, cold = timed(call)
         scaling.append((size, cold, warm_time(call, budget_s=2.0 if size < 1000 else 0)))
 
-    retune = cli_cold = cli_warm = None
+    retune = cli_rows = None
     if not args.skip_retune:
         retune = run_retune_child(TIME_LIMIT_S)
-        with tempfile.TemporaryDirectory() as cache:
-            cli_cold = run_cli_retune(cache, TIME_LIMIT_S)
-            cli_warm = run_cli_retune(cache, TIME_LIMIT_S)
+        cli_rows = cli_table(TIME_LIMIT_S)
     reached = reach(args.reach, 0) if args.reach else None
 
     say(f"Date: {datetime.date.today().isoformat()}; machine: {platform.processor() or 'x86_64'}"
@@ -290,10 +315,9 @@ def main():
                        f"{retune['cold']:.0f} s cold (import and compilation included), "
                        f"{retune['warm']:.1f} s warm; {retune['ok']}/12 status ok")
         say(f"| paper retune, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies | {retune_text} |")
-        for name, wall in (("first run, empty compilation cache", cli_cold),
-                           ("second run, compilation cache filled", cli_warm)):
-            text = "stopped" if wall is None else f"{wall:.0f} s"
-            say(f"| `tid-jax retune` end to end (paper defaults), {name} | {text} |")
+        say()
+        for row in cli_rows:
+            say(row)
     if reached is not None:
         say()
         say(f"Reach: {reached['converged']}/{reached['n']} random structures converged "
@@ -303,13 +327,20 @@ def main():
             f"{reached['worst']:.1e}).")
 
     if args.readme:
-        with open(args.readme) as f:
-            text = f.read()
-        begin, end = "<!-- table:begin -->", "<!-- table:end -->"
-        head, _, rest = text.partition(begin)
-        _, _, tail = rest.partition(end)
-        with open(args.readme, "w") as f:
-            f.write(head + begin + "\n" + "\n".join(lines) + "\n" + end + tail)
+        replace_block(args.readme, "table", lines)
+
+
+def replace_block(path, name, lines):
+    """Replace the lines between `<!-- NAME:begin -->` and `<!-- NAME:end -->` in `path`."""
+    with open(path) as f:
+        text = f.read()
+    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    if begin not in text or end not in text:
+        raise SystemExit(f"{path} has no {begin} ... {end} block")
+    head, _, rest = text.partition(begin)
+    _, _, tail = rest.partition(end)
+    with open(path, "w") as f:
+        f.write(head + begin + "\n" + "\n".join(lines) + "\n" + end + tail)
 
 
 if __name__ == "__main__":
