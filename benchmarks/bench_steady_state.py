@@ -153,7 +153,9 @@ def run_cli(command, cache_dir, limit_s):
 def cli_table(limit_s) -> list[str]:
     """`tid-jax retune`, `sensitivity` and `robust` on the paper's defaults, each with an
     empty compilation cache and again with the cache its first run filled: table rows."""
-    rows = ["| command (paper defaults, end to end) | first run, empty cache | "
+    rows = [f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, JAX "
+            f"{jax.__version__}.", "",
+            "| command (paper defaults, end to end) | first run, empty cache | "
             "second run, cache filled |", "|---|---|---|"]
     for command in CLI_COMMANDS:
         with tempfile.TemporaryDirectory() as cache:
