@@ -54,23 +54,35 @@ def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Arr
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 
-def _local_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """Parabolic refinement of every interior local maximum of `values` on the (possibly
-    non-uniform) grid `omegas`. Returns `(peak, omega_peak, is_peak)` per grid point: at
-    local maxima the vertex of the parabola through the point and its neighbours, else the
-    value itself with `is_peak` False."""
+def parabola_vertices(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
+    """At every interior sample of `values` on the (possibly non-uniform) grid `omegas`
+    where the samples are concave, the vertex of the parabola through it and its
+    neighbours: its value (no less than the sample's) and frequency (between the
+    neighbours'); elsewhere the sample itself. Returns `(value, omega, is_peak)` for the
+    interior points, `is_peak` marking the local maxima."""
     v0, v1, v2 = values[:-2], values[1:-1], values[2:]
     w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
     h0, h1 = w1 - w0, w2 - w1
     d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
     curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
-    is_peak = (v1 >= v0) & (v1 >= v2) & (curvature < 0)
-    safe = jnp.where(is_peak, curvature, -1.0)
+    concave = curvature < 0
+    safe = jnp.where(concave, curvature, -1.0)
     slope = d0 + curvature * h0  # first derivative at w1
     shift = jnp.clip(-slope / (2 * safe), -h0, h1)
     vertex = v1 + slope * shift + safe * shift**2
-    peak = jnp.where(is_peak, jnp.maximum(vertex, v1), v1)
-    omega_peak = jnp.where(is_peak, w1 + shift, w1)
+    value = jnp.where(concave, jnp.maximum(vertex, v1), v1)
+    omega = jnp.where(concave, w1 + shift, w1)
+    return value, omega, (v1 >= v0) & (v1 >= v2) & concave
+
+
+def _local_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
+    """Parabolic refinement of every interior local maximum of `values` on the (possibly
+    non-uniform) grid `omegas`. Returns `(peak, omega_peak, is_peak)` per grid point: at
+    local maxima the vertex of the parabola through the point and its neighbours, else the
+    value itself with `is_peak` False."""
+    vertex, omega_vertex, is_peak = parabola_vertices(values, omegas)
+    peak = jnp.where(is_peak, vertex, values[1:-1])
+    omega_peak = jnp.where(is_peak, omega_vertex, omegas[1:-1])
     edge = lambda a, i: jnp.concatenate([a[:1], i, a[-1:]])
     false = jnp.zeros(1, dtype=bool)
     return edge(values, peak), edge(omegas, omega_peak), jnp.concatenate([false, is_peak, false])

@@ -18,6 +18,7 @@ from ._retune import (
     check_optimiser_options,
     grid_peak,
     optimal_tunings,
+    parabola_vertices,
     peaks,
     smooth_log_peak,
     sweep,
@@ -84,20 +85,11 @@ def _log_candidates(values, omegas):
     the candidates of the smooth worst case: the points `_retune.grid_peak` chooses among
     (interior local maxima and the band ends). The value at every sample where the samples
     are concave is the vertex of the parabola through it and its neighbours, clipped to
-    between them, as `_retune._local_peaks` refines a local maximum: it stays the same
-    function of the design while a peak moves to a neighbouring sample, so differences of
-    its gradient between nearby designs give the curvature of the refined peak."""
-    v0, v1, v2 = values[:-2], values[1:-1], values[2:]
-    w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
-    h0, h1 = w1 - w0, w2 - w1
-    d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
-    curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
-    concave = curvature < 0
-    safe = jnp.where(concave, curvature, -1.0)
-    slope = d0 + curvature * h0
-    shift = jnp.clip(-slope / (2 * safe), -h0, h1)
-    vertex = jnp.where(concave, jnp.maximum(v1 + slope * shift + safe * shift**2, v1), v1)
-    is_peak = (v1 >= v0) & (v1 >= v2) & concave
+    between them (`_retune.parabola_vertices`), as `grid_peak` refines a local maximum: it
+    stays the same function of the design while a peak moves to a neighbouring sample, so
+    differences of its gradient between nearby designs give the curvature of the refined
+    peak."""
+    vertex, _, is_peak = parabola_vertices(values, omegas)
     true = jnp.ones(1, dtype=bool)
     return (
         jnp.log(jnp.concatenate([values[:1], vertex, values[-1:]])),
