@@ -150,8 +150,8 @@ def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init):
 
 class _Curves(NamedTuple):
     """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency,
-    the candidate masks of `_log_candidates`, Jacobians `[freqs, PARAMETERS]`, convergence of every
-    orbit, and the orbits' states."""
+    their candidate masks (`_log_candidates`), Jacobians `[freqs, PARAMETERS]`, convergence
+    of every orbit, and the orbits' states."""
 
     log_x: np.ndarray
     log_y: np.ndarray
@@ -483,8 +483,9 @@ def _step(f: _Model, c: _Model | None, radius) -> np.ndarray:
 
 
 def _finite(model: _Model) -> bool:
-    return bool(np.isfinite(model.value) and model.grad is not None
-                and np.all(np.isfinite(model.grad)) and np.all(np.isfinite(model.hess)))
+    # `_smooth_max` gives no derivatives (None) only with a non-finite value.
+    return bool(np.isfinite(model.value) and np.all(np.isfinite(model.grad))
+                and np.all(np.isfinite(model.hess)))
 
 
 def _merit(f: _Model, c: _Model | None, weight) -> float:
