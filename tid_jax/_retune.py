@@ -376,14 +376,17 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
         return xs, (jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
     def one(system, amplitude, omegas, u_start, z_start):
-        def objective(u, warm):
+        def traced_objective(u, warm):
             xs, orbits = design_sweep(system, omegas, u, amplitude, warm)
             static = amplitude / system.host_stiffness
             return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(orbits)
 
+        # Traced once: the optimiser's steps replay this trace rather than tracing the
+        # steady-state solves again.
+        objective = eqx.filter_closure_convert(traced_objective, u_start, z_start)
         # Every shooting solve starts from the orbits of the last accepted design, so that
         # the Newton iterations of the steady states follow the optimiser.
-        f_struct, aux_struct = jax.eval_shape(objective, u_start, z_start)
+        f_struct, aux_struct = objective.out_struct
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
 
         def cond(carry):

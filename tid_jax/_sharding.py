@@ -18,6 +18,7 @@ sharded over all of them. On CPU, several devices can be simulated with
 JAX).
 """
 
+import equinox as eqx
 import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
@@ -92,13 +93,17 @@ def map_batch(function, batch, chunk: int, valid=None):
         a = a.reshape(parts, chunks * chunk, *a.shape[3:])[:, :length]
         return a.reshape(size, *a.shape[2:])
 
-    mapped = jax.vmap(function)
-    shapes = jax.eval_shape(mapped, jax.tree.map(lambda a: a[:chunk], batch))
+    # Traced once, here: the chunks' computation and the shapes of its outputs (for the
+    # zeros of a skipped chunk) both come from this one trace.
+    mapped = eqx.filter_closure_convert(
+        jax.vmap(function), jax.tree.map(lambda a: a[:chunk], batch)
+    )
+    shapes = mapped.out_struct
 
     def one_chunk(args):
         part_batch, part_valid = args
         return jax.lax.cond(
-            jax.numpy.any(part_valid), mapped,
+            jax.numpy.any(part_valid), lambda chunk_batch: mapped(chunk_batch),
             lambda _: jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), shapes),
             part_batch,
         )
