@@ -1,0 +1,229 @@
+"""Sensitivities of the peak response and of the optimal tuning: `tj.sensitivities`
+against finite differences, re-optimised differences and exact scaling laws."""
+
+import numpy as np
+import pytest
+
+import tid_jax as tj
+
+N_FREQUENCIES = 21
+SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there
+
+
+@pytest.fixture(scope="module")
+def system():
+    return tj.paper_system()
+
+
+@pytest.fixture(scope="module")
+def band(system):
+    return np.asarray(tj.default_omegas(system, N_FREQUENCIES))
+
+
+@pytest.fixture(scope="module")
+def sensitivity(system, band):
+    return tj.sensitivities(system, SENSITIVITY_AMPLITUDE, omegas=band)
+
+
+def _perturbed(system, amplitude, name, value):
+    if name == "amplitude":
+        return system, value
+    return system.replace(**{name: value}), amplitude
+
+
+def _peaks(system, amplitude, band):
+    result = tj.peaks(system, [amplitude], band)
+    return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
+
+
+# --- sensitivities ---------------------------------------------------------------------
+
+
+def test_sensitivities_match_finite_differences(system, band, sensitivity):
+    # Five-point central differences of the peaks found by `tj.peaks` (relative step 5e-4).
+    assert sensitivity.parameters == tuple(tj._system.FIELD_NAMES[:7]) + ("amplitude",)
+    assert bool(sensitivity.converged)
+    x0, y0 = _peaks(system, SENSITIVITY_AMPLITUDE, band)
+    assert float(sensitivity.host_peak) == pytest.approx(x0, rel=1e-7)
+    assert float(sensitivity.stroke_peak) == pytest.approx(y0, rel=1e-7)
+    for i, name in enumerate(sensitivity.parameters):
+        value = float(sensitivity.values[i])
+        h = 5e-4 * value
+
+        def f(step, name=name, value=value):
+            changed, amplitude = _perturbed(system, SENSITIVITY_AMPLITUDE, name, value + step)
+            return _peaks(changed, amplitude, band)
+
+        fd = (8 * (f(h) - f(-h)) - (f(2 * h) - f(-2 * h))) / (12 * h)
+        assert float(sensitivity.host_derivative[i]) == pytest.approx(fd[0], rel=1e-4), name
+        assert float(sensitivity.stroke_derivative[i]) == pytest.approx(fd[1], rel=1e-4), name
+        assert float(sensitivity.host_elasticity[i]) == pytest.approx(value * fd[0] / x0, rel=1e-4)
+        assert float(sensitivity.stroke_elasticity[i]) == pytest.approx(
+            value * fd[1] / y0, rel=1e-4
+        )
+
+
+def test_elasticities_obey_scaling_laws(sensitivity):
+    # Exact laws of eq. (12), whatever the solver. Multiplying every mass, stiffness,
+    # damping and force by s leaves x and y unchanged: the elasticities sum to 0. The
+    # forcing and friction forces set the response only through A/K and ff/A up to a scale:
+    # x(s A, s ff) = s x(A, ff), so e_A + e_ff = 1. (The friction width, a velocity, is held
+    # fixed by both.) At the optimum the same laws hold with k, c free: the host and stroke
+    # elasticities over the other parameters sum to 0 and e_A + e_ff = 1, k* scales with
+    # stiffness (its elasticities sum to 1) and c* likewise, and neither depends on A, ff
+    # apart from ff / A.
+    index = {name: i for i, name in enumerate(sensitivity.parameters)}
+    a, f = index["amplitude"], index["friction_force"]
+    optimum = sensitivity.optimum
+    # The envelope theorem needs first derivatives only; the moving optimum also needs the
+    # curvature of the objective, from differences of first derivatives: looser.
+    for e, tol in (
+        (sensitivity.host_elasticity, 1e-4),
+        (sensitivity.stroke_elasticity, 1e-4),
+        (optimum.host_elasticity, 1e-4),
+        (optimum.stroke_elasticity, 3e-3),
+    ):
+        e = np.asarray(e)
+        assert np.sum(e) == pytest.approx(0.0, abs=tol)
+        assert e[a] + e[f] == pytest.approx(1.0, abs=tol)
+    for e in (optimum.stiffness_elasticity, optimum.damping_elasticity):
+        e = np.asarray(e)
+        assert np.sum(e) == pytest.approx(1.0, abs=3e-3)
+        assert e[a] + e[f] == pytest.approx(0.0, abs=3e-3)
+
+
+def _reoptimised_log_differences(system, amplitude, band, name, value, rel, amplitudes=None):
+    """Central differences, in ln p, of the optimum found afresh (`best_tunings` at
+    `amplitudes`, default `amplitude` alone, polished by `sensitivities`) at p (1 +- rel):
+    of its smooth peak, k* and c*."""
+    ends = []
+    for sign in (1, -1):
+        changed = system.replace(**{name: value * (1 + sign * rel)})
+        best = tj.best_tunings(changed, amplitudes or [amplitude], omegas=band, tol=1e-6)
+        optimum = tj.sensitivities(changed, amplitude, omegas=band, best=best).optimum
+        assert bool(optimum.converged)
+        ends.append(optimum)
+
+    def d_log(field):
+        return float(np.log(getattr(ends[0], field) / getattr(ends[1], field)) / (2 * rel))
+
+    return d_log
+
+
+def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensitivity):
+    optimum = sensitivity.optimum
+    assert bool(optimum.converged)
+    assert not bool(optimum.damping_at_bound)
+    index = {name: i for i, name in enumerate(sensitivity.parameters)}
+    assert float(optimum.host_elasticity[index["tid_stiffness"]]) == 0.0
+    assert float(optimum.smooth_peak) >= float(optimum.host_peak)
+    assert float(optimum.smooth_peak) <= float(optimum.host_peak) * 1.003
+    for name in ("friction_force", "host_damping"):
+        i = index[name]
+        d_log = _reoptimised_log_differences(
+            system, SENSITIVITY_AMPLITUDE, band, name, float(sensitivity.values[i]), 1e-3
+        )
+        assert float(optimum.host_elasticity[i]) == pytest.approx(d_log("smooth_peak"), rel=1e-3)
+        if name == "friction_force":
+            # Implicit derivatives of the optimal tuning, looser: the optimum's damping lies
+            # along a flat valley, so re-optimised differences of it carry the optimiser's
+            # tolerance (host damping hardly moves k* and c*: there it is all noise).
+            assert float(optimum.stiffness_elasticity[i]) == pytest.approx(
+                d_log("tid_stiffness"), rel=0.02
+            )
+            assert float(optimum.damping_elasticity[i]) == pytest.approx(
+                d_log("tid_damping"), rel=0.02
+            )
+
+
+def test_optimum_at_the_damping_bound_and_at_3000_n(system):
+    # On the default band. At 100 N the optimal damping is 0 (the friction damps enough):
+    # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the
+    # elasticities of c* are undefined; k* moves as re-optimised differences say. At 3000 N,
+    # nearly linear, the optimum converges too.
+    band = np.asarray(tj.default_omegas(system))
+    amplitudes = [100.0, 3000.0]
+    best = tj.best_tunings(system, amplitudes, omegas=band)
+    assert bool(best.damping_at_bound[0, 0]) and not bool(best.damping_at_bound[0, 1])
+    low = tj.sensitivities(system, 100.0, omegas=band, best=best)
+    high = tj.sensitivities(system, 3000.0, omegas=band, best=best)
+    assert bool(high.optimum.converged) and not bool(high.optimum.damping_at_bound)
+    assert np.all(np.isfinite(np.asarray(high.optimum.damping_elasticity)))
+    optimum = low.optimum
+    assert bool(optimum.converged) and bool(optimum.damping_at_bound)
+    assert float(optimum.tid_damping) == 0.0
+    assert np.all(np.asarray(optimum.damping_derivative) == 0.0)
+    assert np.all(np.isnan(np.asarray(optimum.damping_elasticity)))
+    index = {name: i for i, name in enumerate(low.parameters)}
+    for name in ("friction_force", "host_mass"):
+        i = index[name]
+        d_log = _reoptimised_log_differences(
+            system, 100.0, band, name, float(low.values[i]), 1e-3, amplitudes
+        )
+        assert float(optimum.stiffness_elasticity[i]) == pytest.approx(
+            d_log("tid_stiffness"), rel=0.02, abs=1e-3
+        ), name
+        assert float(optimum.host_elasticity[i]) == pytest.approx(
+            d_log("smooth_peak"), rel=1e-3
+        ), name
+
+
+def test_optimum_is_a_minimum_of_the_peak(system, band, sensitivity):
+    # Independent of the optimiser: no neighbouring tuning (+-3% in k, +-6% in c) has a
+    # lower peak host displacement by `tj.peaks`.
+    optimum = sensitivity.optimum
+    k, c = float(optimum.tid_stiffness), float(optimum.tid_damping)
+    at_optimum = _peaks(
+        system.replace(tid_stiffness=k, tid_damping=c), SENSITIVITY_AMPLITUDE, band
+    )[0]
+    assert at_optimum == pytest.approx(float(optimum.host_peak), rel=1e-7)
+    assert at_optimum < float(sensitivity.host_peak)  # better than Den Hartog's
+    for dk, dc in [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]:
+        neighbour = system.replace(
+            tid_stiffness=k * (1 + 0.03 * dk), tid_damping=c * (1 + 0.06 * dc)
+        )
+        assert _peaks(neighbour, SENSITIVITY_AMPLITUDE, band)[0] > at_optimum, (dk, dc)
+
+
+def test_sensitivities_reject_bad_input(system):
+    with pytest.raises(ValueError, match="amplitude"):
+        tj.sensitivities(system, -1.0)
+    with pytest.raises(ValueError, match="amplitude"):
+        tj.sensitivities(system, [100.0, 200.0])
+    with pytest.raises(ValueError, match="system"):
+        tj.sensitivities("paper", 100.0)
+    with pytest.raises(ValueError, match="max_steps"):
+        tj.sensitivities(system, 100.0, max_steps=0)
+    with pytest.raises(ValueError, match="tol"):
+        tj.sensitivities(system, 100.0, tol=-1.0)
+    with pytest.raises(ValueError, match="omegas"):
+        tj.sensitivities(system, 100.0, omegas=[1.0, 2.0])
+
+
+# --- command line ----------------------------------------------------------------------
+
+
+def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, sensitivity):
+    from tid_jax import cli
+
+    status = cli.main(
+        [
+            "sensitivity",
+            "--amplitudes",
+            str(SENSITIVITY_AMPLITUDE),
+            "--n-frequencies",
+            str(N_FREQUENCIES),
+            "--no-optimum",
+            "--quiet",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert status == 0
+    lines = capsys.readouterr().out.splitlines()
+    first = lines[3].split()  # after the title, the header and the rule
+    order = np.argsort(-np.abs(np.asarray(sensitivity.host_elasticity)))
+    assert first[1] == sensitivity.parameters[order[0]]
+    assert float(first[5]) == pytest.approx(float(sensitivity.host_elasticity[order[0]]), abs=1e-4)
+    with open(tmp_path / "sensitivity.csv") as file:
+        assert len(file.readlines()) == 1 + len(sensitivity.parameters)
