@@ -139,8 +139,8 @@ def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensi
 def test_optimum_at_the_damping_bound_and_at_3000_n(system):
     # On the default band. At 100 N the optimal damping is 0 (the friction damps enough):
     # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the
-    # elasticities of c* are undefined; k* moves as re-optimised differences say. At 3000 N,
-    # nearly linear, the optimum converges too.
+    # elasticities of c* are undefined; k* moves as re-optimised differences and the scaling
+    # laws say. At 3000 N, nearly linear, the optimum converges too.
     band = np.asarray(tj.default_omegas(system))
     amplitudes = [100.0, 3000.0]
     best = tj.best_tunings(system, amplitudes, omegas=band)
@@ -155,17 +155,22 @@ def test_optimum_at_the_damping_bound_and_at_3000_n(system):
     assert np.all(np.asarray(optimum.damping_derivative) == 0.0)
     assert np.all(np.isnan(np.asarray(optimum.damping_elasticity)))
     index = {name: i for i, name in enumerate(low.parameters)}
-    for name in ("friction_force", "host_mass"):
-        i = index[name]
-        d_log = _reoptimised_log_differences(
-            system, 100.0, band, name, float(low.values[i]), 1e-3, amplitudes
-        )
-        assert float(optimum.stiffness_elasticity[i]) == pytest.approx(
-            d_log("tid_stiffness"), rel=0.02, abs=1e-3
-        ), name
-        assert float(optimum.host_elasticity[i]) == pytest.approx(
-            d_log("smooth_peak"), rel=1e-3
-        ), name
+    i = index["friction_force"]
+    d_log = _reoptimised_log_differences(
+        system, 100.0, band, "friction_force", float(low.values[i]), 1e-3, amplitudes
+    )
+    assert float(optimum.stiffness_elasticity[i]) == pytest.approx(
+        d_log("tid_stiffness"), rel=0.02, abs=1e-3
+    )
+    assert float(optimum.host_elasticity[i]) == pytest.approx(d_log("smooth_peak"), rel=1e-3)
+    # Every other parameter through the exact scaling laws (test_elasticities_obey_scaling_laws),
+    # which hold with c* held at 0 too: k*'s elasticities sum to 1, the peak's to 0.
+    a = index["amplitude"]
+    k_star, peak = np.asarray(optimum.stiffness_elasticity), np.asarray(optimum.host_elasticity)
+    assert np.sum(k_star) == pytest.approx(1.0, abs=3e-3)
+    assert k_star[a] + k_star[i] == pytest.approx(0.0, abs=3e-3)
+    assert np.sum(peak) == pytest.approx(0.0, abs=1e-4)
+    assert peak[a] + peak[i] == pytest.approx(1.0, abs=1e-4)
 
 
 def test_optimum_is_a_minimum_of_the_peak(system, band, sensitivity):
