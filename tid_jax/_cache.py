@@ -48,8 +48,9 @@ def default_cache_dir() -> Path | None:
 
 def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path | None:
     """Keep compiled programs in `directory` (default `default_cache_dir()`): JAX's
-    persistent compilation cache for every program that takes more than 0.1 s to
-    compile, and the traced programs of this package's entry points in its `programs/`.
+    persistent compilation cache for every program, however quickly it compiles (the
+    small ones of the array operations between the solves add up to seconds), and the
+    traced programs of this package's entry points in its `programs/`.
     Call it before the first computation. Returns the folder, or `None` (and changes
     nothing) when the cache is turned off or its folder cannot be created."""
     global _programs_folder
@@ -66,7 +67,7 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     # does when set before equinox is imported.
     equinox._errors.EQX_ON_ERROR = "nan"
     jax.config.update("jax_compilation_cache_dir", str(folder))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _programs_folder = folder / PROGRAMS
     _prune(_programs_folder, time.time() - STALE_DAYS * 86400)
