@@ -3,6 +3,8 @@ import tempfile
 from pathlib import Path
 
 import jax
+import numpy as np
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 
@@ -18,6 +20,7 @@ if "TID_JAX_CACHE_DIR" not in os.environ:
         folder.mkdir(exist_ok=True)
     os.environ["TID_JAX_CACHE_DIR"] = str(folder)
 
+import tid_jax as tj  # noqa: E402
 from tid_jax._cache import enable_compilation_cache  # noqa: E402
 
 enable_compilation_cache()
@@ -38,3 +41,17 @@ SLOWEST_FIRST = (
 def pytest_collection_modifyitems(items):
     rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+@pytest.fixture(scope="module")
+def system():
+    """The paper's system (section 4: M = 1500 kg, 4 Hz, 2%; b = 75 kg, ff = 20 N; Den
+    Hartog's tuning)."""
+    return tj.paper_system()
+
+
+@pytest.fixture(scope="module")
+def band(system):
+    """A coarse band for the design tests: the default band (0.65-1.4 times the host
+    frequency) at 21 frequencies, rad/s."""
+    return np.asarray(tj.default_omegas(system, 21))

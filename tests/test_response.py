@@ -12,11 +12,6 @@ REFERENCE_RATIOS = [0.85, 0.9, 0.95, 1.0, 1.05, 1.1]
 
 
 @pytest.fixture(scope="module")
-def system():
-    return tj.paper_system()
-
-
-@pytest.fixture(scope="module")
 def omegas(system):
     return RATIOS * float(system.host_frequency)
 

@@ -11,11 +11,6 @@ PAPER_RETUNED = {200.0: (1.09, 0.45), 400.0: (1.034, 0.85), 600.0: (1.018, 0.9)}
 
 
 @pytest.fixture(scope="module")
-def system():
-    return tj.paper_system()
-
-
-@pytest.fixture(scope="module")
 def band(system):
     # Narrower than the default band (both peaks stay inside for every design visited here),
     # so that 31 frequencies resolve the peaks as finely as the default 61 do.

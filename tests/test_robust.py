@@ -5,19 +5,8 @@ import pytest
 
 import tid_jax as tj
 
-N_FREQUENCIES = 21
 ROBUST_AMPLITUDES = (100.0, 200.0, 3000.0)  # N: the ends of the paper's range and 200 N
 PAPER_RULE = (1.05, 0.9)  # k and c over Den Hartog's: the paper's "+5% k, -10% c"
-
-
-@pytest.fixture(scope="module")
-def system():
-    return tj.paper_system()
-
-
-@pytest.fixture(scope="module")
-def band(system):
-    return np.asarray(tj.default_omegas(system, N_FREQUENCIES))
 
 
 # --- robust design ---------------------------------------------------------------------

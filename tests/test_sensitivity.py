@@ -6,18 +6,7 @@ import pytest
 
 import tid_jax as tj
 
-N_FREQUENCIES = 21
 SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there
-
-
-@pytest.fixture(scope="module")
-def system():
-    return tj.paper_system()
-
-
-@pytest.fixture(scope="module")
-def band(system):
-    return np.asarray(tj.default_omegas(system, N_FREQUENCIES))
 
 
 @pytest.fixture(scope="module")
@@ -208,7 +197,7 @@ def test_sensitivities_reject_bad_input(system):
 # --- command line ----------------------------------------------------------------------
 
 
-def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, sensitivity):
+def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, band, sensitivity):
     from tid_jax import cli
 
     status = cli.main(
@@ -217,7 +206,7 @@ def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, sensitivity):
             "--amplitudes",
             str(SENSITIVITY_AMPLITUDE),
             "--n-frequencies",
-            str(N_FREQUENCIES),
+            str(len(band)),
             "--no-optimum",
             "--quiet",
             "--out",
