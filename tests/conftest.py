@@ -1,29 +1,32 @@
 import os
+import shutil
 import tempfile
-from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 
+# Before the package is imported, so that nothing it makes at import is single precision.
 jax.config.update("jax_enable_x64", True)
-
-# Compiled programs are kept on disk for the whole test session, as the command line keeps
-# them for a user: in a folder of this session (shared by the parallel test workers and by
-# the commands run as subprocesses), never the user's.
-if "TID_JAX_CACHE_DIR" not in os.environ:
-    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
-    if run is None:
-        folder = tempfile.mkdtemp(prefix="tid_jax_test_cache_")
-    else:
-        folder = Path(tempfile.gettempdir()) / f"tid_jax_test_cache_{run}"
-        folder.mkdir(exist_ok=True)
-    os.environ["TID_JAX_CACHE_DIR"] = str(folder)
 
 import tid_jax as tj  # noqa: E402
 from tid_jax._cache import enable_compilation_cache  # noqa: E402
 
+# Compiled programs are kept on disk for the whole test session, as the command line keeps
+# them for a user: in a folder of this session (made by the first process, shared by the
+# parallel test workers and by the commands run as subprocesses, which inherit the
+# variable), never the user's; the process that made it deletes it at the end.
+_session_cache = None
+if "TID_JAX_CACHE_DIR" not in os.environ:
+    _session_cache = tempfile.mkdtemp(prefix="tid_jax_test_cache_")
+    os.environ["TID_JAX_CACHE_DIR"] = _session_cache
 enable_compilation_cache()
+
+
+def pytest_sessionfinish(session):
+    if _session_cache is not None:
+        shutil.rmtree(_session_cache, ignore_errors=True)
+
 
 # The modules that take longest (each compiles its own retune or robust design programs),
 # slowest first: the parallel workers (pytest-xdist, one file per worker at a time) start
