@@ -94,7 +94,8 @@ def map_batch(function, batch, chunk: int, valid=None):
         return a.reshape(size, *a.shape[2:])
 
     # Traced once, here: the chunks' computation and the shapes of its outputs (for the
-    # zeros of a skipped chunk) both come from this one trace.
+    # zeros of a skipped chunk) both come from this one trace. (`lax.cond` hashes its
+    # branches, which a closure-converted Module is not: it is called from a lambda.)
     mapped = eqx.filter_closure_convert(
         jax.vmap(function), jax.tree.map(lambda a: a[:chunk], batch)
     )
