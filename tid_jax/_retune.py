@@ -12,11 +12,23 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._cache import compiled
 from ._dynamics import PARAMETERS, parameters
 from ._linear import den_hartog_tuning
+from ._peaks import (
+    PEAK_NEWTON_STEPS,
+    REFINED_PEAKS,
+    bracket,
+    grid_peak,
+    interpolated,
+    newton_peak,
+    smooth_log_peak,
+    stencil,
+    stencil_points,
+    top_peaks,
+    true_peaks,
+)
 from ._response import (
     FrequencyResponse,
     batched,
     check_grid,
-    frequency_response,
     lane_response,
     point_response,
     scaled_states,
@@ -31,7 +43,7 @@ from ._system import TIDSystem
 BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
 # Sharpness of the smooth maximum (in log-peak units) at each continuation stage.
-SHARPNESS = (50.0, 1000.0)
+SHARPNESS = (50.0, 1000.0, 30000.0)
 # Optimiser tolerance of every stage but the last.
 CONTINUATION_TOL = 1e-3
 # Refinement of the check grid: the design grid with CHECK_REFINEMENT - 1 frequencies
@@ -54,74 +66,6 @@ def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Arr
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 
-def parabola_vertices(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """At every interior sample of `values` on the (possibly non-uniform) grid `omegas`
-    where the samples are concave, the vertex of the parabola through it and its
-    neighbours: its value (no less than the sample's) and frequency (between the
-    neighbours'); elsewhere the sample itself. Returns `(value, omega, is_peak)` for the
-    interior points, `is_peak` marking the local maxima."""
-    v0, v1, v2 = values[:-2], values[1:-1], values[2:]
-    w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
-    h0, h1 = w1 - w0, w2 - w1
-    d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
-    curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
-    concave = curvature < 0
-    safe = jnp.where(concave, curvature, -1.0)
-    slope = d0 + curvature * h0  # first derivative at w1
-    shift = jnp.clip(-slope / (2 * safe), -h0, h1)
-    vertex = v1 + slope * shift + safe * shift**2
-    value = jnp.where(concave, jnp.maximum(vertex, v1), v1)
-    omega = jnp.where(concave, w1 + shift, w1)
-    return value, omega, (v1 >= v0) & (v1 >= v2) & concave
-
-
-def _local_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """Parabolic refinement of every interior local maximum of `values` on the (possibly
-    non-uniform) grid `omegas`. Returns `(peak, omega_peak, is_peak)` per grid point: at
-    local maxima the vertex of the parabola through the point and its neighbours, else the
-    value itself with `is_peak` False."""
-    vertex, omega_vertex, is_peak = parabola_vertices(values, omegas)
-    peak = jnp.where(is_peak, vertex, values[1:-1])
-    omega_peak = jnp.where(is_peak, omega_vertex, omegas[1:-1])
-    edge = lambda a, i: jnp.concatenate([a[:1], i, a[-1:]])
-    false = jnp.zeros(1, dtype=bool)
-    return edge(values, peak), edge(omegas, omega_peak), jnp.concatenate([false, is_peak, false])
-
-
-def grid_peak(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """The maximum over frequency of `values` sampled on `omegas`, refined by a parabola
-    through the largest sample and its neighbours. Returns `(peak, omega_peak, at_edge)`."""
-    peaks, omega_peaks, _ = _local_peaks(values, omegas)
-    i = jnp.argmax(peaks)
-    return peaks[i], omega_peaks[i], (i == 0) | (i == values.shape[0] - 1)
-
-
-def smooth_log_peak(values: Float[Array, " freqs"], omegas, sharpness) -> Float[Array, ""]:
-    """Smooth maximum (log-sum-exp with `sharpness`) of the logarithms of the refined local
-    peaks of `values` (and of the band ends): it tends to log of `grid_peak` as the
-    sharpness grows, and stays differentiable where two peaks are equal."""
-    peaks, _, is_peak = _local_peaks(values, omegas)
-    candidates = is_peak.at[0].set(True).at[-1].set(True)
-    logs = jnp.where(candidates, jnp.log(peaks), -jnp.inf)
-    return jax.nn.logsumexp(sharpness * logs) / sharpness
-
-
-# Local maxima of the host response (interior, or band ends) whose three-point stencils
-# take the Newton iteration with tangents inside the optimiser; the others' values enter
-# the smooth maximum without derivatives (their weight there is negligible).
-PEAK_STENCILS = 3
-
-
-def _peak_lanes(values: Float[Array, " freqs"], omegas) -> Int[Array, " lanes"]:
-    """Grid indices of the three-point stencils around the `PEAK_STENCILS` highest refined
-    local maxima (or band ends) of `values`; repeats where there are fewer."""
-    peaks, _, is_peak = _local_peaks(jax.lax.stop_gradient(values), omegas)
-    candidates = is_peak.at[0].set(True).at[-1].set(True)
-    count = min(PEAK_STENCILS, values.shape[0])
-    _, top = jax.lax.top_k(jnp.where(candidates, peaks, -jnp.inf), count)
-    return jnp.clip(top[:, None] + jnp.arange(-1, 2), 0, values.shape[0] - 1).reshape(-1)
-
-
 def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
     """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
     one amplitude, shooting from `z_init` (one state per frequency) if given."""
@@ -136,7 +80,9 @@ def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init
 
 
 class Peaks(eqx.Module):
-    """Peak steady-state responses over a frequency band, per amplitude (SI)."""
+    """Peak steady-state responses over a frequency band, per amplitude (SI): of the host,
+    the maximum in continuous frequency; of the inerter terminal (the stroke), the grid's
+    refined by a parabola (see `response_peaks`)."""
 
     amplitudes: Float[Array, " amps"]
     x_peak: Float[Array, " amps"]  # m, NaN where a steady state in the band did not converge
@@ -147,20 +93,43 @@ class Peaks(eqx.Module):
     converged: Bool[Array, " amps"]  # every steady state in the band converged
 
 
-def _peaks_from_response(response: FrequencyResponse, omegas) -> Peaks:
-    """`Peaks` from a `FrequencyResponse` over amplitudes x `omegas` (one grid, or one row
-    per amplitude)."""
-    omegas = jnp.broadcast_to(omegas, response.x_max.shape)
-    x = jax.vmap(grid_peak)(response.x_max, omegas)
-    y = jax.vmap(grid_peak)(response.y_max, omegas)
+def response_peaks(systems: TIDSystem, response: FrequencyResponse,
+                   settings: SolverSettings) -> Peaks:
+    """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
+    true maxima over frequency of |x| (`_peaks.true_peaks`; every Newton step's stencils
+    of every lane solved in one batch, each steady state shot from the grid's orbits,
+    interpolated), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
+    can have corners, where the highest of the terminal's excursions within a period
+    changes, which Newton steps on its slope would miss). NaN where a steady state in the
+    band, or of a stencil, did not converge."""
+    omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
+    states = scaled_states(response, systems.host_stiffness)
     converged = jnp.all(response.converged, axis=-1)
+    # Selection only: an orbit that was not found makes the lane's peaks NaN below.
+    grid = jnp.where(response.converged, response.x_max, 0.0)
+    index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
+    lower, upper, interior = jax.vmap(bracket)(index, omegas)
+    for step in range(PEAK_NEWTON_STEPS):
+        at = jax.vmap(ft.partial(stencil, points=stencil_points(step)))(centre, interior)
+        flat = at.reshape(at.shape[0], -1)
+        warm = jax.vmap(interpolated)(states, omegas, flat)
+        solved = lane_response(systems, response.amplitudes, flat, settings, warm)
+        converged &= jnp.all(solved.converged, axis=-1)
+        peak, centre = jax.vmap(newton_peak)(solved.x_max.reshape(at.shape), at, lower, upper,
+                                             interior)
+    best = jnp.argmax(jnp.where(valid, peak, -jnp.inf), axis=1)
+
+    def take(a):
+        return jnp.take_along_axis(a, best[:, None], axis=1)[:, 0]
+
+    y, omega_y, _ = jax.vmap(grid_peak)(response.y_max, omegas)
     return Peaks(
         amplitudes=response.amplitudes,
-        x_peak=jnp.where(converged, x[0], jnp.nan),
-        y_peak=jnp.where(converged, y[0], jnp.nan),
-        omega_x=x[1],
-        omega_y=y[1],
-        at_edge=x[2],
+        x_peak=jnp.where(converged, take(peak), jnp.nan),
+        y_peak=jnp.where(converged, y, jnp.nan),
+        omega_x=take(centre),
+        omega_y=omega_y,
+        at_edge=(take(index) == 0) | (take(index) == omegas.shape[-1] - 1),
         converged=converged,
     )
 
@@ -189,11 +158,14 @@ def peaks(
     settings: SolverSettings = SolverSettings(),
 ) -> Peaks:
     """Peak host and inerter displacement over the band `omegas` (rad/s; default
-    `default_omegas(system)`) for each amplitude (N), all in one batched call."""
+    `default_omegas(system)`) for each amplitude (N): the maxima in continuous frequency
+    (each of the highest local maxima on the grid located by Newton steps on the slope of
+    the response, see `_peaks`), all amplitudes in one batch."""
     _check_system(system)
     band = _band(system, omegas)
-    amps = np.atleast_1d(check_grid("amplitudes", amplitudes))
-    return _peaks_from_response(frequency_response(system, band, amps, settings=settings), band)
+    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
+    systems = batched(system, amps.size)
+    return response_peaks(systems, lane_response(systems, amps, band, settings), settings)
 
 
 def peak_response(
@@ -209,7 +181,9 @@ def peak_response(
     (`response="host"`, max |x|) or of the inerter terminal (`"inerter"`, max |y|, the
     stroke). Differentiable with respect to every field of `system` and `amplitude`
     (implicit differentiation through the periodic orbits; envelope theorem at the peak).
-    NaN where a steady state in the band did not converge."""
+    The host's peak is the maximum in continuous frequency, the inerter's the grid's
+    refined by a parabola (see `response_peaks`). NaN where a steady state in the band did
+    not converge."""
     _check_system(system)
     if response not in ("host", "inerter"):
         raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
@@ -223,9 +197,22 @@ def peak_response(
 
 @compiled
 def _peak_response(system, amplitude, omegas, host, settings):
-    xs, ys, converged, _ = sweep(system, amplitude, omegas, settings)
+    xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
+    if host:
+        def solve(step, at):
+            del step
+            z0 = interpolated(states, omegas, at)
+            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
+                system, amplitude, at, settings, z0)
+            return jnp.where(ok, x, jnp.nan)
+
+        selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
+        _, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
+        peak = jnp.max(jnp.where(valid, peaks, -jnp.inf))
+    else:
+        peak = grid_peak(ys, omegas)[0]  # see `response_peaks`
     # The maximum over a band with an orbit that was not found is unknown.
-    return jnp.where(jnp.all(converged), grid_peak(xs if host else ys, omegas)[0], jnp.nan)
+    return jnp.where(jnp.all(converged), peak, jnp.nan)
 
 
 class RetuneResult(eqx.Module):
@@ -341,13 +328,17 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
     tags = frozenset()
 
     def design_sweep(system, omegas, u, amplitude, warm):
-        """Host peaks (m) at every frequency, and the orbits of the design `u`, from the
-        orbits `warm` of a nearby design (its tuning, then per frequency the scaled state,
-        monodromy matrix and state derivatives with respect to the tuning): every steady
-        state is predicted to first order at `u` and settled by chord iterations without
-        tangents; then only the points around the highest peaks (which alone set the
-        objective and its gradient) take the Newton iteration with tangents, which gives
-        their derivatives and renews their monodromy matrices."""
+        """Host peaks (m) at every frequency, the true maxima over frequency of the highest
+        of them, and the orbits of the design `u`, from the orbits `warm` of a nearby
+        design (its tuning, then per frequency the scaled state, monodromy matrix and state
+        derivatives with respect to the tuning): every steady state is predicted to first
+        order at `u` and settled by chord iterations without tangents; each of the
+        `REFINED_PEAKS` highest local maxima is then located in continuous frequency by
+        Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
+        shot from the grid's orbits (interpolated) with the monodromy matrix of the
+        peak's grid point: the first by chord iterations, the last with tangents, which
+        give the peaks' derivatives and renew the monodromy matrices at those grid points.
+        Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
         k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
                                          system.inertance)
         k, c = _design_to_tuning(u, k_ref, c_ref)
@@ -356,30 +347,44 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
         change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
         scale = amplitude / system.host_stiffness
 
-        def settle(omega, z0, monodromy, derivative):
+        def settle(omega, z0, monodromy):
             p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
-            z, x_samples = settled_state(z0 + derivative @ change, p, settings, monodromy)
+            z, x_samples = settled_state(z0, p, settings, monodromy)
             return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
 
-        states, xs = jax.vmap(settle)(omegas, states, monodromies, derivatives)
-        lanes = _peak_lanes(xs, omegas)
+        states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)
+        index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
+        lower, upper, interior = bracket(index, omegas)
 
-        def full(omega, z0):
-            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, None,
+        def on_stencil(f, at):
+            nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + (4, 4))
+            return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
+
+        for step in range(PEAK_NEWTON_STEPS - 1):
+            at = stencil(centre, interior, stencil_points(step))
+            _, values = on_stencil(settle, at)
+            _, centre = newton_peak(values, at, lower, upper, interior)
+
+        def full(omega, z0, monodromy):
+            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
                                               DESIGN_PARAMETERS)
-            return x_max, (orbit.state, orbit.monodromy, orbit.state_derivatives)
+            return x_max, (orbit.monodromy, orbit.state_derivatives)
 
-        x_lanes, (z_lanes, m_lanes, d_lanes) = jax.vmap(full)(omegas[lanes], states[lanes])
-        xs = jax.lax.stop_gradient(xs).at[lanes].set(x_lanes)
-        orbits = (states.at[lanes].set(z_lanes), monodromies.at[lanes].set(m_lanes),
-                  derivatives.at[lanes].set(d_lanes))
-        return xs, (jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
+        at = stencil(centre, interior, stencil_points(PEAK_NEWTON_STEPS - 1))
+        values, (m_new, d_new) = on_stencil(full, at)
+        peak, _ = newton_peak(values, at, lower, upper, interior)
+        mid = at.shape[1] // 2
+        orbits = (states, monodromies.at[index].set(m_new[:, mid]),
+                  derivatives.at[index].set(d_new[:, mid]))
+        return (jax.lax.stop_gradient(xs), (index, peak)), (
+            jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
     def one(system, amplitude, omegas, u_start, z_start):
         def traced_objective(u, warm):
-            xs, orbits = design_sweep(system, omegas, u, amplitude, warm)
+            (xs, (index, peak)), orbits = design_sweep(system, omegas, u, amplitude, warm)
             static = amplitude / system.host_stiffness
-            return smooth_log_peak(xs / static, omegas, sharpness), jax.lax.stop_gradient(orbits)
+            objective = smooth_log_peak(xs / static, omegas, sharpness, (index, peak / static))
+            return objective, jax.lax.stop_gradient(orbits)
 
         # Traced once: the optimiser's steps replay this trace rather than tracing the
         # steady-state solves again.
@@ -455,7 +460,8 @@ def retune(
     its frequencies batched; with several JAX devices, one sequence per device), so that
     each optimiser stops as soon as it converges; the checks are batched over every
     amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
-    maximum of the parabola-refined local peaks whose sharpness grows over `SHARPNESS`
+    maximum of the local peaks (the highest located in continuous frequency, so that the
+    optimum does not depend on where the grid falls) whose sharpness grows over `SHARPNESS`
     (continuation), each stage a BFGS run (optimistix's, with its Newton step capped at
     `MAX_DESIGN_STEP`; at most `max_steps` iterations, tolerance `tol` for the last stage
     (on the scaled design variables and the log peak: the default 1e-4 settles k to about
@@ -465,9 +471,10 @@ def retune(
     through the periodic orbits. The first stage starts from the initial tuning's orbits
     on the design grid. At every design, each steady state is predicted to first order
     from the orbit of the last accepted design and settled by chord iterations with the
-    latest monodromy matrix at its frequency; only the points around the `PEAK_STENCILS`
-    highest peaks then take a Newton iteration whose tangents give the derivatives and
-    renew their monodromy matrices. The initial and retuned
+    latest monodromy matrix at its frequency; the `REFINED_PEAKS` highest local maxima
+    are then located in continuous frequency by Newton steps on the slope of the response
+    (`_peaks`), the last with tangents, which give the derivatives of the true peaks and
+    renew the monodromy matrices at their grid points. The initial and retuned
     designs are then solved afresh (each steady state starting from the design's orbits)
     on a grid `CHECK_REFINEMENT` times finer; a design whose peak there is above the
     initial tuning's is replaced by the initial tuning (status 4). `progress`, if given,
@@ -544,17 +551,20 @@ def optimal_tunings(
                                 with_tuning(systems, k, c))
     both = lane_response(both_systems, jnp.concatenate([amps, amps]),
                          jnp.concatenate([fine, fine]), settings, warm)
-    return _checked_result(both, k0, c0, k, c, ok, iterations, c_ref)
+    found = response_peaks(both_systems, both, settings)
+    return _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref)
 
 
 @eqx.filter_jit
-def _checked_result(both: FrequencyResponse, k0, c0, k, c, ok, iterations, c_ref):
+def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, iterations,
+                    c_ref):
     """The `RetuneResult` from the check `both` of the initial designs (`k0`, `c0`, its first
-    half of amplitudes) and the retuned ones (`k`, `c`, the second half)."""
+    half of amplitudes) and the retuned ones (`k`, `c`, the second half), and their true
+    peaks `found`."""
     n = k0.shape[0]
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
-    before = _peaks_from_response(initial, initial.omegas)
-    after = _peaks_from_response(retuned, retuned.omegas)
+    before = jax.tree.map(lambda a: a[:n], found)
+    after = jax.tree.map(lambda a: a[n:], found)
     status = jnp.where(
         ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
     )

@@ -9,6 +9,15 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._cache import compiled
 from ._linear import den_hartog_tuning
+from ._peaks import (
+    PEAK_NEWTON_STEPS,
+    REFINED_PEAKS,
+    grid_peak,
+    interpolated,
+    parabola_vertices,
+    smooth_log_peak,
+    true_peaks,
+)
 from ._response import batched, check_grid, frequency_response, scaled_states
 from ._retune import CHECK_REFINEMENT as RETUNE_CHECK_REFINEMENT
 from ._retune import (
@@ -16,11 +25,7 @@ from ._retune import (
     _band,
     _check_system,
     check_optimiser_options,
-    grid_peak,
     optimal_tunings,
-    parabola_vertices,
-    peaks,
-    smooth_log_peak,
     sweep,
 )
 from ._steady_state import SolverSettings
@@ -65,6 +70,9 @@ _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
 # on a grid CHECK_REFINEMENT times finer; if it is exceeded there the design-grid target is
 # lowered by the excess and the design polished again (at most _STROKE_ROUNDS times).
 STROKE_MARGIN = 0.005
+# Sharpness of the smooth worst case over the scenarios of the robust design, in stages:
+# its ratios need not balance as finely as the peaks of one optimum (`_retune.SHARPNESS`).
+ROBUST_SHARPNESS = (50.0, 1000.0)
 CHECK_REFINEMENT = 4
 _STROKE_ROUNDS = 3
 DAMPING_BOUND_RATIO = 1e-3  # c / c_ref below which c >= 0 is reported as active
@@ -80,21 +88,22 @@ ROBUST_STATUS_MESSAGES = {
 # --- the kernel: refined peaks and their derivatives at a few designs ---------------------
 
 
-def _log_candidates(values, omegas):
-    """Log of the parabola-refined value at every grid point of `values` over `omegas`, and
-    the candidates of the smooth worst case: the points `_retune.grid_peak` chooses among
-    (interior local maxima and the band ends). The value at every sample where the samples
-    are concave is the vertex of the parabola through it and its neighbours, clipped to
-    between them (`_retune.parabola_vertices`), as `grid_peak` refines a local maximum: it
-    stays the same function of the design while a peak moves to a neighbouring sample, so
-    differences of its gradient between nearby designs give the curvature of the refined
-    peak."""
+def _log_candidates(values, omegas, true):
+    """Log of the parabola-refined value at every grid point of `values` over `omegas`,
+    then of the true peaks `true = (index, peaks, valid)` (`_peaks.true_peaks`, in the
+    order of their grid indices), and the candidates of the smooth worst case: the
+    true peaks, and the other interior local maxima and band ends. The value at every
+    sample where the samples are concave is the vertex of the parabola through it and its
+    neighbours, clipped to between them (`_peaks.parabola_vertices`). Between nearby
+    designs, the same entry holds the same peak (the true peaks in the order of
+    frequency, wherever the grid falls), so that differences of its gradient give its
+    curvature."""
+    index, peaks, valid = true
     vertex, _, is_peak = parabola_vertices(values, omegas)
-    true = jnp.ones(1, dtype=bool)
-    return (
-        jnp.log(jnp.concatenate([values[:1], vertex, values[-1:]])),
-        jnp.concatenate([true, is_peak, true]),
-    )
+    true_mask = jnp.ones(1, dtype=bool)
+    grid_mask = jnp.concatenate([true_mask, is_peak, true_mask]).at[index].set(False)
+    logs = jnp.log(jnp.concatenate([values[:1], vertex, values[-1:], peaks]))
+    return logs, jnp.concatenate([grid_mask, valid])
 
 
 def _changed_system(system, theta, scale):
@@ -116,29 +125,51 @@ def _changed_system(system, theta, scale):
     )
 
 
-def _point_curves(system, theta, scale, omegas, settings, z_init):
-    """Log refined peaks of |x| and |y| (m) over `omegas` for the parameters `theta` (order
-    `PARAMETERS`), with the host stiffness multiplied by `scale**2`."""
+def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
+    """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
+    `locate` (see `_log_candidates`), for the parameters `theta` (order `PARAMETERS`),
+    with the host stiffness multiplied by `scale**2`."""
     changed = _changed_system(system, theta, scale)
     xs, ys, converged, states = sweep(changed, theta[-1], omegas, settings, z_init)
-    log_x, peak_x = _log_candidates(xs, omegas)
-    log_y, peak_y = _log_candidates(ys, omegas)
-    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, converged, states)
+    states = jax.lax.stop_gradient(states)
+
+    def located(values):
+        def solve(step, at):
+            # Only the last Newton step's values are differentiated.
+            t = theta if step == PEAK_NEWTON_STEPS - 1 else jax.lax.stop_gradient(theta)
+            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
+                _changed_system(system, t, scale), t[-1], at, settings,
+                interpolated(states, omegas, at))
+            return jnp.where(ok, x, jnp.nan)
+
+        selection = jnp.where(converged, jax.lax.stop_gradient(values), 0.0)
+        index, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
+        order = jnp.argsort(index)
+        return index[order], peaks[order], valid[order]
+
+    # The host's peaks are located in continuous frequency, the stroke's are the grid's
+    # (see `_retune.response_peaks`).
+    none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
+    true_x = located(xs) if locate else none
+    converged = jnp.concatenate([converged, jnp.isfinite(true_x[1]) | ~true_x[2]])
+    log_x, peak_x = _log_candidates(xs, omegas, true_x)
+    log_y, peak_y = _log_candidates(ys, omegas, none)
+    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, converged, states, true_x[0])
 
 
 @compiled
-def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init):
+def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locate):
     """`_CHUNK` points at once, shooting from the scaled states `z_init`: for each, the log
-    refined peaks, candidate masks and their Jacobians with respect to `theta` (forward
-    mode, implicit differentiation through the orbits). Each point's band is `ratio_grid`
-    times its host frequency."""
+    refined peaks (with the host's true peaks if `locate`), candidate masks and their
+    Jacobians with respect to `theta` (forward mode, implicit differentiation through the
+    orbits). Each point's band is `ratio_grid` times its host frequency."""
     host_frequency = jax.lax.stop_gradient(system.host_frequency)
 
     def one(theta, scale, z0):
         omegas = ratio_grid * host_frequency * scale
 
         def curves(t):
-            return _point_curves(system, t, scale, omegas, settings, z0)
+            return _point_curves(system, t, scale, omegas, settings, z0, locate)
 
         return jax.jacfwd(curves, has_aux=True)(theta)
 
@@ -149,9 +180,10 @@ def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init):
 
 
 class _Curves(NamedTuple):
-    """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency,
-    their candidate masks (`_log_candidates`), Jacobians `[freqs, PARAMETERS]`, convergence
-    of every orbit, and the orbits' states."""
+    """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency
+    (then the true peaks of |x|, if located), their candidate masks (`_log_candidates`),
+    Jacobians `[entries, PARAMETERS]`, convergence of every orbit, the orbits' states and
+    the grid indices of the true peaks."""
 
     log_x: np.ndarray
     log_y: np.ndarray
@@ -161,9 +193,10 @@ class _Curves(NamedTuple):
     jac_y: np.ndarray
     converged: bool
     states: np.ndarray
+    located: np.ndarray
 
     def top(self, response: str) -> tuple[float, np.ndarray]:
-        """Log of the grid peak of `response` ("x" or "y"), as `_retune.grid_peak` finds it,
+        """Log of the grid peak of `response` ("x" or "y"), as `_peaks.grid_peak` finds it,
         and its gradient (`PARAMETERS`)."""
         values = np.where(
             getattr(self, f"peak_{response}"), getattr(self, f"log_{response}"), -np.inf
@@ -180,11 +213,14 @@ class _Curves(NamedTuple):
 
 class _Context:
     """What every evaluation shares: the system, the band as multiples of the host
-    frequency, the solver settings and the reference tuning of the design variables
+    frequency, the solver settings, whether the host's peaks are located in continuous
+    frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
+    the grid's, refined by parabolas) and the reference tuning of the design variables
     u = (ln(k / k_ref), sqrt(c / c_ref))."""
 
-    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings):
+    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool):
         self.system = system
+        self.locate = locate
         self.settings = settings
         self.omegas = np.asarray(omegas, dtype=float)
         self.ratio_grid = jnp.asarray(self.omegas / float(system.host_frequency))
@@ -232,11 +268,12 @@ class _Context:
                 self.ratio_grid,
                 settings,
                 jnp.asarray(z_init),
+                self.locate,
             )
             jac_x, jac_y = np.asarray(jac_x), np.asarray(jac_y)
             aux = [np.asarray(a) for a in aux]
             for i in range(used):
-                log_x, log_y, peak_x, peak_y, converged, states = (
+                log_x, log_y, peak_x, peak_y, converged, states, located = (
                     a[i] for a in aux
                 )
                 results.append(
@@ -249,6 +286,7 @@ class _Context:
                         jac_y[i],
                         bool(np.all(converged)),
                         states,
+                        located,
                     )
                 )
         return results
@@ -299,6 +337,13 @@ def _coordinates(ctx: _Context, u, stencil: list[_Curves], response: str):
         dgrad[:, i, 0] = k * d_jac[:, _K] + (k * centre[:, _K] if i == 0 else 0.0)
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
         dgrad[:, i, 2:] = d_jac[:, _OTHER]
+    if response == "x" and stencil[0].located.size:
+        # A true peak's entry holds the same peak at every design of the stencil unless the
+        # set of highest local maxima changed between them (its grid index jumps): then
+        # its curvature is unknown and left out.
+        located = np.stack([curves.located for curves in stencil])
+        changed = np.any(np.abs(located - located[0]) > 1, axis=0)
+        dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
     curves = stencil[0]
     values = getattr(curves, f"log_{response}")
     return values, getattr(curves, f"peak_{response}"), grad, dgrad
@@ -499,7 +544,7 @@ def _minimise(
     *,
     stroke_log_limit=None,
     z_inits=None,
-    stages=SHARPNESS,
+    stages=ROBUST_SHARPNESS,
     max_steps,
     tol,
     say=None,
@@ -816,7 +861,7 @@ def sensitivities(
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
     check_optimiser_options(max_steps, tol)
-    ctx = _Context(system, band, settings)
+    ctx = _Context(system, band, settings, locate=True)
     scenario = _Scenario(amplitude, 1.0, 0.0)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     theta = ctx.theta(k, c, amplitude)
@@ -857,10 +902,11 @@ class BestTunings(eqx.Module):
     - `system`: the nominal system; a scale s multiplies its host stiffness by s**2 (host
       frequency by s) and its band `omegas` (rad/s) by s.
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
-    - `host_peak`: peak |x| over the band with it, m; `stroke_peak`: peak |y|, m, on the
-      check grid of `retune` (`CHECK_REFINEMENT` times finer than the band).
-    - `objective`: `retune`'s smooth log peak (`smooth_log_peak`, sharpness
-      `SHARPNESS[-1]`) over the band (ln m), the reference of the worst-case ratio of
+    - `host_peak`: peak |x| over the band's grid with it (refined by a parabola, as the
+      robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
+      `retune` (`CHECK_REFINEMENT` times finer than the band).
+    - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, sharpness
+      `ROBUST_SHARPNESS[-1]`, ln m), the reference of the worst-case ratio of
       `robust_tune`.
     - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
       `converged`: `retune`'s status is ok (stationary, every steady state converged, the
@@ -899,7 +945,7 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
 
 def _smooth_objective(values, omegas) -> np.ndarray:
     """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
-    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, SHARPNESS[-1]))
+    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, ROBUST_SHARPNESS[-1]))
     return np.asarray(smooth(jnp.asarray(values), jnp.asarray(omegas)))
 
 
@@ -932,7 +978,8 @@ def best_tunings(
         _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
         max_steps=max_steps, tol=tol, progress=progress,
     )
-    # The check grid holds the band's frequencies at every CHECK_REFINEMENT-th point.
+    # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
+    # which the check grid holds at every CHECK_REFINEMENT-th point.
     on_band = np.asarray(result.x_response)[:, ::RETUNE_CHECK_REFINEMENT]
     band_peaks = np.asarray(jax.vmap(lambda v, w: grid_peak(v, w)[0])(
         jnp.asarray(on_band), bands))
@@ -987,17 +1034,18 @@ def _scaled_system(system: TIDSystem, scale: float, k: float, c: float) -> TIDSy
 
 
 def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings):
-    """Host and inerter peaks (m) and convergence `[scales, amps]` of the tuning (k, c) by
-    `peaks`, over `omegas` (rad/s) times each scale."""
+    """Host and inerter peaks (m; on the grid, refined by parabolas, as the robust design
+    judges them) and convergence `[scales, amps]` of the tuning (k, c), over `omegas`
+    (rad/s) times each scale."""
     x, y, ok = (np.zeros((len(scales), len(amplitudes))) for _ in range(3))
     for i, scale in enumerate(scales):
-        result = peaks(
-            _scaled_system(system, float(scale), k, c),
-            np.asarray(amplitudes),
-            np.asarray(omegas) * float(scale),
-            settings=settings,
-        )
-        x[i], y[i], ok[i] = result.x_peak, result.y_peak, result.converged
+        grid = np.asarray(omegas) * float(scale)
+        response = frequency_response(_scaled_system(system, float(scale), k, c), grid,
+                                      np.asarray(amplitudes), settings=settings)
+        on_grid = jax.vmap(grid_peak, (0, None))
+        x[i] = on_grid(response.x_max, jnp.asarray(grid))[0]
+        y[i] = on_grid(response.y_max, jnp.asarray(grid))[0]
+        ok[i] = np.all(np.asarray(response.converged), axis=-1)
     return x, y, ok.astype(bool)
 
 
@@ -1149,9 +1197,9 @@ def robust_tune(
 
     The best achievable peaks come from `best` if given (a `BestTunings` for the same
     system, amplitudes and scales), else from `best_tunings`. The worst case is a smooth
-    maximum, with sharpness rising over `SHARPNESS`, of the scenarios' log peak ratios. It
-    is minimised by sequential quadratic programming with the smooth maximum of the log
-    inerter peaks held below the limit (aimed `STROKE_MARGIN` below it): trust-region
+    maximum, with sharpness rising over `ROBUST_SHARPNESS`, of the scenarios' log peak
+    ratios. It is minimised by sequential quadratic programming with the smooth maximum of
+    the log inerter peaks held below the limit (aimed `STROKE_MARGIN` below it): trust-region
     Newton steps, aiming at a decrement along the constraint below `tol` (converged within
     `NOISE_FACTOR * tol`), at most `max_steps` steps per stage, from the system's tuning
     or the best tuning of a nominal scenario, whichever has the smaller worst case within
@@ -1186,7 +1234,10 @@ def robust_tune(
             if band.shape != best.omegas.shape or not np.allclose(band, best.omegas):
                 raise ValueError("omegas differ from the band best was computed on")
     band = np.asarray(best.omegas)
-    ctx = _Context(system, band, settings)
+    # The worst case over scenarios is of the peaks on the band's grid (refined by
+    # parabolas), as its reference `best.objective` is: the stroke limit is then checked
+    # on a grid CHECK_REFINEMENT times finer.
+    ctx = _Context(system, band, settings, locate=False)
     scenarios = [
         _Scenario(float(amplitude), float(scale), float(best.objective[i, j]))
         for i, scale in enumerate(scales)
@@ -1222,7 +1273,7 @@ def robust_tune(
             minimum.evaluation.u,
             stroke_log_limit=target,
             z_inits=states,
-            stages=SHARPNESS[-1:],
+            stages=ROBUST_SHARPNESS[-1:],
             max_steps=max_steps,
             tol=tol,
             say=say,
