@@ -18,6 +18,7 @@ from ._peaks import (
     bracket,
     grid_peak,
     interpolated,
+    located_peak,
     newton_peak,
     smooth_log_peak,
     stencil,
@@ -109,14 +110,20 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
     grid = jnp.where(response.converged, response.x_max, 0.0)
     index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
     lower, upper, interior = jax.vmap(bracket)(index, omegas)
-    for step in range(PEAK_NEWTON_STEPS):
-        at = jax.vmap(ft.partial(stencil, points=stencil_points(step)))(centre, interior)
+    def solve(at):
         flat = at.reshape(at.shape[0], -1)
         warm = jax.vmap(interpolated)(states, omegas, flat)
         solved = lane_response(systems, response.amplitudes, flat, settings, warm)
-        converged &= jnp.all(solved.converged, axis=-1)
-        peak, centre = jax.vmap(newton_peak)(solved.x_max.reshape(at.shape), at, lower, upper,
-                                             interior)
+        return solved.x_max.reshape(at.shape), jnp.all(solved.converged, axis=-1)
+
+    for step in range(PEAK_NEWTON_STEPS):
+        at = jax.vmap(ft.partial(stencil, points=stencil_points(step)))(centre, interior)
+        values, ok = solve(at)
+        converged &= ok
+        estimate, centre = jax.vmap(newton_peak)(values, at, lower, upper, interior)
+    values, ok = solve(centre[..., None])
+    converged &= ok
+    peak = located_peak(estimate, values[..., 0])
     best = jnp.argmax(jnp.where(valid, peak, -jnp.inf), axis=1)
 
     def take(a):
@@ -314,12 +321,14 @@ class _BFGS(optx.AbstractBFGS):
 
 
 @compiled
-def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, max_steps, tol):
+def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings, max_steps,
+                    tol):
     """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
-    the frequencies `omegas[i]`) from the design `u0[i]` on the smooth log peak, shooting
-    from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
-    scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
-    the designs, iterations, success and the orbits of the last accepted design."""
+    the frequencies `omegas[i]`) from the design `u0[i]` and inverse Hessian `h0[i]` on
+    the smooth log peak, shooting from the orbits `z0` of a nearby design (its tuning
+    (k, c) and, per frequency, the scaled state, monodromy matrix and state derivatives
+    with respect to (k, c)); returns the designs, iterations, success, the orbits of the
+    last accepted design and BFGS's inverse Hessian there."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
     )
@@ -336,8 +345,9 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
         `REFINED_PEAKS` highest local maxima is then located in continuous frequency by
         Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
         shot from the grid's orbits (interpolated) with the monodromy matrix of the
-        peak's grid point: the first by chord iterations, the last with tangents, which
-        give the peaks' derivatives and renew the monodromy matrices at those grid points.
+        peak's grid point and settled by chord iterations; the peak, the response at the
+        last iterate, is solved with tangents, which give its derivatives and renew the
+        monodromy matrices at those grid points.
         Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
         k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
                                          system.inertance)
@@ -360,26 +370,24 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
             nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + (4, 4))
             return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
 
-        for step in range(PEAK_NEWTON_STEPS - 1):
+        for step in range(PEAK_NEWTON_STEPS):
             at = stencil(centre, interior, stencil_points(step))
             _, values = on_stencil(settle, at)
-            _, centre = newton_peak(values, at, lower, upper, interior)
+            estimate, centre = newton_peak(values, at, lower, upper, interior)
 
         def full(omega, z0, monodromy):
             orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
                                               DESIGN_PARAMETERS)
             return x_max, (orbit.monodromy, orbit.state_derivatives)
 
-        at = stencil(centre, interior, stencil_points(PEAK_NEWTON_STEPS - 1))
-        values, (m_new, d_new) = on_stencil(full, at)
-        peak, _ = newton_peak(values, at, lower, upper, interior)
-        mid = at.shape[1] // 2
-        orbits = (states, monodromies.at[index].set(m_new[:, mid]),
-                  derivatives.at[index].set(d_new[:, mid]))
+        values, (m_new, d_new) = on_stencil(full, centre[:, None])
+        peak = located_peak(estimate, values[:, 0])
+        orbits = (states, monodromies.at[index].set(m_new[:, 0]),
+                  derivatives.at[index].set(d_new[:, 0]))
         return (jax.lax.stop_gradient(xs), (index, peak)), (
             jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
-    def one(system, amplitude, omegas, u_start, z_start):
+    def one(system, amplitude, omegas, u_start, z_start, h_start):
         def traced_objective(u, warm):
             (xs, (index, peak)), orbits = design_sweep(system, omegas, u, amplitude, warm)
             static = amplitude / system.host_stiffness
@@ -393,6 +401,11 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
         # the Newton iterations of the steady states follow the optimiser.
         f_struct, aux_struct = objective.out_struct
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
+        # A stage starts from the curvature that the last one learnt, not from the identity:
+        # from a gradient step (of length MAX_DESIGN_STEP), the line search would halve
+        # its way down to the small moves that a sharper maximum asks for, one evaluation
+        # of the objective per halving.
+        state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
 
         def cond(carry):
             u, state, z, steps, rejected = carry
@@ -415,12 +428,13 @@ def _optimise_stage(systems, amplitudes, u0, z0, omegas, sharpness, settings, ma
         # A line search that finds no decrease in MAX_REJECTED_STEPS halvings has reached
         # the noise of the objective (steady states converged to the periodicity tolerance).
         stalled = rejected >= MAX_REJECTED_STEPS
-        return u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z
+        return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
+                state.f_info.hessian_inv.pytree)
 
     # One amplitude after another (each vmapped over its frequencies; with several devices,
     # one sequence per device): an amplitude's optimiser stops when it converges, and its
     # integrations wait only for its own stiffest steady state, not for every amplitude's.
-    return map_batch(lambda args: one(*args), (systems, amplitudes, omegas, u0, z0), 1)
+    return map_batch(lambda args: one(*args), (systems, amplitudes, omegas, u0, z0, h0), 1)
 
 
 def _on_check_grid(values):
@@ -467,14 +481,16 @@ def retune(
     (on the scaled design variables and the log peak: the default 1e-4 settles k to about
     1e-5 and the peak to about 1e-4, relative), `CONTINUATION_TOL` before; a stage also
     ends, converged, when its line search finds no decrease in `MAX_REJECTED_STEPS`
-    halvings) warm-started from the last, with gradients by implicit differentiation
+    halvings) warm-started from the last (its design, orbits and BFGS's inverse Hessian;
+    the first stage from the identity in the scaled design variables), with gradients by implicit differentiation
     through the periodic orbits. The first stage starts from the initial tuning's orbits
     on the design grid. At every design, each steady state is predicted to first order
     from the orbit of the last accepted design and settled by chord iterations with the
     latest monodromy matrix at its frequency; the `REFINED_PEAKS` highest local maxima
     are then located in continuous frequency by Newton steps on the slope of the response
-    (`_peaks`), the last with tangents, which give the derivatives of the true peaks and
-    renew the monodromy matrices at their grid points. The initial and retuned
+    (`_peaks`), and the response at the last iterate is solved with tangents, which give
+    the derivatives of the true peaks and renew the monodromy matrices at their grid
+    points. The initial and retuned
     designs are then solved afresh (each steady state starting from the design's orbits)
     on a grid `CHECK_REFINEMENT` times finer; a design whose peak there is above the
     initial tuning's is replaced by the initial tuning (status 4). `progress`, if given,
@@ -527,6 +543,7 @@ def optimal_tunings(
     states = scaled_states(start, systems.host_stiffness)
     orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
               jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
+    hessian_inv = jnp.broadcast_to(jnp.eye(2, dtype=amps.dtype), amps.shape + (2, 2))
     for stage, sharpness in enumerate(SHARPNESS, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
@@ -534,8 +551,9 @@ def optimal_tunings(
             _optimise_stage, sharpness=jnp.asarray(sharpness), settings=settings,
             max_steps=max_steps, tol=jnp.asarray(stage_tol),
         )
-        u, steps, ok, orbits = sharded_batch(
-            lambda s, a, w, u, z: stage_run(s, a, u, z, w), systems, amps, bands, u, orbits)
+        u, steps, ok, orbits, hessian_inv = sharded_batch(
+            lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
+            orbits, hessian_inv)
         iterations = iterations + steps
         say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
             f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "

@@ -135,8 +135,8 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
 
     def located(values):
         def solve(step, at):
-            # Only the last Newton step's values are differentiated.
-            t = theta if step == PEAK_NEWTON_STEPS - 1 else jax.lax.stop_gradient(theta)
+            # Only the peak (the response at the last Newton iterate) is differentiated.
+            t = theta if step == PEAK_NEWTON_STEPS else jax.lax.stop_gradient(theta)
             x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
                 _changed_system(system, t, scale), t[-1], at, settings,
                 interpolated(states, omegas, at))
