@@ -129,6 +129,15 @@ print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def retune_row(retune) -> str:
+    """The paper retune's timings (`run_retune_child`) as a line of text."""
+    text = ("stopped" if retune is None else
+            f"{retune['cold']:.0f} s cold (import and compilation included), "
+            f"{retune['warm']:.1f} s warm; {retune['ok']}/12 status ok")
+    return (f"Paper retune (`tj.retune`, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies, "
+            f"default friction width): {text}.")
+
+
 CLI_COMMANDS = ("retune", "sensitivity", "robust")
 
 
@@ -204,7 +213,8 @@ def main():
     args = parser.parse_args()
     if args.cli_only:
         lines = [f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, JAX "
-                 f"{jax.__version__}.", ""] + cli_table(TIME_LIMIT_S)
+                 f"{jax.__version__}.", "", retune_row(run_retune_child(TIME_LIMIT_S)), ""]
+        lines += cli_table(TIME_LIMIT_S)
         print("\n".join(lines))
         if args.readme:
             replace_block(args.readme, "cli-table", lines)
@@ -310,12 +320,7 @@ def main():
         say(f"| {size} | {cold:.2f} s | {warm:.3f} s | {warm / size * 1e3:.2f} ms |")
     if not args.skip_retune:
         say()
-        say("| run | wall time |")
-        say("|---|---|")
-        retune_text = ("stopped" if retune is None else
-                       f"{retune['cold']:.0f} s cold (import and compilation included), "
-                       f"{retune['warm']:.1f} s warm; {retune['ok']}/12 status ok")
-        say(f"| paper retune, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies | {retune_text} |")
+        say(retune_row(retune))
         say()
         for row in cli_rows:
             say(row)
