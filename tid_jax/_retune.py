@@ -402,9 +402,9 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
         f_struct, aux_struct = objective.out_struct
         state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
         # A stage starts from the curvature that the last one learnt, not from the identity:
-        # from a gradient step (of length MAX_DESIGN_STEP), the line search would halve
-        # its way down to the small moves that a sharper maximum asks for, one evaluation
-        # of the objective per halving.
+        # from a gradient step (about 0.1 long on the paper's system), the line search
+        # would halve its way down to the small moves that a sharper maximum asks for
+        # (1e-3 to 1e-4), one evaluation of the objective per halving.
         state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
 
         def cond(carry):
