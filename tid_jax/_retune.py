@@ -110,6 +110,7 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
     grid = jnp.where(response.converged, response.x_max, 0.0)
     index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
     lower, upper, interior = jax.vmap(bracket)(index, omegas)
+
     def solve(at):
         flat = at.reshape(at.shape[0], -1)
         warm = jax.vmap(interpolated)(states, omegas, flat)
@@ -481,20 +482,20 @@ def retune(
     (on the scaled design variables and the log peak: the default 1e-4 settles k to about
     1e-5 and the peak to about 1e-4, relative), `CONTINUATION_TOL` before; a stage also
     ends, converged, when its line search finds no decrease in `MAX_REJECTED_STEPS`
-    halvings) warm-started from the last (its design, orbits and BFGS's inverse Hessian;
-    the first stage from the identity in the scaled design variables), with gradients by implicit differentiation
-    through the periodic orbits. The first stage starts from the initial tuning's orbits
-    on the design grid. At every design, each steady state is predicted to first order
-    from the orbit of the last accepted design and settled by chord iterations with the
-    latest monodromy matrix at its frequency; the `REFINED_PEAKS` highest local maxima
-    are then located in continuous frequency by Newton steps on the slope of the response
-    (`_peaks`), and the response at the last iterate is solved with tangents, which give
-    the derivatives of the true peaks and renew the monodromy matrices at their grid
-    points. The initial and retuned
-    designs are then solved afresh (each steady state starting from the design's orbits)
-    on a grid `CHECK_REFINEMENT` times finer; a design whose peak there is above the
-    initial tuning's is replaced by the initial tuning (status 4). `progress`, if given,
-    is called with a one-line message after each stage.
+    halvings) warm-started from the last (its design, orbits and BFGS's inverse Hessian),
+    with gradients by implicit differentiation through the periodic orbits. The first
+    stage starts from the initial tuning's orbits on the design grid and the identity
+    (in the scaled design variables). At every design, each steady state is predicted to
+    first order from the orbit of the last accepted design and settled by chord
+    iterations with the latest monodromy matrix at its frequency; the `REFINED_PEAKS`
+    highest local maxima are then located in continuous frequency by Newton steps on the
+    slope of the response (`_peaks`), and the response at the last iterate is solved with
+    tangents, which give the derivatives of the true peaks and renew the monodromy
+    matrices at their grid points. The initial and retuned designs are then solved afresh
+    (each steady state starting from the design's orbits) on a grid `CHECK_REFINEMENT`
+    times finer; a design whose peak there is above the initial tuning's is replaced by
+    the initial tuning (status 4). `progress`, if given, is called with a one-line
+    message after each stage.
     """
     _check_system(system)
     band = _band(system, omegas)
