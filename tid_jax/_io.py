@@ -7,6 +7,8 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+import tomli_w
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -68,29 +70,8 @@ def check_writable_dir(path: str | os.PathLike) -> Path:
     return path
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
-    raise TypeError(f"cannot write {value!r} as TOML")
-
-
 def write_toml(path: str | os.PathLike, data: dict, *, comment: str = "") -> Path:
-    """Write a TOML file of numbers, strings and lists, with `dict` values as one level of
-    tables, atomically. `comment` becomes a leading `#` comment."""
-    lines = [f"# {line}" for line in comment.splitlines()]
-    lines += [
-        f"{key} = {_toml_value(value)}"
-        for key, value in data.items()
-        if not isinstance(value, dict)
-    ]
-    for key, table in data.items():
-        if isinstance(table, dict):
-            lines += ["", f"[{key}]"]
-            lines += [f"{name} = {_toml_value(value)}" for name, value in table.items()]
-    return write_text(path, "\n".join(lines) + "\n")
+    """Write `data` (numbers, strings, lists, and `dict` values as tables) as TOML
+    (`tomli_w`), atomically. `comment` becomes a leading `#` comment."""
+    lines = [f"# {line}\n" for line in comment.splitlines()]
+    return write_text(path, "".join(lines) + tomli_w.dumps(data))
