@@ -304,7 +304,8 @@ class _CappedNewtonDescent(optx.NewtonDescent):
     def query(self, y, f_info, state):
         state = super().query(y, f_info, state)
         length = optx.two_norm(state.newton)
-        factor = jnp.minimum(1.0, MAX_DESIGN_STEP / jnp.maximum(length, 1e-300))
+        tiny = jnp.finfo(length.dtype).tiny
+        factor = jnp.minimum(1.0, MAX_DESIGN_STEP / jnp.maximum(length, tiny))
         return eqx.tree_at(lambda s: s.newton, state, factor * state.newton)
 
 
