@@ -133,6 +133,26 @@ def test_frf_reports_progress_and_where_results_went(frf_run):
     assert f"results in {out}/" in stderr
 
 
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_frf_progress_bar_on_a_terminal(tmp_path, quiet):
+    err = _Terminal()
+    argv = [*FRF_ARGS, "--out", tmp_path, *(["--quiet"] if quiet else [])]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main([str(arg) for arg in argv]) == 0
+    stderr = err.getvalue()
+    if quiet:
+        assert stderr == ""
+    else:
+        # The bar at each step (one per amplitude), the messages above it.
+        assert "1/2 [" in stderr and "2/2 [" in stderr
+        assert "amplitude 2/2 (A = 600 N)" in stderr
+
+
 def test_saved_config_reproduces_the_run(frf_run, tmp_path):
     _, stdout, _, out = frf_run
     config = tomllib.loads((out / "frf_config.toml").read_text())

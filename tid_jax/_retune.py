@@ -50,6 +50,9 @@ CONTINUATION_TOL = 1e-3
 # Refinement of the check grid: the design grid with CHECK_REFINEMENT - 1 frequencies
 # inserted evenly between neighbours.
 CHECK_REFINEMENT = 2
+# Messages that `retune` gives its `progress`, one as each step ends: the initial tuning's
+# steady states, each stage, the check.
+PROGRESS_STEPS = len(SHARPNESS) + 2
 
 STATUS_MESSAGES = {
     0: "ok",
@@ -496,7 +499,8 @@ def retune(
     (each steady state starting from the design's orbits) on a grid `CHECK_REFINEMENT`
     times finer; a design whose peak there is above the initial tuning's is replaced by
     the initial tuning (status 4). `progress`, if given, is called with a one-line
-    message after each stage.
+    message as each of its `PROGRESS_STEPS` steps ends (the initial tuning's steady
+    states, each stage, the check).
     """
     _check_system(system)
     band = _band(system, omegas)
@@ -540,8 +544,8 @@ def optimal_tunings(
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
     fine = _on_check_grid(bands)
-    say(f"initial tuning on {bands.shape[-1]} frequencies x {amps.size} lanes")
     start = lane_response(systems, amps, bands, settings)
+    say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     states = scaled_states(start, systems.host_stiffness)
     orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
               jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
@@ -561,8 +565,6 @@ def optimal_tunings(
             f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
-    say(f"checking the initial and retuned designs on {fine.shape[-1]} frequencies x "
-        f"{amps.size} lanes")
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
     _, final_states, _, _ = orbits
@@ -572,7 +574,10 @@ def optimal_tunings(
     both = lane_response(both_systems, jnp.concatenate([amps, amps]),
                          jnp.concatenate([fine, fine]), settings, warm)
     found = response_peaks(both_systems, both, settings)
-    return _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref)
+    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref)
+    say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
+        f"{amps.size} lanes: {int(jnp.sum(result.converged))}/{amps.size} ok")
+    return result
 
 
 @eqx.filter_jit

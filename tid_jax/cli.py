@@ -10,6 +10,7 @@ objects), `_Output` (output folder, progress, files written) and the error handl
 """
 
 import argparse
+import contextlib
 import math
 import sys
 import time
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from tqdm import tqdm
 
 from . import __version__, plot
 from ._cache import CACHE_ENVIRONMENT_VARIABLE, enable_compilation_cache
@@ -25,8 +27,10 @@ from ._io import check_writable_dir, json_text, write_csv, write_json, write_tom
 from ._linear import den_hartog_tuning, linear_receptance
 from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
+from ._retune import PROGRESS_STEPS as RETUNE_STEPS
 from ._robust import (
     PARAMETER_UNITS,
+    ROBUST_SHARPNESS,
     best_tunings,
     robust_tune,
     sensitivities,
@@ -350,10 +354,37 @@ class _Output:
             raise CLIError(f"output folder {self.folder} is not writable: {reason}") from None
         self.files: list[Path] = []
         self.start = time.perf_counter()
+        self.bar: tqdm | None = None
 
     def say(self, message: str) -> None:
-        if not self.args.quiet:
+        if self.args.quiet:
+            return
+        if self.bar is not None:
+            self.bar.write(f"{PROG}: {message}", file=sys.stderr)
+        else:
             print(f"{PROG}: {message}", file=sys.stderr, flush=True)
+
+    @contextlib.contextmanager
+    def steps(self, total: int):
+        """A progress bar of `total` steps on stderr (on a terminal, and not with
+        --quiet), with the elapsed and remaining time; yields the function that says a
+        step's message above it and advances it by one step (more steps than `total`
+        extend it)."""
+        self.bar = tqdm(total=total, file=sys.stderr, leave=False, mininterval=0,
+                        disable=self.args.quiet or not sys.stderr.isatty(),
+                        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}]")
+
+        def step(message: str) -> None:
+            self.say(message)
+            if self.bar.n >= self.bar.total:
+                self.bar.total = self.bar.n + 1
+            self.bar.update(1)
+
+        try:
+            yield step
+        finally:
+            self.bar.close()
+            self.bar = None
 
     def path(self, name: str) -> Path:
         path = self.folder / name
@@ -470,7 +501,8 @@ def _run_retune(args) -> int:
         f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "
         f"{_describe(system)}"
     )
-    result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=output.say)
+    with output.steps(RETUNE_STEPS) as step:
+        result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
 
     stiffness = float(system.host_stiffness)
     # The frequency responses before and after retuning, on retune's check grid.
@@ -634,14 +666,16 @@ def _run_frf(args) -> int:
     shape = (amplitudes.size, omegas.size)
     x_max, y_max = np.empty(shape), np.empty(shape)
     converged, stable = np.empty(shape, bool), np.empty(shape, bool)
-    for i, amplitude in enumerate(amplitudes):
-        response = frequency_response(system, omegas, amplitude, settings=settings)
-        x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
-        converged[i], stable[i] = np.asarray(response.converged), np.asarray(response.stable)
-        output.say(
-            f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
-            f"{converged[i].sum()}/{omegas.size} steady states converged"
-        )
+    with output.steps(amplitudes.size) as step:
+        for i, amplitude in enumerate(amplitudes):
+            response = frequency_response(system, omegas, amplitude, settings=settings)
+            x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
+            converged[i] = np.asarray(response.converged)
+            stable[i] = np.asarray(response.stable)
+            step(
+                f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
+                f"{converged[i].sum()}/{omegas.size} steady states converged"
+            )
 
     static = (amplitudes / float(system.host_stiffness))[:, None]
     x_norm, y_norm = x_max / static, y_max / static
@@ -1058,17 +1092,18 @@ def _run_sensitivity(args) -> int:
         f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
     )
     best = None
-    if not args.no_optimum:
-        output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
-        best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
-                            progress=output.say)
     results = []
-    for i, amplitude in enumerate(amplitudes):
-        results.append(
-            sensitivities(system, amplitude, omegas=omegas, optimum=not args.no_optimum,
-                          best=best, settings=settings)
-        )
-        output.say(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
+    with output.steps((0 if args.no_optimum else RETUNE_STEPS) + amplitudes.size) as step:
+        if not args.no_optimum:
+            output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
+            best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
+                                progress=step)
+        for i, amplitude in enumerate(amplitudes):
+            results.append(
+                sensitivities(system, amplitude, omegas=omegas, optimum=not args.no_optimum,
+                              best=best, settings=settings)
+            )
+            step(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
 
     records = []
     for amplitude, result in zip(amplitudes, results, strict=True):
@@ -1248,15 +1283,17 @@ def _run_robust(args) -> int:
         f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} host "
         f"frequencies, {omegas.size} frequencies each; {_describe(system)}"
     )
-    result = robust_tune(
-        system,
-        amplitudes,
-        host_frequency_scales=scales,
-        stroke_limit=stroke_limit,
-        omegas=omegas,
-        settings=settings,
-        progress=output.say,
-    )
+    # The retune's steps, then the robust design's: its start, its stages and its end.
+    with output.steps(RETUNE_STEPS + 3 + len(ROBUST_SHARPNESS)) as step:
+        result = robust_tune(
+            system,
+            amplitudes,
+            host_frequency_scales=scales,
+            stroke_limit=stroke_limit,
+            omegas=omegas,
+            settings=settings,
+            progress=step,
+        )
     given = tuning_performance(system, result.best, settings=settings)
     robust = result.performance
     best = result.best
