@@ -88,3 +88,60 @@ def test_system_rejects_non_numbers():
         tj.paper_system().replace(inertance="heavy")
     with pytest.raises(ValueError, match="unknown TIDSystem field"):
         tj.paper_system().replace(mass=1.0)
+
+
+def _breakaway_numpy(system, omega):
+    """Independent: the amplitude A at which the force of the spring and damper on the
+    stuck terminal, (k + i w c) X with X = A / (K + k - M w^2 + i w (C + c)), reaches ff."""
+    M, K, C, ff, k, c = (float(getattr(system, n)) for n in
+                         ("host_mass", "host_stiffness", "host_damping", "friction_force",
+                          "tid_stiffness", "tid_damping"))
+    x_per_newton = 1 / (K + k - M * omega**2 + 1j * omega * (C + c))
+    return ff / np.abs((k + 1j * omega * c) * x_per_newton)
+
+
+@pytest.mark.parametrize(
+    ("band_hz", "damping"), [((2.0, 6.0), None), ((2.0, 6.0), 0.0), ((4.5, 6.0), None)]
+)
+def test_breakaway_amplitude_and_its_exact_minimum(band_hz, damping):
+    from scipy.optimize import minimize_scalar
+
+    system = tj.paper_system()
+    if damping is not None:
+        system = system.replace(tid_damping=damping)
+    omegas = 2 * np.pi * np.linspace(*band_hz, 41)
+    result = tj.breakaway_amplitude(system, omegas)
+    np.testing.assert_allclose(result.amplitude, _breakaway_numpy(system, omegas), rtol=1e-12)
+    found = minimize_scalar(lambda w: _breakaway_numpy(system, w), bounds=tuple(omegas[[0, -1]]),
+                            method="bounded", options={"xatol": 1e-10})
+    assert float(result.minimum) <= float(np.min(result.amplitude))
+    if band_hz[0] > 4.2:  # above the stuck host's resonance: the band's lower end
+        assert float(result.omega_minimum) == pytest.approx(omegas[0], rel=1e-12)
+        assert float(result.minimum) == pytest.approx(_breakaway_numpy(system, omegas[0]),
+                                                      rel=1e-12)
+    else:
+        assert float(result.minimum) == pytest.approx(found.fun, rel=1e-10)
+        assert float(result.omega_minimum) == pytest.approx(found.x, rel=1e-6)
+
+
+def test_breakaway_separates_stuck_from_slipping_steady_states():
+    # The smoothed model's steady states, from the linear steady state after a transient:
+    # just below the breakaway amplitude the inerter stays stuck (creeping within two
+    # friction widths) all period; just above it slips for part of it.
+    system = tj.paper_system()
+    omegas = 2 * np.pi * np.array([3.5, 4.09, 4.6])
+    breakaway = np.asarray(tj.breakaway_amplitude(system, omegas).amplitude)
+    for factor, stuck in ((0.9, True), (1.05, False)):
+        for omega, amplitude in zip(omegas, breakaway, strict=True):
+            response = tj.frequency_response(system, omega, factor * amplitude)
+            assert bool(response.converged)
+            assert (float(response.stick_fraction) == 1.0) == stuck, (factor, omega)
+    # The paper's smallest amplitude, 100 N, is above the band's minimum (about 23 N).
+    assert 20.0 < float(tj.breakaway_amplitude(system, omegas).minimum) < 25.0
+
+
+def test_breakaway_bad_input():
+    with pytest.raises(ValueError, match="omegas"):
+        tj.breakaway_amplitude(tj.paper_system(), [10.0, -1.0])
+    with pytest.raises(ValueError, match="system"):
+        tj.breakaway_amplitude("paper", [10.0])

@@ -5,6 +5,8 @@ from ._cache import (
     enable_compilation_cache as enable_compilation_cache,
 )
 from ._linear import (
+    Breakaway as Breakaway,
+    breakaway_amplitude as breakaway_amplitude,
     LinearReceptance as LinearReceptance,
     den_hartog as den_hartog,
     den_hartog_tuning as den_hartog_tuning,

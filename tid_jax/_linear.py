@@ -102,3 +102,58 @@ def stuck_receptance(system: TIDSystem, omega: ArrayLike) -> Complex[Array, "...
         - system.host_mass * w**2
         + 1j * w * (system.host_damping + system.tid_damping)
     )
+
+
+class Breakaway(eqx.Module):
+    """Forcing amplitudes at which the inerter breaks away (SI units). With the terminal
+    stuck, the host is a single-degree-of-freedom oscillator (`stuck_receptance`) and the
+    spring and damper put the harmonic force (k + i omega c) X on the terminal; that
+    steady state exists while the force stays within the friction force ff.
+
+    - `omegas`: the frequencies, rad/s.
+    - `amplitude`: at each frequency, the forcing amplitude (N) up to which the steady
+      state with the inerter stuck exists: ff |K + k - M omega^2 + i omega (C + c)| /
+      |k + i omega c|.
+    - `minimum`, `omega_minimum`: its smallest value over the band from the lowest to
+      the highest of `omegas` (exact, not the grid's), N, and where, rad/s. Below it the
+      inerter never slips at any frequency of the band: the TID acts as a spring and
+      damper to ground and its inertance does nothing.
+    """
+
+    omegas: Float[Array, " freqs"]
+    amplitude: Float[Array, " freqs"]
+    minimum: Float[Array, ""]
+    omega_minimum: Float[Array, ""]
+
+
+def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
+    """The `Breakaway` amplitudes of `system` at the frequencies `omegas` (rad/s; a
+    scalar or a 1-d array of finite positive values) and their minimum over the band."""
+    if not isinstance(system, TIDSystem):
+        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+    check_values("omegas", omegas, "positive")
+    w = jnp.atleast_1d(jnp.asarray(omegas, dtype=float))
+    if w.ndim != 1:
+        raise ValueError(f"omegas must be a scalar or 1-d, got shape {w.shape}")
+    mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
+    stiffness = system.host_stiffness + k
+    damping = system.host_damping + c
+
+    def amplitude(w):
+        return system.friction_force * jnp.abs(1 / stuck_receptance(system, w)) / jnp.abs(
+            k + 1j * w * c)
+
+    # The squared amplitude is a ratio of polynomials in u = omega^2, stationary where
+    # M^2 c^2 u^2 + 2 M^2 k^2 u + (d^2 - 2 a M) k^2 - a^2 c^2 = 0 (a = K + k, d = C + c):
+    # the minimum over the band is there or at an end.
+    qa = mass**2 * c**2
+    qb = 2 * mass**2 * k**2
+    qc = (damping**2 - 2 * stiffness * mass) * k**2 - stiffness**2 * c**2
+    root = jnp.where(qa > 0, (-qb + jnp.sqrt(jnp.maximum(qb**2 - 4 * qa * qc, 0.0)))
+                     / (2 * jnp.where(qa > 0, qa, 1.0)), -qc / qb)
+    low, high = jnp.min(w), jnp.max(w)
+    candidates = jnp.stack([low, high, jnp.clip(jnp.sqrt(jnp.maximum(root, 0.0)), low, high)])
+    values = amplitude(candidates)
+    best = jnp.argmin(values)
+    return Breakaway(omegas=w, amplitude=amplitude(w), minimum=values[best],
+                     omega_minimum=candidates[best])
