@@ -133,6 +133,16 @@ def test_frf_reports_progress_and_where_results_went(frf_run):
     assert f"results in {out}/" in stderr
 
 
+def test_frf_reports_the_breakaway_amplitude(frf_run):
+    _, stdout, _, _ = frf_run
+    data = json.loads(stdout)
+    system = tj.paper_system()
+    omegas = 2 * np.pi * np.asarray(data["frequencies_hz"])
+    expected = tj.breakaway_amplitude(system, omegas)
+    np.testing.assert_allclose(data["breakaway_amplitude_N"], expected.amplitude, rtol=1e-12)
+    assert data["breakaway_minimum_N"] == pytest.approx(float(expected.minimum), rel=1e-12)
+
+
 class _Terminal(io.StringIO):
     def isatty(self):
         return True
@@ -140,11 +150,15 @@ class _Terminal(io.StringIO):
 
 @pytest.mark.parametrize("quiet", [False, True])
 def test_frf_progress_bar_on_a_terminal(tmp_path, quiet):
-    err = _Terminal()
+    out, err = io.StringIO(), _Terminal()
     argv = [*FRF_ARGS, "--out", tmp_path, *(["--quiet"] if quiet else [])]
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         assert main([str(arg) for arg in argv]) == 0
     stderr = err.getvalue()
+    # The table ends with the breakaway amplitude.
+    breakaway = tj.breakaway_amplitude(tj.paper_system(), 2 * np.pi * np.linspace(3, 5, 5))
+    assert (f"Breakaway amplitude over the band: {float(breakaway.minimum):.4g} N"
+            in out.getvalue())
     if quiet:
         assert stderr == ""
     else:

@@ -12,6 +12,7 @@ objects), `_Output` (output folder, progress, files written) and the error handl
 import argparse
 import contextlib
 import math
+import shutil
 import sys
 import time
 import tomllib
@@ -24,7 +25,12 @@ from tqdm import tqdm
 from . import __version__, plot
 from ._cache import CACHE_ENVIRONMENT_VARIABLE, enable_compilation_cache
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
-from ._linear import den_hartog_tuning, linear_receptance
+from ._linear import (
+    breakaway_amplitude,
+    den_hartog_tuning,
+    linear_receptance,
+    stuck_receptance,
+)
 from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
 from ._retune import PROGRESS_STEPS as RETUNE_STEPS
@@ -321,6 +327,14 @@ def _linear_curves(system: TIDSystem, frequencies_hz, points: int = 400):
     return (fine, *_linear_normalised(system, fine))
 
 
+def _stuck_curve(system: TIDSystem, frequencies_hz, points: int = 400):
+    """`(frequencies, x)` of the host over A / K with the inerter stuck, on a fine grid
+    spanning `frequencies_hz`, for plots."""
+    fine = np.linspace(frequencies_hz[0], frequencies_hz[-1], points)
+    receptance = stuck_receptance(system, 2 * math.pi * fine)
+    return fine, np.abs(np.asarray(receptance)) * float(system.host_stiffness)
+
+
 def _host_frequency_hz(system: TIDSystem) -> float:
     return float(system.host_frequency) / (2 * math.pi)
 
@@ -370,7 +384,9 @@ class _Output:
         --quiet), with the elapsed and remaining time; yields the function that says a
         step's message above it and advances it by one step (more steps than `total`
         extend it)."""
+        # (A terminal that reports no width, as some pseudo-terminals do, gets 80 columns.)
         self.bar = tqdm(total=total, file=sys.stderr, leave=False, mininterval=0,
+                        ncols=shutil.get_terminal_size().columns,
                         disable=self.args.quiet or not sys.stderr.isatty(),
                         bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}]")
 
@@ -521,6 +537,8 @@ def _run_retune(args) -> int:
     within = y_after <= stroke_limit
     improved = x_peak_after <= x_peak_before
     statuses = result.status_messages()
+    breakaway = breakaway_amplitude(system, omegas)
+    stuck = amplitudes < float(breakaway.minimum)
     records = [
         dict(
             zip(
@@ -542,7 +560,9 @@ def _run_retune(args) -> int:
                     bool(result.converged[i]),
                     statuses[i]
                     + ("" if within[i] else "; stroke over limit")
-                    + ("" if improved[i] else "; peak above the initial tuning's"),
+                    + ("" if improved[i] else "; peak above the initial tuning's")
+                    + (f"; below the breakaway amplitude {float(breakaway.minimum):.4g} N: "
+                       "with the initial tuning the inerter stays stuck" if stuck[i] else ""),
                 ),
                 strict=True,
             )
@@ -621,7 +641,8 @@ def _run_retune(args) -> int:
         f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
         f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
     )
-    return output.finish(data, title + "\n" + _format_table(header, rows))
+    return output.finish(data, title + "\n" + _format_table(header, rows) + "\n"
+                         + "With the initial tuning: " + _breakaway_line(breakaway))
 
 
 # --- tid-jax frf ----------------------------------------------------------------------------
@@ -709,6 +730,7 @@ def _run_frf(args) -> int:
         for i in range(amplitudes.size)
     ]
 
+    breakaway = breakaway_amplitude(system, omegas)
     write_csv(output.path("frf.csv"), FRF_COLUMNS, rows)
     write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
     plot.save_figure(
@@ -718,6 +740,7 @@ def _run_frf(args) -> int:
             x_norm,
             y_norm,
             linear=_linear_curves(system, frequencies_hz),
+            stuck=(*_stuck_curve(system, frequencies_hz), float(breakaway.minimum)),
             host_frequency_hz=_host_frequency_hz(system),
         ),
         output.path("frf.png"),
@@ -736,6 +759,9 @@ def _run_frf(args) -> int:
         stable=stable.tolist(),
         x_linear_over_A_K=x_linear.tolist(),
         y_linear_over_A_K=y_linear.tolist(),
+        breakaway_amplitude_N=np.asarray(breakaway.amplitude).tolist(),
+        breakaway_minimum_N=float(breakaway.minimum),
+        breakaway_minimum_frequency_Hz=float(breakaway.omega_minimum) / (2 * math.pi),
         summary=summary,
     )
     write_json(json_path, data)
@@ -764,7 +790,15 @@ def _run_frf(args) -> int:
         f"Frequency response ({_describe(system)}); peaks on the grid, x normalised by "
         f"the static displacement A/K"
     )
-    return output.finish(data, title + "\n" + _format_table(header, table_rows))
+    return output.finish(data, title + "\n" + _format_table(header, table_rows) + "\n"
+                         + _breakaway_line(breakaway))
+
+
+def _breakaway_line(breakaway) -> str:
+    """What the minimum breakaway amplitude over the band means, in one line."""
+    return (f"Breakaway amplitude over the band: {float(breakaway.minimum):.4g} N at "
+            f"{float(breakaway.omega_minimum) / (2 * math.pi):.3f} Hz; below it the inerter "
+            f"never slips and the TID acts as a spring and damper to ground.")
 
 
 # --- tid-jax rtds ---------------------------------------------------------------------------

@@ -53,12 +53,15 @@ def _mark_host_frequency(ax, host_frequency_hz):
 
 
 def plot_frequency_response(
-    frequencies_hz, amplitudes, x_norm, y_norm, *, linear=None, host_frequency_hz=None, title=None
+    frequencies_hz, amplitudes, x_norm, y_norm, *, linear=None, stuck=None,
+    host_frequency_hz=None, title=None
 ):
     """The paper's Figure 5: peak host displacement (a) and inerter displacement (b) over
     A / K against forcing frequency (Hz), one line per forcing amplitude (N); arrays
     `x_norm`, `y_norm` are `(n_amplitudes, n_frequencies)`. `linear = (frequencies_hz, x,
-    y)` adds the frictionless TID."""
+    y)` adds the frictionless TID; `stuck = (frequencies_hz, x, breakaway)` the host with
+    the inerter stuck, labelled with the minimum breakaway amplitude (N) below which
+    every forcing leaves it stuck."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
     colours = _amplitude_colours(amplitudes)
     panels = (
@@ -70,6 +73,10 @@ def plot_frequency_response(
             ax.plot(frequencies_hz, row, color=colour, linewidth=1.0, label=f"A = {amplitude:g} N")
         if linear is not None:
             ax.plot(linear[0], linear[1 + index], **LINEAR_STYLE)
+        if stuck is not None and index == 0:
+            ax.plot(stuck[0], stuck[1], color="0.45", linestyle=":", linewidth=1.2,
+                    label=f"inerter stuck (every A below {stuck[2]:.3g} N)")
+            ax.legend(fontsize=7, loc="upper left")
         _mark_host_frequency(ax, host_frequency_hz)
         ax.set(xlabel="forcing frequency [Hz]", ylabel=ylabel, title=name)
         ax.set_xlim(frequencies_hz[0], frequencies_hz[-1])
