@@ -178,6 +178,35 @@ def test_bad_arguments(system):
         tj.peak_response(system, 100.0, response="stroke")
 
 
+def test_retune_settings_set_the_stages_and_the_check_grid(system):
+    coarse = np.linspace(0.8, 1.2, 7) * float(system.host_frequency)
+    settings = tj.RetuneSettings(sharpness=(1000.0, 30000.0), check_refinement=3)
+    messages = []
+    result = tj.retune(system, [1000.0], omegas=coarse, retune_settings=settings,
+                       progress=messages.append)
+    assert result.check_omegas.shape == (3 * 6 + 1,)
+    np.testing.assert_allclose(result.check_omegas[::3], coarse, rtol=1e-12)
+    assert len(messages) == settings.progress_steps() == 4
+    assert "stage 2/2 (smooth-max sharpness 30000)" in messages[2]
+
+
+@pytest.mark.parametrize(
+    ("changes", "name"),
+    [(dict(sharpness=()), "sharpness"), (dict(sharpness=(50.0, -1.0)), "sharpness"),
+     (dict(check_refinement=0), "check_refinement"), (dict(max_design_step=np.inf),
+                                                      "max_design_step"),
+     (dict(design_newton_steps=2.5), "design_newton_steps")],
+)
+def test_bad_retune_settings(changes, name):
+    with pytest.raises(ValueError, match=f"RetuneSettings.{name}"):
+        tj.RetuneSettings(**changes)
+
+
+def test_retune_settings_must_be_retune_settings(system):
+    with pytest.raises(ValueError, match="retune_settings must be a RetuneSettings"):
+        tj.retune(system, [100.0], retune_settings=tj.SolverSettings())
+
+
 def test_check_grid_orbits_interpolate_between_design_points():
     from tid_jax import _retune
 
@@ -185,7 +214,8 @@ def test_check_grid_orbits_interpolate_between_design_points():
     n = 5
     index = np.arange(n, dtype=float)
     states = jnp.asarray(np.stack([index, 2 * index, -index, index + 1], axis=-1))[None]
-    z = _retune._on_check_grid(states)
-    r = _retune.CHECK_REFINEMENT
-    fine = np.arange((n - 1) * r + 1) / r
-    np.testing.assert_allclose(np.asarray(z[0]), np.stack([fine, 2 * fine, -fine, fine + 1], -1))
+    for r in (tj.RetuneSettings().check_refinement, 3):
+        z = _retune._on_check_grid(states, r)
+        fine = np.arange((n - 1) * r + 1) / r
+        np.testing.assert_allclose(np.asarray(z[0]),
+                                   np.stack([fine, 2 * fine, -fine, fine + 1], -1))

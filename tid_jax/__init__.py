@@ -21,6 +21,7 @@ from ._response import (
 from ._retune import (
     Peaks as Peaks,
     RetuneResult as RetuneResult,
+    RetuneSettings as RetuneSettings,
     default_omegas as default_omegas,
     peak_response as peak_response,
     peaks as peaks,

@@ -1,5 +1,6 @@
 import dataclasses
 import functools as ft
+import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -43,16 +44,61 @@ from ._system import TIDSystem
 # for TID frequencies from well below to 25% above Den Hartog's.
 BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
-# Sharpness of the smooth maximum (in log-peak units) at each continuation stage.
-SHARPNESS = (50.0, 1000.0, 30000.0)
-# Optimiser tolerance of every stage but the last.
-CONTINUATION_TOL = 1e-3
-# Refinement of the check grid: the design grid with CHECK_REFINEMENT - 1 frequencies
-# inserted evenly between neighbours.
-CHECK_REFINEMENT = 2
-# Messages that `retune` gives its `progress`, one as each step ends: the initial tuning's
-# steady states, each stage, the check.
-PROGRESS_STEPS = len(SHARPNESS) + 2
+
+
+class RetuneSettings(eqx.Module):
+    """Settings of the retuning optimiser: of `retune`, and of the per-scenario optimum
+    that `best_tunings`, `sensitivities` and `robust_tune` share with it. Defaults live
+    here only.
+
+    - `sharpness`: sharpness of the smooth maximum of the local peaks (in log-peak units)
+      at each continuation stage; the last one defines the optimum.
+    - `continuation_tol`: optimiser tolerance of every stage but the last.
+    - `check_refinement`: the check grid is the design grid with `check_refinement - 1`
+      frequencies inserted evenly between neighbours.
+    - `design_newton_steps`: Newton iterations allowed per steady state inside the
+      optimiser, where every solve is warm-started; points that need more are still
+      evaluated (at their last iterate), and the final design is checked with fully
+      converged steady states.
+    - `max_rejected_steps`: consecutive rejected line-search steps (each halving the
+      step) after which a stage is taken as converged: no decrease is found above the
+      noise of the objective.
+    - `max_design_step`: longest optimiser step in the scaled design variables (1.0 is
+      about 10% in k; see `DESIGN_SCALE`).
+    """
+
+    sharpness: tuple[float, ...] = (50.0, 1000.0, 30000.0)
+    continuation_tol: float = 1e-3
+    check_refinement: int = 2
+    design_newton_steps: int = 4
+    max_rejected_steps: int = 12
+    max_design_step: float = 1.0
+
+    def __check_init__(self):
+        sharpness = self.sharpness
+        if not (isinstance(sharpness, tuple) and sharpness and all(
+                isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in sharpness)):
+            raise ValueError("RetuneSettings.sharpness must be a non-empty tuple of positive "
+                             f"numbers, got {sharpness!r}")
+        for name in ("continuation_tol", "max_design_step"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"RetuneSettings.{name} must be a positive number, "
+                                 f"got {value!r}")
+        for name in ("check_refinement", "design_newton_steps", "max_rejected_steps"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise ValueError(f"RetuneSettings.{name} must be an integer >= 1, "
+                                 f"got {value!r}")
+
+    def progress_steps(self) -> int:
+        """The messages that `retune` gives its `progress`, one as each step ends: the
+        initial tuning's steady states, each stage, the check."""
+        return len(self.sharpness) + 2
+
+    def to_dict(self) -> dict:
+        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
 
 STATUS_MESSAGES = {
     0: "ok",
@@ -229,10 +275,10 @@ def _peak_response(system, amplitude, omegas, host, settings):
 class RetuneResult(eqx.Module):
     """Per-amplitude retuned TID (SI units). `x_peak`/`x_peak_initial` and `y_peak`/
     `y_peak_initial` are the peak host and inerter displacements over the band after and
-    before retuning, confirmed on a frequency grid `CHECK_REFINEMENT` times finer than the
-    design grid, `check_omegas`, on which `x_response`/`x_response_initial` hold the peak
-    host displacement over a period at every frequency. `status` codes are explained by
-    `status_messages()`."""
+    before retuning, confirmed on a frequency grid `RetuneSettings.check_refinement` times
+    finer than the design grid, `check_omegas`, on which `x_response`/`x_response_initial`
+    hold the peak host displacement over a period at every frequency. `status` codes are
+    explained by `status_messages()`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -282,39 +328,31 @@ def _tuning_to_design(k, c, k_ref, c_ref):
     )
 
 
-# Newton iterations allowed per steady state inside the optimiser, where every solve is
-# warm-started; points that need more are still evaluated (at their last iterate), and the
-# final design is checked with fully converged steady states.
-DESIGN_NEWTON_STEPS = 4
-# Consecutive rejected line-search steps (each halving the step) after which the design is
-# taken as converged: no decrease is found above the noise of the objective.
-MAX_REJECTED_STEPS = 12
 # The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
 # shooting iterations carry tangents along them for the implicit derivatives.
 DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))
 
 
-# Longest step of the optimiser in the scaled design variables (about 10% in k).
-MAX_DESIGN_STEP = 1.0
-
 
 class _CappedNewtonDescent(optx.NewtonDescent):
-    """Newton direction with its two-norm capped at `MAX_DESIGN_STEP` before the line
-    search scales it: where the objective is nearly linear along some direction, BFGS's
+    """Newton direction with its two-norm capped at `max_step` before the line search
+    scales it: where the objective is nearly linear along some direction, BFGS's
     curvature estimate there is near zero and the plain Newton step would throw the
     design far off, where the steady states are expensive and the objective meaningless."""
+
+    max_step: float = 1.0
 
     def query(self, y, f_info, state):
         state = super().query(y, f_info, state)
         length = optx.two_norm(state.newton)
         tiny = jnp.finfo(length.dtype).tiny
-        factor = jnp.minimum(1.0, MAX_DESIGN_STEP / jnp.maximum(length, tiny))
+        factor = jnp.minimum(1.0, self.max_step / jnp.maximum(length, tiny))
         return eqx.tree_at(lambda s: s.newton, state, factor * state.newton)
 
 
 class _BFGS(optx.AbstractBFGS):
     """`optx.BFGS` (inverse-Hessian updates, backtracking Armijo line search) with the
-    Newton step capped at `MAX_DESIGN_STEP`."""
+    Newton step capped (`_CappedNewtonDescent`)."""
 
     rtol: float
     atol: float
@@ -327,7 +365,7 @@ class _BFGS(optx.AbstractBFGS):
 
 @compiled
 def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings, max_steps,
-                    tol):
+                    tol, design_newton_steps, max_rejected_steps, max_design_step):
     """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
     the frequencies `omegas[i]`) from the design `u0[i]` and inverse Hessian `h0[i]` on
     the smooth log peak, shooting from the orbits `z0` of a nearby design (its tuning
@@ -335,9 +373,9 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
     with respect to (k, c)); returns the designs, iterations, success, the orbits of the
     last accepted design and BFGS's inverse Hessian there."""
     settings = eqx.tree_at(
-        lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, DESIGN_NEWTON_STEPS)
+        lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
     )
-    solver = _BFGS(rtol=tol, atol=tol)
+    solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step))
     options = dict(autodiff_mode="fwd")
     tags = frozenset()
 
@@ -415,7 +453,7 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
         def cond(carry):
             u, state, z, steps, rejected = carry
             done, _ = solver.terminate(objective, u, z, options, state, tags)
-            return ~done & (steps < max_steps) & (rejected < MAX_REJECTED_STEPS)
+            return ~done & (steps < max_steps) & (rejected < max_rejected_steps)
 
         def body(carry):
             u, state, z, steps, rejected = carry
@@ -430,9 +468,9 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
             cond, body, (u_start, state, z_start, 0, 0)
         )
         done, result = solver.terminate(objective, u, z, options, state, tags)
-        # A line search that finds no decrease in MAX_REJECTED_STEPS halvings has reached
+        # A line search that finds no decrease in `max_rejected_steps` halvings has reached
         # the noise of the objective (steady states converged to the periodicity tolerance).
-        stalled = rejected >= MAX_REJECTED_STEPS
+        stalled = rejected >= max_rejected_steps
         return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
                 state.f_info.hessian_inv.pytree)
 
@@ -442,10 +480,10 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
     return map_batch(lambda args: one(*args), (systems, amplitudes, omegas, u0, z0, h0), 1)
 
 
-def _on_check_grid(values):
-    """`values` (amplitudes x design frequencies x ...) on the check grid: interpolated
-    linearly between neighbouring design frequencies."""
-    f = jnp.arange(CHECK_REFINEMENT).reshape((-1,) + (1,) * (values.ndim - 2)) / CHECK_REFINEMENT
+def _on_check_grid(values, refinement: int):
+    """`values` (amplitudes x design frequencies x ...) on the check grid, `refinement`
+    times finer: interpolated linearly between neighbouring design frequencies."""
+    f = jnp.arange(refinement).reshape((-1,) + (1,) * (values.ndim - 2)) / refinement
     lower, upper = values[:, :-1, None], values[:, 1:, None]
     inner = lower + f * (upper - lower)
     inner = inner.reshape(inner.shape[:1] + (-1,) + inner.shape[3:])
@@ -469,54 +507,73 @@ def retune(
     settings: SolverSettings = SolverSettings(),
     max_steps: int = 60,
     tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
 ) -> RetuneResult:
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
-    `tid_damping` c >= 0 minimising the peak steady-state host displacement over the band
-    `omegas` (rad/s; default `default_omegas(system)`).
+    `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
     All amplitudes are solved in one compiled call, one amplitude after another (each with
     its frequencies batched; with several JAX devices, one sequence per device), so that
     each optimiser stops as soon as it converges; the checks are batched over every
     amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
     maximum of the local peaks (the highest located in continuous frequency, so that the
-    optimum does not depend on where the grid falls) whose sharpness grows over `SHARPNESS`
-    (continuation), each stage a BFGS run (optimistix's, with its Newton step capped at
-    `MAX_DESIGN_STEP`; at most `max_steps` iterations, tolerance `tol` for the last stage
-    (on the scaled design variables and the log peak: the default 1e-4 settles k to about
-    1e-5 and the peak to about 1e-4, relative), `CONTINUATION_TOL` before; a stage also
-    ends, converged, when its line search finds no decrease in `MAX_REJECTED_STEPS`
-    halvings) warm-started from the last (its design, orbits and BFGS's inverse Hessian),
-    with gradients by implicit differentiation through the periodic orbits. The first
-    stage starts from the initial tuning's orbits on the design grid and the identity
-    (in the scaled design variables). At every design, each steady state is predicted to
-    first order from the orbit of the last accepted design and settled by chord
-    iterations with the latest monodromy matrix at its frequency; the `REFINED_PEAKS`
-    highest local maxima are then located in continuous frequency by Newton steps on the
-    slope of the response (`_peaks`), and the response at the last iterate is solved with
-    tangents, which give the derivatives of the true peaks and renew the monodromy
-    matrices at their grid points. The initial and retuned designs are then solved afresh
-    (each steady state starting from the design's orbits) on a grid `CHECK_REFINEMENT`
-    times finer; a design whose peak there is above the initial tuning's is replaced by
-    the initial tuning (status 4). `progress`, if given, is called with a one-line
-    message as each of its `PROGRESS_STEPS` steps ends (the initial tuning's steady
-    states, each stage, the check).
+    optimum does not depend on where the grid falls) whose sharpness grows over
+    `retune_settings.sharpness` (continuation), each stage a BFGS run (optimistix's, with
+    its Newton step capped at `retune_settings.max_design_step`) warm-started from the
+    last (its design, orbits and BFGS's inverse Hessian), with gradients by implicit
+    differentiation through the periodic orbits. The first stage starts from the initial
+    tuning's orbits on the design grid and the identity (in the scaled design variables).
+    At every design, each steady state is predicted to first order from the orbit of the
+    last accepted design and settled by chord iterations with the latest monodromy matrix
+    at its frequency; the `REFINED_PEAKS` highest local maxima are then located in
+    continuous frequency by Newton steps on the slope of the response (`_peaks`), and the
+    response at the last iterate is solved with tangents, which give the derivatives of
+    the true peaks and renew the monodromy matrices at their grid points. The initial and
+    retuned designs are then solved afresh (each steady state starting from the design's
+    orbits) on a grid `retune_settings.check_refinement` times finer; a design whose peak
+    there is above the initial tuning's is replaced by the initial tuning (status 4).
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`; its `tid_stiffness` and `tid_damping` are the initial
+      tuning.
+    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
+    - `omegas`: the design grid of the band, rad/s, increasing (default
+      `default_omegas(system)`: 61 frequencies over 0.65-1.4 times the host frequency).
+    - `settings`: `SolverSettings` of the steady states.
+    - `max_steps`: BFGS iterations allowed per stage.
+    - `tol`: tolerance of the last stage, on the scaled design variables and the log peak
+      (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
+      the stages before use `retune_settings.continuation_tol`. A stage also ends,
+      converged, when its line search finds no decrease in
+      `retune_settings.max_rejected_steps` halvings.
+    - `retune_settings`: `RetuneSettings` of the optimiser.
+    - `progress`: if given, called with a one-line message as each of the
+      `retune_settings.progress_steps()` steps ends (the initial tuning's steady states,
+      each stage, the check).
+
+    **Returns:** a `RetuneResult`.
     """
     _check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
-    check_optimiser_options(max_steps, tol)
+    check_optimiser_options(max_steps, tol, retune_settings)
     bands = jnp.broadcast_to(band, amps.shape + band.shape)
     result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
-                             max_steps=max_steps, tol=tol, progress=progress)
+                             max_steps=max_steps, tol=tol, retune_settings=retune_settings,
+                             progress=progress)
     return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
 
 
-def check_optimiser_options(max_steps, tol) -> None:
+def check_optimiser_options(max_steps, tol, retune_settings) -> None:
     if not (isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1):
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
     if not (isinstance(tol, float) and np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive float, got {tol!r}")
+    if not isinstance(retune_settings, RetuneSettings):
+        raise ValueError("retune_settings must be a RetuneSettings, got "
+                         f"{type(retune_settings).__name__}")
 
 
 def optimal_tunings(
@@ -527,6 +584,7 @@ def optimal_tunings(
     settings: SolverSettings,
     max_steps: int,
     tol: float,
+    retune_settings: RetuneSettings,
     progress: Callable[[str], None] | None = None,
 ) -> RetuneResult:
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
@@ -543,32 +601,37 @@ def optimal_tunings(
     # variables and would never be left.
     u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
-    fine = _on_check_grid(bands)
+    sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
+    fine = _on_check_grid(bands, refinement)
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     states = scaled_states(start, systems.host_stiffness)
     orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
               jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
     hessian_inv = jnp.broadcast_to(jnp.eye(2, dtype=amps.dtype), amps.shape + (2, 2))
-    for stage, sharpness in enumerate(SHARPNESS, start=1):
+    for stage, sharpness in enumerate(sharpnesses, start=1):
         # Stages before the last only bring the design near the optimum.
-        stage_tol = tol if stage == len(SHARPNESS) else max(tol, CONTINUATION_TOL)
+        stage_tol = (tol if stage == len(sharpnesses)
+                     else max(tol, retune_settings.continuation_tol))
         stage_run = ft.partial(
-            _optimise_stage, sharpness=jnp.asarray(sharpness), settings=settings,
+            _optimise_stage, sharpness=jnp.asarray(float(sharpness)), settings=settings,
             max_steps=max_steps, tol=jnp.asarray(stage_tol),
+            design_newton_steps=retune_settings.design_newton_steps,
+            max_rejected_steps=retune_settings.max_rejected_steps,
+            max_design_step=float(retune_settings.max_design_step),
         )
         u, steps, ok, orbits, hessian_inv = sharded_batch(
             lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
             orbits, hessian_inv)
         iterations = iterations + steps
-        say(f"retune stage {stage}/{len(SHARPNESS)} (smooth-max sharpness {sharpness:g}): "
+        say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "
             f"{int(jnp.max(steps))} iterations at most")
     k, c = _design_to_tuning(u.T, k_ref, c_ref)
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
     _, final_states, _, _ = orbits
-    warm = _on_check_grid(jnp.concatenate([states, final_states]))
+    warm = _on_check_grid(jnp.concatenate([states, final_states]), refinement)
     both_systems = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), systems,
                                 with_tuning(systems, k, c))
     both = lane_response(both_systems, jnp.concatenate([amps, amps]),

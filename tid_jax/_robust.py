@@ -19,9 +19,8 @@ from ._peaks import (
     true_peaks,
 )
 from ._response import batched, check_grid, frequency_response, scaled_states
-from ._retune import CHECK_REFINEMENT as RETUNE_CHECK_REFINEMENT
 from ._retune import (
-    SHARPNESS,
+    RetuneSettings,
     _band,
     _check_system,
     check_optimiser_options,
@@ -71,7 +70,8 @@ _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
 # lowered by the excess and the design polished again (at most _STROKE_ROUNDS times).
 STROKE_MARGIN = 0.005
 # Sharpness of the smooth worst case over the scenarios of the robust design, in stages:
-# its ratios need not balance as finely as the peaks of one optimum (`_retune.SHARPNESS`).
+# its ratios need not balance as finely as the peaks of one optimum
+# (`RetuneSettings.sharpness`).
 ROBUST_SHARPNESS = (50.0, 1000.0)
 CHECK_REFINEMENT = 4
 _STROKE_ROUNDS = 3
@@ -741,12 +741,13 @@ class Sensitivities(eqx.Module):
         }
 
 
-def _polished(ctx, scenario, u, z_init, at_bound, tol):
+def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
     """The evaluation (central stencil) at the optimum of the smooth log peak of `retune`
-    near u, its smooth maximum, gradient and derivatives: at most `_POLISH` Newton steps
-    from u (along u0 alone, with u1 = 0, where the damping is at its bound)."""
+    (of its last stage's `sharpness`) near u, its smooth maximum, gradient and
+    derivatives: at most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0,
+    where the damping is at its bound)."""
     final = _evaluate_design(ctx, u, [scenario], [z_init], central=True)
-    model = _Model(*_smooth_max(*final.host_terms, SHARPNESS[-1]))
+    model = _Model(*_smooth_max(*final.host_terms, sharpness))
     free = slice(0, 1) if at_bound else slice(0, 2)
     for _ in range(_POLISH):
         g, h = model.grad[free], model.curvature()[free, free]
@@ -756,14 +757,14 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol):
         step[free] = _trust_step(g, h, _MAX_STEP)
         trial = _evaluate_design(ctx, final.u + step, [scenario],
                                  [curves.states for curves in final.centres()], central=True)
-        trial_model = _Model(*_smooth_max(*trial.host_terms, SHARPNESS[-1]))
+        trial_model = _Model(*_smooth_max(*trial.host_terms, sharpness))
         if not trial_model.value < model.value:
             break
         final, model = trial, trial_model
     return final, model
 
 
-def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol):
+def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol, sharpness):
     """`OptimumSensitivities` at the best tuning `best[index]`, polished (see `_polished`)
     and differentiated through its stationarity condition: in (u0, u1), or where the
     damping is at its bound, in u0 alone with dc*/dp = 0 (the bound stays active)."""
@@ -771,7 +772,7 @@ def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol
     k, c = float(best.tid_stiffness[index]), float(best.tid_damping[index])
     u = ctx.design(k, 0.0 if at_bound else c)
     z_init = ctx.cold_states(k, c, [scenario.amplitude], scenario.scale)[0]
-    final, model = _polished(ctx, scenario, u, z_init, at_bound, tol)
+    final, model = _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness)
     u = final.u
     k, c = ctx.tuning(u)
     g, h_uu = model.grad, model.curvature()
@@ -841,6 +842,7 @@ def sensitivities(
     settings: SolverSettings = SolverSettings(),
     max_steps: int = 60,
     tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
 ) -> Sensitivities:
     """Sensitivities of the peak steady-state host displacement and inerter stroke over the
     band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
@@ -849,8 +851,9 @@ def sensitivities(
 
     With `optimum=True` also at the retuned optimum (see `OptimumSensitivities`): the
     tuning that `retune` finds (from `best`, a `BestTunings` of this system and band
-    holding `amplitude`, or else from `best_tunings` with `max_steps` and `tol`), polished
-    by at most `_POLISH` Newton steps on the same objective (aiming at a Newton decrement
+    holding `amplitude`, or else from `best_tunings` with `max_steps`, `tol` and
+    `retune_settings`), polished by at most `_POLISH` Newton steps on the same objective
+    (the smooth maximum of `retune_settings.sharpness[-1]`, aiming at a Newton decrement
     below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
@@ -860,7 +863,7 @@ def sensitivities(
     band = _band(system, omegas)
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
-    check_optimiser_options(max_steps, tol)
+    check_optimiser_options(max_steps, tol, retune_settings)
     ctx = _Context(system, band, settings, locate=True)
     scenario = _Scenario(amplitude, 1.0, 0.0)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
@@ -873,9 +876,10 @@ def sensitivities(
     if optimum:
         if best is None:
             best = best_tunings(system, [amplitude], omegas=band, settings=settings,
-                                max_steps=max_steps, tol=tol)
+                                max_steps=max_steps, tol=tol, retune_settings=retune_settings)
         index = _best_index(best, system, band, amplitude)
-        optimal = _optimum_sensitivities(ctx, scenario, theta, best, index, POLISH_TOL)
+        optimal = _optimum_sensitivities(ctx, scenario, theta, best, index, POLISH_TOL,
+                                         retune_settings.sharpness[-1])
     host_peak, stroke_peak = np.exp(log_host), np.exp(log_stroke)
     return Sensitivities(
         parameters=PARAMETERS,
@@ -904,7 +908,7 @@ class BestTunings(eqx.Module):
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
     - `host_peak`: peak |x| over the band's grid with it (refined by a parabola, as the
       robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
-      `retune` (`CHECK_REFINEMENT` times finer than the band).
+      `retune` (`RetuneSettings.check_refinement` times finer than the band).
     - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, sharpness
       `ROBUST_SHARPNESS[-1]`, ln m), the reference of the worst-case ratio of
       `robust_tune`.
@@ -958,29 +962,31 @@ def best_tunings(
     settings: SolverSettings = SolverSettings(),
     max_steps: int = 60,
     tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
 ) -> BestTunings:
     """The best achievable peak host displacement for each forcing amplitude (N) and host
     frequency scale (host stiffness times scale**2), over the band `omegas` (rad/s, for
     the nominal system; default `default_omegas(system)`) scaled with the host frequency.
 
-    Every scenario is retuned by `retune`'s optimiser (`max_steps`, `tol` as there), all
-    of them in one batch, from the system's tuning (k times scale**2, c times scale).
-    `progress`, if given, gets a line per optimiser stage."""
+    Every scenario is retuned by `retune`'s optimiser (`max_steps`, `tol`,
+    `retune_settings` as there), all of them in one batch, from the system's tuning (k
+    times scale**2, c times scale). `progress`, if given, gets a line as each step of the
+    retune ends."""
     _check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
     band = _band(system, omegas)
-    check_optimiser_options(max_steps, tol)
+    check_optimiser_options(max_steps, tol, retune_settings)
     lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
     bands = jnp.asarray(lane_scales[:, None] * np.asarray(band)[None])
     result = optimal_tunings(
         _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
-        max_steps=max_steps, tol=tol, progress=progress,
+        max_steps=max_steps, tol=tol, retune_settings=retune_settings, progress=progress,
     )
     # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
-    # which the check grid holds at every CHECK_REFINEMENT-th point.
-    on_band = np.asarray(result.x_response)[:, ::RETUNE_CHECK_REFINEMENT]
+    # which the check grid holds at every `check_refinement`-th point.
+    on_band = np.asarray(result.x_response)[:, ::retune_settings.check_refinement]
     band_peaks = np.asarray(jax.vmap(lambda v, w: grid_peak(v, w)[0])(
         jnp.asarray(on_band), bands))
     shape = (scales.size, amps.size)
@@ -1185,6 +1191,7 @@ def robust_tune(
     settings: SolverSettings = SolverSettings(),
     max_steps: int = 40,
     tol: float = 1e-9,
+    retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
 ) -> RobustDesign:
     """One TID stiffness k and damping c for every forcing amplitude in `amplitudes` (N;
@@ -1196,7 +1203,8 @@ def robust_tune(
     the inerter stroke |y| <= `stroke_limit` (m).
 
     The best achievable peaks come from `best` if given (a `BestTunings` for the same
-    system, amplitudes and scales), else from `best_tunings`. The worst case is a smooth
+    system, amplitudes and scales), else from `best_tunings` (with `retune_settings`).
+    The worst case is a smooth
     maximum, with sharpness rising over `ROBUST_SHARPNESS`, of the scenarios' log peak
     ratios. It is minimised by sequential quadratic programming with the smooth maximum of
     the log inerter peaks held below the limit (aimed `STROKE_MARGIN` below it): trust-region
@@ -1211,6 +1219,9 @@ def robust_tune(
     _check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
+    if not isinstance(retune_settings, RetuneSettings):
+        raise ValueError("retune_settings must be a RetuneSettings, got "
+                         f"{type(retune_settings).__name__}")
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
     _check_options(max_steps, tol)
     say = progress if progress is not None else (lambda message: None)
@@ -1221,6 +1232,7 @@ def robust_tune(
             host_frequency_scales=scales,
             omegas=omegas,
             settings=settings,
+            retune_settings=retune_settings,
             progress=progress,
         )
     else:

@@ -32,8 +32,7 @@ from ._linear import (
     stuck_receptance,
 )
 from ._response import frequency_response
-from ._retune import DEFAULT_FREQUENCIES, default_omegas, retune
-from ._retune import PROGRESS_STEPS as RETUNE_STEPS
+from ._retune import DEFAULT_FREQUENCIES, RetuneSettings, default_omegas, retune
 from ._robust import (
     PARAMETER_UNITS,
     ROBUST_SHARPNESS,
@@ -517,7 +516,7 @@ def _run_retune(args) -> int:
         f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "
         f"{_describe(system)}"
     )
-    with output.steps(RETUNE_STEPS) as step:
+    with output.steps(RetuneSettings().progress_steps()) as step:
         result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
 
     stiffness = float(system.host_stiffness)
@@ -1127,7 +1126,8 @@ def _run_sensitivity(args) -> int:
     )
     best = None
     results = []
-    with output.steps((0 if args.no_optimum else RETUNE_STEPS) + amplitudes.size) as step:
+    retune_steps = 0 if args.no_optimum else RetuneSettings().progress_steps()
+    with output.steps(retune_steps + amplitudes.size) as step:
         if not args.no_optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
             best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
@@ -1318,7 +1318,7 @@ def _run_robust(args) -> int:
         f"frequencies, {omegas.size} frequencies each; {_describe(system)}"
     )
     # The retune's steps, then the robust design's: its start, its stages and its end.
-    with output.steps(RETUNE_STEPS + 3 + len(ROBUST_SHARPNESS)) as step:
+    with output.steps(RetuneSettings().progress_steps() + 3 + len(ROBUST_SHARPNESS)) as step:
         result = robust_tune(
             system,
             amplitudes,
