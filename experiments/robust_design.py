@@ -65,7 +65,8 @@ def main() -> None:
         "robust": (float(robust.tid_stiffness), float(robust.tid_damping)),
         "robust, no stroke limit": (float(free.tid_stiffness), float(free.tid_damping)),
     }
-    status = {"robust": robust.status_message(), "robust, no stroke limit": free.status_message()}
+    status = {"robust": robust.status_messages()[0],
+              "robust, no stroke limit": free.status_messages()[0]}
     worst_overall = {}
     if args.host_frequency_tolerance > 0:
         tolerance = args.host_frequency_tolerance
@@ -75,7 +76,7 @@ def main() -> None:
         )
         name = f"robust, host frequency +-{100 * tolerance:g}%"
         tunings[name] = (float(uncertain.tid_stiffness), float(uncertain.tid_damping))
-        status[name] = uncertain.status_message()
+        status[name] = uncertain.status_messages()[0]
         worst_overall[name] = (
             float(uncertain.worst_ratio),
             float(uncertain.worst_amplitude),

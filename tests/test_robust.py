@@ -71,7 +71,7 @@ def test_best_tunings(system, best):
 
 
 def test_robust_beats_other_designs_without_stroke_limit(robust_free, other_designs):
-    assert int(robust_free.status) == 0, robust_free.status_message()
+    assert int(robust_free.status) == 0, robust_free.status_messages()[0]
     for name, performance in other_designs.items():
         assert float(robust_free.worst_ratio) <= float(performance.worst_ratio), name
     # The best tuning at each amplitude has ratio 1, so no tuning does better than 1.
@@ -79,7 +79,7 @@ def test_robust_beats_other_designs_without_stroke_limit(robust_free, other_desi
 
 
 def test_robust_design_respects_stroke_limit(system, band, robust, other_designs):
-    assert int(robust.status) == 0, robust.status_message()
+    assert int(robust.status) == 0, robust.status_messages()[0]
     k, c = float(robust.tid_stiffness), float(robust.tid_damping)
     # Checked independently on a finer and wider grid than the design's.
     assert _fine_stroke(system, k, c, band) <= tj.PAPER_STROKE

@@ -1125,7 +1125,7 @@ class RobustDesign(eqx.Module):
       `ratio` per scenario); `check_stroke_peak`: inerter peaks `[scales, amps]` on the
       fine grid, `check_converged`: whether every steady state there converged; `best`:
       the `BestTunings` it was measured against.
-    - `iterations`: Newton steps; `converged`; `status`: see `status_message()`.
+    - `iterations`: Newton steps; `converged`; `status`: see `status_messages()`.
     """
 
     tid_stiffness: Float[Array, ""]
@@ -1144,8 +1144,10 @@ class RobustDesign(eqx.Module):
     converged: Bool[Array, ""]
     status: Int[Array, ""]
 
-    def status_message(self) -> str:
-        return ROBUST_STATUS_MESSAGES[int(self.status)]
+    def status_messages(self) -> list[str]:
+        """The meaning of `status`, one message per entry (one here), as
+        `RetuneResult.status_messages`."""
+        return [ROBUST_STATUS_MESSAGES[int(code)] for code in np.atleast_1d(self.status)]
 
 
 def _check_stroke_limit(stroke_limit) -> float:

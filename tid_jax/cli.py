@@ -1400,7 +1400,7 @@ def _run_robust(args) -> int:
         "given_worst_amplitude_N": float(given.worst_amplitude),
         "iterations": int(result.iterations),
         "converged": bool(result.converged),
-        "status": result.status_message(),
+        "status": result.status_messages()[0],
     }
     json_path = output.path("robust.json")
     data = output.document(
