@@ -27,6 +27,7 @@ from ._retune import (
     optimal_tunings,
     sweep,
 )
+from ._sqp import Model, decrement, minimise_stage, stationary, trust_step
 from ._steady_state import SolverSettings
 from ._system import FIELD_NAMES, PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
@@ -420,121 +421,20 @@ def _cold_start(ctx: _Context, u, scenarios) -> list[np.ndarray]:
 
 class _Minimum(NamedTuple):
     evaluation: _Evaluation
-    objective: "_Model"  # the smooth worst case at the last stage's sharpness
-    constraint: "_Model | None"  # the stroke constraint, if any
+    objective: "Model"  # the smooth worst case at the last stage's sharpness
+    constraint: "Model | None"  # the stroke constraint, if any
     steps: int
     converged: bool
-
-
-class _Model(NamedTuple):
-    """A smooth maximum at a design: value, gradient in all coordinates, and derivatives
-    of the gradient along u0, u1 (rows)."""
-
-    value: float
-    grad: np.ndarray
-    hess: np.ndarray
-
-    def curvature(self) -> np.ndarray:
-        return 0.5 * (self.hess[:, :2] + self.hess[:, :2].T)
 
 
 def _models(evaluation: _Evaluation, sharpness, stroke_log_limit):
     """The worst case f (smooth maximum of the host terms) and, if a stroke limit is given,
     the constraint c = (smooth maximum of the log inerter peaks) - ln(limit) <= 0."""
-    f = _Model(*_smooth_max(*evaluation.host_terms, sharpness))
+    f = Model(*_smooth_max(*evaluation.host_terms, sharpness))
     if stroke_log_limit is None:
         return f, None
     value, grad, hess = _smooth_max(*evaluation.stroke_terms, sharpness)
-    return f, _Model(value - stroke_log_limit, grad, hess)
-
-
-def _decrement(g, h) -> float:
-    """Newton decrement g h^-1 g / 2 (inf where h is not positive definite)."""
-    if np.linalg.eigvalsh(h)[0] <= 0:
-        return np.inf
-    return float(g @ np.linalg.solve(h, g) / 2)
-
-
-def _multiplier(f: _Model, c: _Model) -> float:
-    """First-order estimate of the constraint's multiplier, from grad f + mu grad c = 0."""
-    a = c.grad[:2]
-    return float(-(f.grad[:2] @ a) / max(a @ a, 1e-300))
-
-
-def _lagrangian_curvature(f: _Model, c: _Model | None) -> np.ndarray:
-    if c is None:
-        return f.curvature()
-    return f.curvature() + max(_multiplier(f, c), 0.0) * c.curvature()
-
-
-def _stationary(f: _Model, c: _Model | None, tol) -> bool:
-    """Unconstrained: Newton decrement below `tol`. With the constraint active
-    (|c| <= _FEASIBILITY), a non-negative multiplier and the decrement along the
-    constraint below `tol`."""
-    h = _lagrangian_curvature(f, c)
-    if (c is None or c.value <= 0) and _decrement(f.grad[:2], f.curvature()) < tol:
-        return True
-    if c is None or abs(c.value) > _FEASIBILITY or _multiplier(f, c) < -np.sqrt(tol):
-        return False
-    a = c.grad[:2]
-    n = np.array([-a[1], a[0]]) / max(np.linalg.norm(a), 1e-300)
-    along = n @ h @ n
-    return bool(along > 0 and (n @ f.grad[:2]) ** 2 / (2 * along) < tol)
-
-
-def _trust_step(g, h, radius) -> np.ndarray:
-    """Minimiser of g.d + d.h.d / 2 over |d| <= radius (2-norm), h symmetric 2 x 2."""
-    values, vectors = np.linalg.eigh(h)
-    g_eig = vectors.T @ g
-    if values[0] > 0:
-        newton = -g_eig / values
-        if np.linalg.norm(newton) <= radius:
-            return vectors @ newton
-    low = max(0.0, -values[0]) + 1e-12 * max(1.0, np.abs(values).max())
-
-    def length(shift):
-        return np.linalg.norm(g_eig / (values + shift))
-
-    if length(low) <= radius:  # the hard case: go along the lowest curvature to the boundary
-        d = -g_eig / (values + low)
-        d[0] = np.sqrt(max(radius**2 - np.sum(d[1:] ** 2), 0.0))
-        return vectors @ d
-    high = low + np.linalg.norm(g) / radius + np.abs(values).max()
-    for _ in range(100):
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if length(mid) > radius else (low, mid)
-    return vectors @ (-g_eig / (values + high))
-
-
-def _step(f: _Model, c: _Model | None, radius) -> np.ndarray:
-    """Trust-region step of sequential quadratic programming: the quadratic model of the
-    Lagrangian minimised within `radius`, subject to the linearised constraint when the
-    unconstrained step would break it (or, if the constraint cannot be reached within
-    `radius`, the step towards it)."""
-    g, h = f.grad[:2], _lagrangian_curvature(f, c)
-    step = _trust_step(g, h, radius)
-    if c is None or c.value + c.grad[:2] @ step <= 0:
-        return step
-    a = c.grad[:2]
-    norm = max(np.linalg.norm(a), 1e-300)
-    to_line = -c.value * a / norm**2
-    if np.linalg.norm(to_line) >= radius:
-        return to_line * radius / np.linalg.norm(to_line)
-    n = np.array([-a[1], a[0]]) / norm
-    along, slope = n @ h @ n, n @ (g + h @ to_line)
-    reach = np.sqrt(radius**2 - to_line @ to_line)
-    t = -slope / along if along > 0 else -np.sign(slope) * reach
-    return to_line + np.clip(t, -reach, reach) * n
-
-
-def _finite(model: _Model) -> bool:
-    # `_smooth_max` gives no derivatives (None) only with a non-finite value.
-    return bool(np.isfinite(model.value) and np.all(np.isfinite(model.grad))
-                and np.all(np.isfinite(model.hess)))
-
-
-def _merit(f: _Model, c: _Model | None, weight) -> float:
-    return f.value + (weight * max(c.value, 0.0) if c is not None else 0.0)
+    return f, Model(value - stroke_log_limit, grad, hess)
 
 
 def _minimise(
@@ -561,39 +461,18 @@ def _minimise(
         f, c = _models(current, sharpness, stroke_log_limit)
         if not np.isfinite(f.value) or (c is not None and not np.isfinite(c.value)):
             return _Minimum(current, f, c, steps, False)
-        radius, weight = _MAX_STEP, 1.0
-        for _ in range(max_steps):
-            if _stationary(f, c, tol):
-                break
-            if c is not None:
-                weight = max(weight, 2 * _multiplier(f, c))
-            step = _step(f, c, radius)
-            h = _lagrangian_curvature(f, c)
-            predicted = -(f.grad[:2] @ step + step @ h @ step / 2)
-            if c is not None:
-                predicted += weight * (max(c.value, 0.0) - max(c.value + c.grad[:2] @ step, 0.0))
-            if predicted < tol / 10:
-                break  # nothing left to gain at the noise level of the objective
+
+        def evaluate(u, accepted, sharpness=sharpness):
             trial = _evaluate_design(
-                ctx, current.u + step, scenarios, [curves.states for curves in current.centres()]
-            )
-            steps += 1
+                ctx, u, scenarios, [curves.states for curves in accepted.centres()])
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
-            # A design where a steady state failed, or whose model is not finite, is a
-            # rejected step: its peaks are unknown.
-            usable = trial.converged() and all(_finite(m) for m in (t_f, t_c) if m is not None)
-            actual = _merit(f, c, weight) - _merit(t_f, t_c, weight) if usable else -np.inf
-            ratio = actual / predicted if np.isfinite(actual) else -np.inf
-            length = np.linalg.norm(step)
-            if ratio < 0.25:
-                radius = length / 4
-            elif ratio > 0.75 and length > 0.9 * radius:
-                radius = min(2 * radius, _MAX_STEP)
-            if ratio >= 1e-4:
-                current, f, c = trial, t_f, t_c
-            elif radius < _MIN_STEP:
-                break  # a jump or kink of the objective: no model fits it
-        converged = _stationary(f, c, NOISE_FACTOR * tol)
+            return trial, t_f, t_c, trial.converged()
+
+        current, f, c, stage_steps = minimise_stage(
+            evaluate, current, f, c, max_step=_MAX_STEP, min_step=_MIN_STEP,
+            feasibility=_FEASIBILITY, max_steps=max_steps, tol=tol)
+        steps += stage_steps
+        converged = stationary(f, c, NOISE_FACTOR * tol, _FEASIBILITY)
         if say is not None:
             k, c_tuned = ctx.tuning(current.u)
             say(
@@ -747,17 +626,17 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
     derivatives: at most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0,
     where the damping is at its bound)."""
     final = _evaluate_design(ctx, u, [scenario], [z_init], central=True)
-    model = _Model(*_smooth_max(*final.host_terms, sharpness))
+    model = Model(*_smooth_max(*final.host_terms, sharpness))
     free = slice(0, 1) if at_bound else slice(0, 2)
     for _ in range(_POLISH):
         g, h = model.grad[free], model.curvature()[free, free]
-        if _decrement(g, h) < tol:
+        if decrement(g, h) < tol:
             break
         step = np.zeros(2)
-        step[free] = _trust_step(g, h, _MAX_STEP)
+        step[free] = trust_step(g, h, _MAX_STEP)
         trial = _evaluate_design(ctx, final.u + step, [scenario],
                                  [curves.states for curves in final.centres()], central=True)
-        trial_model = _Model(*_smooth_max(*trial.host_terms, sharpness))
+        trial_model = Model(*_smooth_max(*trial.host_terms, sharpness))
         if not trial_model.value < model.value:
             break
         final, model = trial, trial_model
@@ -792,9 +671,9 @@ def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol
     dk[list(_OTHER)] = k * du_dp[0]
     dc[list(_OTHER)] = 2 * ctx.c_ref * u[1] * du_dp[1]
     host_peak, stroke_peak = centre.host_peak(), centre.stroke_peak()
-    stationary = _decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
+    at_optimum = decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
     # At the bound the peak must rise with the damping (a positive curvature in u1).
-    stationary &= not at_bound or h_uu[1, 1] > 0
+    at_optimum &= not at_bound or h_uu[1, 1] > 0
     return OptimumSensitivities(
         tid_stiffness=jnp.asarray(k),
         tid_damping=jnp.asarray(c),
@@ -812,7 +691,7 @@ def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol
         damping_elasticity=jnp.asarray(np.full(n, np.nan) if at_bound else theta * dc / c),
         gradient_norm=jnp.asarray(float(np.linalg.norm(g[free]))),
         iterations=jnp.asarray(int(best.iterations[index])),
-        converged=jnp.asarray(bool(stationary and final.converged()
+        converged=jnp.asarray(bool(at_optimum and final.converged()
                                    and best.converged[index])),
         damping_at_bound=jnp.asarray(at_bound),
     )
