@@ -4,6 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from ._checks import check_system
 from ._system import (
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -129,8 +130,7 @@ class Breakaway(eqx.Module):
 def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     """The `Breakaway` amplitudes of `system` at the frequencies `omegas` (rad/s; a
     scalar or a 1-d array of finite positive values) and their minimum over the band."""
-    if not isinstance(system, TIDSystem):
-        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+    check_system(system)
     check_values("omegas", omegas, "positive")
     w = jnp.atleast_1d(jnp.asarray(omegas, dtype=float))
     if w.ndim != 1:

@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._cache import compiled
+from ._checks import check_grid, check_system
 from ._dynamics import parameters
 from ._sharding import map_batch, map_parts, sharded_batch
 from ._steady_state import (
@@ -55,26 +56,6 @@ class FrequencyResponse(eqx.Module):
 
 
 _GRID_FIELDS = tuple(f.name for f in dataclasses.fields(FrequencyResponse))[2:]
-
-
-def check_grid(name: str, values: ArrayLike) -> np.ndarray:
-    """A 0- or 1-d grid of finite, positive values, else `ValueError` naming `name`."""
-    if isinstance(values, jax.core.Tracer):
-        raise ValueError(f"{name} must be concrete (not traced)")
-    try:
-        array = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numbers, got {values!r}") from None
-    if array.ndim > 1:
-        raise ValueError(f"{name} must be a scalar or 1-d, got shape {array.shape}")
-    if array.size == 0:
-        raise ValueError(f"{name} must not be empty")
-    bad = ~(np.isfinite(array) & (array > 0))
-    if np.any(bad):
-        raise ValueError(
-            f"{name} must be finite and positive, got {float(array.reshape(-1)[np.argmax(bad)])!r}"
-        )
-    return array
 
 
 def point_response(
@@ -279,8 +260,7 @@ def frequency_response(
     **Returns:** a `FrequencyResponse`; arrays are `(n_amplitudes, n_frequencies)`, with the
     axis of a scalar input dropped. Points that fail to converge are flagged in `converged`.
     """
-    if not isinstance(system, TIDSystem):
-        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+    check_system(system)
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)

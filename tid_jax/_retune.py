@@ -11,6 +11,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._cache import compiled
+from ._checks import check_grid, check_optimiser_options, check_system
 from ._dynamics import PARAMETERS, parameters
 from ._linear import den_hartog_tuning
 from ._peaks import (
@@ -30,7 +31,6 @@ from ._peaks import (
 from ._response import (
     FrequencyResponse,
     batched,
-    check_grid,
     lane_response,
     point_response,
     scaled_states,
@@ -191,11 +191,6 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
     )
 
 
-def _check_system(system) -> None:
-    if not isinstance(system, TIDSystem):
-        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
-
-
 def _band(system, omegas):
     if omegas is None:
         return default_omegas(system)
@@ -218,7 +213,7 @@ def peaks(
     `default_omegas(system)`) for each amplitude (N): the maxima in continuous frequency
     (each of the highest local maxima on the grid located by Newton steps on the slope of
     the response, see `_peaks`), all amplitudes in one batch."""
-    _check_system(system)
+    check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
     systems = batched(system, amps.size)
@@ -241,7 +236,7 @@ def peak_response(
     The host's peak is the maximum in continuous frequency, the inerter's the grid's
     refined by a parabola (see `response_peaks`). NaN where a steady state in the band did
     not converge."""
-    _check_system(system)
+    check_system(system)
     if response not in ("host", "inerter"):
         raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
     if not isinstance(amplitude, jax.core.Tracer):
@@ -555,10 +550,10 @@ def retune(
 
     **Returns:** a `RetuneResult`.
     """
-    _check_system(system)
+    check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
-    check_optimiser_options(max_steps, tol, retune_settings)
+    check_retune_options(max_steps, tol, retune_settings)
     bands = jnp.broadcast_to(band, amps.shape + band.shape)
     result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
                              max_steps=max_steps, tol=tol, retune_settings=retune_settings,
@@ -566,11 +561,8 @@ def retune(
     return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
 
 
-def check_optimiser_options(max_steps, tol, retune_settings) -> None:
-    if not (isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1):
-        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-    if not (isinstance(tol, float) and np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a positive float, got {tol!r}")
+def check_retune_options(max_steps, tol, retune_settings) -> None:
+    check_optimiser_options(max_steps, tol)
     if not isinstance(retune_settings, RetuneSettings):
         raise ValueError("retune_settings must be a RetuneSettings, got "
                          f"{type(retune_settings).__name__}")

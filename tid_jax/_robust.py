@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._cache import compiled
+from ._checks import check_grid, check_optimiser_options, check_system
 from ._linear import den_hartog_tuning
 from ._peaks import (
     PEAK_NEWTON_STEPS,
@@ -18,12 +19,11 @@ from ._peaks import (
     smooth_log_peak,
     true_peaks,
 )
-from ._response import batched, check_grid, frequency_response, scaled_states
+from ._response import batched, frequency_response, scaled_states
 from ._retune import (
     RetuneSettings,
     _band,
-    _check_system,
-    check_optimiser_options,
+    check_retune_options,
     optimal_tunings,
     sweep,
 )
@@ -509,13 +509,6 @@ def _check_scales(scales) -> np.ndarray:
     return array
 
 
-def _check_options(max_steps, tol) -> None:
-    if not (isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1):
-        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-    if not (isinstance(tol, float) and np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a positive float, got {tol!r}")
-
-
 # --- sensitivities -------------------------------------------------------------------------
 
 
@@ -737,12 +730,12 @@ def sensitivities(
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
     """
-    _check_system(system)
+    check_system(system)
     amplitude = _check_amplitude(amplitude)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
-    check_optimiser_options(max_steps, tol, retune_settings)
+    check_retune_options(max_steps, tol, retune_settings)
     ctx = _Context(system, band, settings, locate=True)
     scenario = _Scenario(amplitude, 1.0, 0.0)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
@@ -852,11 +845,11 @@ def best_tunings(
     `retune_settings` as there), all of them in one batch, from the system's tuning (k
     times scale**2, c times scale). `progress`, if given, gets a line as each step of the
     retune ends."""
-    _check_system(system)
+    check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
     band = _band(system, omegas)
-    check_optimiser_options(max_steps, tol, retune_settings)
+    check_retune_options(max_steps, tol, retune_settings)
     lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
     bands = jnp.asarray(lane_scales[:, None] * np.asarray(band)[None])
     result = optimal_tunings(
@@ -965,7 +958,7 @@ def tuning_performance(
     """The system's tuning over the scenarios of `best` (same band, amplitudes and host
     frequency scales): its host and inerter peaks (by `peaks`) and the ratio of its host
     peak to the best achievable, with the worst case and where it occurs."""
-    _check_system(system)
+    check_system(system)
     _check_best(best, system)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     amps = np.asarray(best.amplitudes)
@@ -1097,14 +1090,14 @@ def robust_tune(
     again. `stroke_limit=None` leaves the stroke free (reported with an infinite limit).
     `progress`, if given, gets one-line messages.
     """
-    _check_system(system)
+    check_system(system)
     amps = _check_amplitudes(amplitudes)
     scales = _check_scales(host_frequency_scales)
     if not isinstance(retune_settings, RetuneSettings):
         raise ValueError("retune_settings must be a RetuneSettings, got "
                          f"{type(retune_settings).__name__}")
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
-    _check_options(max_steps, tol)
+    check_optimiser_options(max_steps, tol)
     say = progress if progress is not None else (lambda message: None)
     if best is None:
         best = best_tunings(

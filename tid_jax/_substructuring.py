@@ -18,11 +18,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._cache import compiled
+from ._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from ._dynamics import smooth_sign
 from ._linear import linear_receptance
 from ._response import point_response
 from ._steady_state import SolverSettings
-from ._system import FIELD_NAMES, TIDSystem
+from ._system import TIDSystem
 
 SCHEMES = ("conventional", "error_feedback")
 GUESSED_FORCES = ("acceleration", "harmonic")
@@ -411,60 +412,6 @@ def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSett
     return jax.vmap(one)(omegas, amplitudes)
 
 
-# Input checks ----------------------------------------------------------------------------
-
-
-def _real_array(name: str, value, allowed: str) -> np.ndarray:
-    if isinstance(value, jax.core.Tracer):
-        raise ValueError(f"{name} must be concrete (not traced)")
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be real numbers, got {value!r}") from None
-    if array.size == 0:
-        raise ValueError(f"{name} must not be empty")
-    bad = ~np.isfinite(array) | ~((array > 0) if allowed == "positive" else (array >= 0))
-    if np.any(bad):
-        first = array.reshape(-1)[np.argmax(bad.reshape(-1))]
-        raise ValueError(f"{name} must be finite and {allowed}, got {first!r}")
-    return array
-
-
-def _real_scalar(name: str, value, allowed: str) -> float:
-    array = _real_array(name, value, allowed)
-    if array.ndim != 0:
-        raise ValueError(f"{name} must be a scalar, got shape {array.shape}")
-    return float(array)
-
-
-def _integer(name: str, value, low: int, high: int | None = None) -> int:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | np.integer)
-        or value < low
-        or (high is not None and value > high)
-    ):
-        allowed = f">= {low}" if high is None else f"from {low} to {high}"
-        raise ValueError(f"{name} must be an integer {allowed}, got {value!r}")
-    return int(value)
-
-
-def _choice(name: str, value, allowed: tuple) -> None:
-    if not isinstance(value, str) or value not in allowed:
-        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
-
-
-def _check_system(system) -> None:
-    if not isinstance(system, TIDSystem):
-        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
-    for name in FIELD_NAMES:
-        value = getattr(system, name)
-        if value is None and name == "friction_width":
-            continue
-        if isinstance(value, jax.core.Tracer) or np.ndim(value) != 0:
-            raise ValueError(f"system.{name} must be a concrete scalar, got {value!r}")
-
-
 # Public functions ------------------------------------------------------------------------
 
 
@@ -550,31 +497,31 @@ def simulate_substructuring(
 
     **Returns:** a `Substructuring`.
     """
-    _check_system(system)
+    check_concrete_system(system)
     if not isinstance(settings, SolverSettings):
         raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
-    _choice("scheme", scheme, SCHEMES)
-    _choice("guessed_force", guessed_force, GUESSED_FORCES)
+    choice("scheme", scheme, SCHEMES)
+    choice("guessed_force", guessed_force, GUESSED_FORCES)
     if prediction is not None:
-        _choice("prediction", prediction, PREDICTIONS)
-    omega_array = _real_array("omega", omega, "positive")
-    amplitude_array = _real_array("amplitude", amplitude, "positive")
-    delay_array = _real_array("delay", delay, "non-negative")
+        choice("prediction", prediction, PREDICTIONS)
+    omega_array = real_array("omega", omega, "positive")
+    amplitude_array = real_array("amplitude", amplitude, "positive")
+    delay_array = real_array("delay", delay, "non-negative")
     if guessed_inertance is None:
         guessed_inertance = float(system.inertance)
-    guess_array = _real_array("guessed_inertance", guessed_inertance, "positive")
-    rate = _real_scalar("sample_rate", sample_rate, "positive")
-    order = _integer("prediction_order", prediction_order, 0, MAX_PREDICTION_ORDER)
-    substeps = _integer("substeps", substeps, 1)
-    measure_periods = _integer("measure_periods", measure_periods, 1)
-    periods = _integer("periods", periods, 3 * measure_periods)
-    lag = _real_scalar("actuator_lag", actuator_lag, "non-negative")
+    guess_array = real_array("guessed_inertance", guessed_inertance, "positive")
+    rate = real_scalar("sample_rate", sample_rate, "positive")
+    order = integer("prediction_order", prediction_order, 0, MAX_PREDICTION_ORDER)
+    substeps = integer("substeps", substeps, 1)
+    measure_periods = integer("measure_periods", measure_periods, 1)
+    periods = integer("periods", periods, 3 * measure_periods)
+    lag = real_scalar("actuator_lag", actuator_lag, "non-negative")
     if parasitic_stiffness is not None:
-        parasitic_stiffness = _real_scalar("parasitic_stiffness", parasitic_stiffness, "positive")
-    factor = _real_scalar("divergence_factor", divergence_factor, "positive")
+        parasitic_stiffness = real_scalar("parasitic_stiffness", parasitic_stiffness, "positive")
+    factor = real_scalar("divergence_factor", divergence_factor, "positive")
     if factor <= 1:
         raise ValueError(f"divergence_factor must be > 1, got {divergence_factor!r}")
-    growth_tolerance = _real_scalar("growth_tolerance", growth_tolerance, "positive")
+    growth_tolerance = real_scalar("growth_tolerance", growth_tolerance, "positive")
     if scheme == "conventional" and not float(system.tid_damping) > 0:
         raise ValueError(
             "system.tid_damping must be positive for the conventional scheme (it solves y' "
@@ -608,7 +555,7 @@ def simulate_substructuring(
     if prediction_horizon is None:
         horizon_array = delay_array + 0.5 / rate  # the hold lags half a sample on average
     else:
-        horizon = _real_scalar("prediction_horizon", prediction_horizon, "non-negative")
+        horizon = real_scalar("prediction_horizon", prediction_horizon, "non-negative")
         if horizon >= duration / 2:
             raise ValueError(
                 f"prediction_horizon must be shorter than half the simulated duration "
@@ -717,15 +664,15 @@ def substructuring_stability(
     """
     if "reference" in options:
         raise ValueError("options must not contain reference (stability needs none)")
-    guesses = _real_array("guessed_inertance", guessed_inertance, "positive")
-    delays = _real_array("delay", delay, "non-negative")
+    guesses = real_array("guessed_inertance", guessed_inertance, "positive")
+    delays = real_array("delay", delay, "non-negative")
     for name, array in (("guessed_inertance", guesses), ("delay", delays)):
         if array.ndim != 1:
             raise ValueError(f"{name} must be 1-d, got shape {array.shape}")
     if np.any(np.diff(delays) <= 0):
         raise ValueError(f"delay must be strictly increasing, got {delays.tolist()!r}")
-    _real_scalar("omega", omega, "positive")
-    _real_scalar("amplitude", amplitude, "positive")
+    real_scalar("omega", omega, "positive")
+    real_scalar("amplitude", amplitude, "positive")
     result = simulate_substructuring(
         system,
         omega,

@@ -1,0 +1,90 @@
+"""Checks of user input: each raises `ValueError` with a message that names the input."""
+
+import jax
+import numpy as np
+from jaxtyping import ArrayLike
+
+from ._system import FIELD_NAMES, TIDSystem
+
+
+def check_system(system) -> None:
+    if not isinstance(system, TIDSystem):
+        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+
+
+def check_concrete_system(system) -> None:
+    """`check_system`, and every field a concrete scalar (not traced, not batched)."""
+    check_system(system)
+    for name in FIELD_NAMES:
+        value = getattr(system, name)
+        if value is None and name == "friction_width":
+            continue
+        if isinstance(value, jax.core.Tracer) or np.ndim(value) != 0:
+            raise ValueError(f"system.{name} must be a concrete scalar, got {value!r}")
+
+
+def check_grid(name: str, values: ArrayLike) -> np.ndarray:
+    """A 0- or 1-d grid of finite, positive values, else `ValueError` naming `name`."""
+    if isinstance(values, jax.core.Tracer):
+        raise ValueError(f"{name} must be concrete (not traced)")
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {values!r}") from None
+    if array.ndim > 1:
+        raise ValueError(f"{name} must be a scalar or 1-d, got shape {array.shape}")
+    if array.size == 0:
+        raise ValueError(f"{name} must not be empty")
+    bad = ~(np.isfinite(array) & (array > 0))
+    if np.any(bad):
+        raise ValueError(
+            f"{name} must be finite and positive, got {float(array.reshape(-1)[np.argmax(bad)])!r}"
+        )
+    return array
+
+
+def check_optimiser_options(max_steps, tol) -> None:
+    """`max_steps` a positive integer and `tol` a positive finite float."""
+    integer("max_steps", max_steps, 1)
+    if not (isinstance(tol, float) and np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a positive float, got {tol!r}")
+
+
+def real_array(name: str, value, allowed: str) -> np.ndarray:
+    if isinstance(value, jax.core.Tracer):
+        raise ValueError(f"{name} must be concrete (not traced)")
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be real numbers, got {value!r}") from None
+    if array.size == 0:
+        raise ValueError(f"{name} must not be empty")
+    bad = ~np.isfinite(array) | ~((array > 0) if allowed == "positive" else (array >= 0))
+    if np.any(bad):
+        first = array.reshape(-1)[np.argmax(bad.reshape(-1))]
+        raise ValueError(f"{name} must be finite and {allowed}, got {first!r}")
+    return array
+
+
+def real_scalar(name: str, value, allowed: str) -> float:
+    array = real_array(name, value, allowed)
+    if array.ndim != 0:
+        raise ValueError(f"{name} must be a scalar, got shape {array.shape}")
+    return float(array)
+
+
+def integer(name: str, value, low: int, high: int | None = None) -> int:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or value < low
+        or (high is not None and value > high)
+    ):
+        allowed = f">= {low}" if high is None else f"from {low} to {high}"
+        raise ValueError(f"{name} must be an integer {allowed}, got {value!r}")
+    return int(value)
+
+
+def choice(name: str, value, allowed: tuple) -> None:
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
