@@ -79,7 +79,7 @@ def main() -> None:
                 amplitude,
                 name,
                 float(result.values[i]),
-                tj._robust.PARAMETER_UNITS[name],
+                tj._design.PARAMETER_UNITS[name],
                 float(result.host_peak),
                 float(result.host_elasticity[i]),
                 float(result.stroke_peak),

@@ -27,16 +27,20 @@ from ._retune import (
     peaks as peaks,
     retune as retune,
 )
-from ._robust import (
+from ._design import (
     BestTunings as BestTunings,
-    OptimumSensitivities as OptimumSensitivities,
-    RobustDesign as RobustDesign,
-    Sensitivities as Sensitivities,
-    TuningPerformance as TuningPerformance,
     best_tunings as best_tunings,
+)
+from ._robust import (
+    RobustDesign as RobustDesign,
+    TuningPerformance as TuningPerformance,
     robust_tune as robust_tune,
-    sensitivities as sensitivities,
     tuning_performance as tuning_performance,
+)
+from ._sensitivity import (
+    OptimumSensitivities as OptimumSensitivities,
+    Sensitivities as Sensitivities,
+    sensitivities as sensitivities,
 )
 from ._steady_state import SolverSettings as SolverSettings
 from ._substructuring import (

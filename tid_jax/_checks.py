@@ -25,21 +25,9 @@ def check_concrete_system(system) -> None:
 
 def check_grid(name: str, values: ArrayLike) -> np.ndarray:
     """A 0- or 1-d grid of finite, positive values, else `ValueError` naming `name`."""
-    if isinstance(values, jax.core.Tracer):
-        raise ValueError(f"{name} must be concrete (not traced)")
-    try:
-        array = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numbers, got {values!r}") from None
+    array = real_array(name, values, "positive")
     if array.ndim > 1:
         raise ValueError(f"{name} must be a scalar or 1-d, got shape {array.shape}")
-    if array.size == 0:
-        raise ValueError(f"{name} must not be empty")
-    bad = ~(np.isfinite(array) & (array > 0))
-    if np.any(bad):
-        raise ValueError(
-            f"{name} must be finite and positive, got {float(array.reshape(-1)[np.argmax(bad)])!r}"
-        )
     return array
 
 
@@ -51,18 +39,20 @@ def check_optimiser_options(max_steps, tol) -> None:
 
 
 def real_array(name: str, value, allowed: str) -> np.ndarray:
+    """A concrete array of finite values, `allowed` "positive" (> 0) or "non-negative"
+    (>= 0)."""
     if isinstance(value, jax.core.Tracer):
         raise ValueError(f"{name} must be concrete (not traced)")
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be real numbers, got {value!r}") from None
+        raise ValueError(f"{name} must be numbers, got {value!r}") from None
     if array.size == 0:
         raise ValueError(f"{name} must not be empty")
     bad = ~np.isfinite(array) | ~((array > 0) if allowed == "positive" else (array >= 0))
     if np.any(bad):
         first = array.reshape(-1)[np.argmax(bad.reshape(-1))]
-        raise ValueError(f"{name} must be finite and {allowed}, got {first!r}")
+        raise ValueError(f"{name} must be finite and {allowed}, got {float(first)!r}")
     return array
 
 

@@ -24,6 +24,7 @@ from tqdm import tqdm
 
 from . import __version__, plot
 from ._cache import CACHE_ENVIRONMENT_VARIABLE, enable_compilation_cache
+from ._design import PARAMETER_UNITS, ROBUST_SHARPNESS, best_tunings
 from ._io import check_writable_dir, json_text, write_csv, write_json, write_toml
 from ._linear import (
     breakaway_amplitude,
@@ -33,14 +34,8 @@ from ._linear import (
 )
 from ._response import frequency_response
 from ._retune import DEFAULT_FREQUENCIES, RetuneSettings, default_omegas, retune
-from ._robust import (
-    PARAMETER_UNITS,
-    ROBUST_SHARPNESS,
-    best_tunings,
-    robust_tune,
-    sensitivities,
-    tuning_performance,
-)
+from ._robust import robust_tune, tuning_performance
+from ._sensitivity import sensitivities
 from ._steady_state import SolverSettings
 from ._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._system import (

@@ -1,0 +1,574 @@
+"""Designs judged over scenarios: the peaks of each scenario (forcing amplitude, host
+frequency scale) at a few designs (k, c) and their derivatives, the smooth worst case
+over scenarios, and the best tuning of each scenario (`best_tunings`) that the
+sensitivities and the robust design are measured against."""
+
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ._cache import compiled
+from ._checks import check_grid, check_system
+from ._linear import den_hartog_tuning
+from ._peaks import (
+    PEAK_NEWTON_STEPS,
+    REFINED_PEAKS,
+    grid_peak,
+    interpolated,
+    parabola_vertices,
+    smooth_log_peak,
+    true_peaks,
+)
+from ._response import batched, frequency_response, scaled_states
+from ._retune import (
+    RetuneSettings,
+    _band,
+    check_retune_options,
+    optimal_tunings,
+    sweep,
+)
+from ._steady_state import SolverSettings
+from ._system import FIELD_NAMES, TIDSystem
+
+# The parameters that sensitivities are taken with respect to: the physical fields of a
+# `TIDSystem` (not the numerical `friction_width`) and the forcing amplitude.
+PARAMETERS = FIELD_NAMES[:7] + ("amplitude",)
+PARAMETER_UNITS = {
+    "host_mass": "kg",
+    "host_stiffness": "N/m",
+    "host_damping": "N s/m",
+    "inertance": "kg",
+    "friction_force": "N",
+    "tid_stiffness": "N/m",
+    "tid_damping": "N s/m",
+    "amplitude": "N",
+}
+_K, _C = PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping")
+# Parameters other than the design (k, c), in the order of the optimiser's coordinates
+# (u0, u1, *OTHER): u0 = ln(k / k_ref), u1 = sqrt(c / c_ref), as in `retune`.
+OTHER = tuple(i for i in range(len(PARAMETERS)) if i not in (_K, _C))
+
+# Design-variable step of the differences of exact gradients that give the curvature of
+# each refined peak (forward while optimising, central for the final derivatives; the
+# curvature of the smooth maximum across peaks is exact). Smaller steps amplify the noise
+# of the orbit solver in the gradients, larger ones the truncation error.
+_STENCIL_STEP = 1e-3
+_CHUNK = 3  # points per kernel call (one compiled shape for every use)
+MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
+
+# The optimiser aims at a Newton decrement below `tol`; the noise of the orbit solver in the
+# gradients, and jumps of ~1e-8 in the log peak where a sample's concavity flips, can hold
+# it above that (most where peaks of different amplitudes balance). Within
+# NOISE_FACTOR * tol (1e-6 of the log peak by default) the optimum counts as converged.
+NOISE_FACTOR = 1000.0
+
+# Sharpness of the smooth worst case over the scenarios of the robust design, in stages:
+# its ratios need not balance as finely as the peaks of one optimum
+# (`RetuneSettings.sharpness`).
+ROBUST_SHARPNESS = (50.0, 1000.0)
+
+# --- the kernel: refined peaks and their derivatives at a few designs ---------------------
+
+
+def _log_candidates(values, omegas, true):
+    """Log of the parabola-refined value at every grid point of `values` over `omegas`,
+    then of the true peaks `true = (index, peaks, valid)` (`_peaks.true_peaks`, in the
+    order of their grid indices), and the candidates of the smooth worst case: the
+    true peaks, and the other interior local maxima and band ends. The value at every
+    sample where the samples are concave is the vertex of the parabola through it and its
+    neighbours, clipped to between them (`_peaks.parabola_vertices`). Between nearby
+    designs, the same entry holds the same peak (the true peaks in the order of
+    frequency, wherever the grid falls), so that differences of its gradient give its
+    curvature."""
+    index, peaks, valid = true
+    vertex, _, is_peak = parabola_vertices(values, omegas)
+    true_mask = jnp.ones(1, dtype=bool)
+    grid_mask = jnp.concatenate([true_mask, is_peak, true_mask]).at[index].set(False)
+    logs = jnp.log(jnp.concatenate([values[:1], vertex, values[-1:], peaks]))
+    return logs, jnp.concatenate([grid_mask, valid])
+
+
+def _changed_system(system, theta, scale):
+    """`system` with the parameters `theta` (order `PARAMETERS`, amplitude last and unused)
+    and its host stiffness multiplied by `scale**2`."""
+    mass, stiffness, damping, inertance, friction, k, c, _ = theta
+    return eqx.tree_at(
+        lambda s: (
+            s.host_mass,
+            s.host_stiffness,
+            s.host_damping,
+            s.inertance,
+            s.friction_force,
+            s.tid_stiffness,
+            s.tid_damping,
+        ),
+        system,
+        (mass, stiffness * scale**2, damping, inertance, friction, k, c),
+    )
+
+
+def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
+    """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
+    `locate` (see `_log_candidates`), for the parameters `theta` (order `PARAMETERS`),
+    with the host stiffness multiplied by `scale**2`."""
+    changed = _changed_system(system, theta, scale)
+    xs, ys, converged, states = sweep(changed, theta[-1], omegas, settings, z_init)
+    states = jax.lax.stop_gradient(states)
+
+    def located(values):
+        def solve(step, at):
+            # Only the peak (the response at the last Newton iterate) is differentiated.
+            t = theta if step == PEAK_NEWTON_STEPS else jax.lax.stop_gradient(theta)
+            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
+                _changed_system(system, t, scale), t[-1], at, settings,
+                interpolated(states, omegas, at))
+            return jnp.where(ok, x, jnp.nan)
+
+        selection = jnp.where(converged, jax.lax.stop_gradient(values), 0.0)
+        index, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
+        order = jnp.argsort(index)
+        return index[order], peaks[order], valid[order]
+
+    # The host's peaks are located in continuous frequency, the stroke's are the grid's
+    # (see `_retune.response_peaks`).
+    none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
+    true_x = located(xs) if locate else none
+    converged = jnp.concatenate([converged, jnp.isfinite(true_x[1]) | ~true_x[2]])
+    log_x, peak_x = _log_candidates(xs, omegas, true_x)
+    log_y, peak_y = _log_candidates(ys, omegas, none)
+    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, converged, states, true_x[0])
+
+
+@compiled
+def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locate):
+    """`_CHUNK` points at once, shooting from the scaled states `z_init`: for each, the log
+    refined peaks (with the host's true peaks if `locate`), candidate masks and their
+    Jacobians with respect to `theta` (forward mode, implicit differentiation through the
+    orbits). Each point's band is `ratio_grid` times its host frequency."""
+    host_frequency = jax.lax.stop_gradient(system.host_frequency)
+
+    def one(theta, scale, z0):
+        omegas = ratio_grid * host_frequency * scale
+
+        def curves(t):
+            return _point_curves(system, t, scale, omegas, settings, z0, locate)
+
+        return jax.jacfwd(curves, has_aux=True)(theta)
+
+    return jax.vmap(one)(thetas, scales, jax.lax.stop_gradient(z_init))
+
+
+# --- host side: points, stencils, the smooth worst case and its derivatives ----------------
+
+
+class _Curves(NamedTuple):
+    """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency
+    (then the true peaks of |x|, if located), their candidate masks (`_log_candidates`),
+    Jacobians `[entries, PARAMETERS]`, convergence of every orbit, the orbits' states and
+    the grid indices of the true peaks."""
+
+    log_x: np.ndarray
+    log_y: np.ndarray
+    peak_x: np.ndarray
+    peak_y: np.ndarray
+    jac_x: np.ndarray
+    jac_y: np.ndarray
+    converged: bool
+    states: np.ndarray
+    located: np.ndarray
+
+    def top(self, response: str) -> tuple[float, np.ndarray]:
+        """Log of the grid peak of `response` ("x" or "y"), as `_peaks.grid_peak` finds it,
+        and its gradient (`PARAMETERS`)."""
+        values = np.where(
+            getattr(self, f"peak_{response}"), getattr(self, f"log_{response}"), -np.inf
+        )
+        i = int(np.argmax(values))
+        return float(values[i]), getattr(self, f"jac_{response}")[i]
+
+    def host_peak(self) -> float:
+        return float(np.exp(self.top("x")[0]))
+
+    def stroke_peak(self) -> float:
+        return float(np.exp(self.top("y")[0]))
+
+
+class Context:
+    """What every evaluation shares: the system, the band as multiples of the host
+    frequency, the solver settings, whether the host's peaks are located in continuous
+    frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
+    the grid's, refined by parabolas) and the reference tuning of the design variables
+    u = (ln(k / k_ref), sqrt(c / c_ref))."""
+
+    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool):
+        self.system = system
+        self.locate = locate
+        self.settings = settings
+        self.omegas = np.asarray(omegas, dtype=float)
+        self.ratio_grid = jnp.asarray(self.omegas / float(system.host_frequency))
+        self.values = np.array([float(getattr(system, name)) for name in PARAMETERS[:-1]])
+        k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+        self.k_ref, self.c_ref = float(k_ref), float(c_ref)
+
+    def tuning(self, u) -> tuple[float, float]:
+        return self.k_ref * float(np.exp(u[0])), self.c_ref * float(u[1]) ** 2
+
+    def design(self, k, c, *, floor=0.0) -> np.ndarray:
+        return np.array([np.log(k / self.k_ref), np.sqrt(max(c / self.c_ref, floor))])
+
+    def theta(self, k, c, amplitude) -> np.ndarray:
+        theta = np.append(self.values, float(amplitude))
+        theta[_K], theta[_C] = k, c
+        return theta
+
+    def evaluate(self, points: Sequence[tuple]) -> list[_Curves]:
+        """`_Curves` at each `(theta, scale, z_init)`; points where a steady state did not
+        converge are tried again with each of `SolverSettings.fallbacks()` in turn."""
+        results = self._evaluate(points, self.settings)
+        for settings in self.settings.fallbacks():
+            failed = [i for i, curves in enumerate(results) if not curves.converged]
+            if not failed:
+                break
+            retried = self._evaluate([points[i] for i in failed], settings)
+            for i, curves in zip(failed, retried, strict=True):
+                if curves.converged:
+                    results[i] = curves
+        return results
+
+    def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
+        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call."""
+        results = []
+        for start in range(0, len(points), _CHUNK):
+            chunk = list(points[start : start + _CHUNK])
+            used = len(chunk)
+            chunk += [chunk[-1]] * (_CHUNK - used)
+            thetas, scales, z_init = (np.stack([point[i] for point in chunk]) for i in range(3))
+            (jac_x, jac_y), aux = _evaluate_points(
+                self.system,
+                jnp.asarray(thetas),
+                jnp.asarray(scales, dtype=float),
+                self.ratio_grid,
+                settings,
+                jnp.asarray(z_init),
+                self.locate,
+            )
+            jac_x, jac_y = np.asarray(jac_x), np.asarray(jac_y)
+            aux = [np.asarray(a) for a in aux]
+            for i in range(used):
+                log_x, log_y, peak_x, peak_y, converged, states, located = (
+                    a[i] for a in aux
+                )
+                results.append(
+                    _Curves(
+                        log_x,
+                        log_y,
+                        peak_x,
+                        peak_y,
+                        jac_x[i],
+                        jac_y[i],
+                        bool(np.all(converged)),
+                        states,
+                        located,
+                    )
+                )
+        return results
+
+    def cold_states(self, k, c, amplitudes, scale) -> np.ndarray:
+        """Scaled orbit states `[amps, freqs, 4]` at the tuning (k, c) for each amplitude,
+        from `frequency_response` (which retries points that fail to converge)."""
+        changed = self.system.replace(
+            host_stiffness=float(self.system.host_stiffness) * scale**2,
+            tid_stiffness=k,
+            tid_damping=c,
+        )
+        omegas = self.omegas * scale
+        amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
+        response = frequency_response(changed, omegas, amplitudes, settings=self.settings)
+        return np.asarray(scaled_states(response, float(changed.host_stiffness)))
+
+
+class Scenario(NamedTuple):
+    amplitude: float  # N
+    scale: float  # host frequency / nominal host frequency
+    offset: float  # subtracted from the log host peak: ln of the best achievable peak, or 0
+
+
+def _stencil(u, central: bool) -> list[np.ndarray]:
+    h = _STENCIL_STEP
+    steps = [[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]] if central else [[h, 0.0], [0.0, h]]
+    return [np.asarray(u, dtype=float)] + [u + np.asarray(step) for step in steps]
+
+
+def coordinates(ctx: Context, u, stencil: list[_Curves], response: str):
+    """Log peaks, their gradients in the coordinates (u0, u1, parameters `OTHER`) and
+    the derivatives of those gradients along u0 and u1, for every frequency of one
+    scenario, from the curves at the designs `_stencil(u, central)` (central when there
+    are five). Only the second derivatives of each refined peak come from differences."""
+    k, _ = ctx.tuning(u)
+    jac = [getattr(curves, f"jac_{response}") for curves in stencil]
+    centre = jac[0]
+    grad = np.concatenate(
+        [k * centre[:, [_K]], 2 * ctx.c_ref * u[1] * centre[:, [_C]], centre[:, OTHER]], axis=1
+    )
+    dgrad = np.empty(grad.shape[:1] + (2,) + grad.shape[1:])
+    for i in range(2):
+        if len(stencil) == 5:
+            d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * _STENCIL_STEP)
+        else:
+            d_jac = (jac[1 + i] - centre) / _STENCIL_STEP
+        dgrad[:, i, 0] = k * d_jac[:, _K] + (k * centre[:, _K] if i == 0 else 0.0)
+        dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
+        dgrad[:, i, 2:] = d_jac[:, OTHER]
+    if response == "x" and stencil[0].located.size:
+        # A true peak's entry holds the same peak at every design of the stencil unless the
+        # set of highest local maxima changed between them (its grid index jumps): then
+        # its curvature is unknown and left out.
+        located = np.stack([curves.located for curves in stencil])
+        changed = np.any(np.abs(located - located[0]) > 1, axis=0)
+        dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
+    curves = stencil[0]
+    values = getattr(curves, f"log_{response}")
+    return values, getattr(curves, f"peak_{response}"), grad, dgrad
+
+
+def smooth_max(values, mask, grad, dgrad, sharpness):
+    """Smooth maximum G = ln(sum exp(s T)) / s of the candidate terms T, its gradient in
+    all coordinates and its derivatives along u0, u1 (rows) in all coordinates: the exact
+    curvature of the log-sum-exp plus the weighted curvatures of the terms."""
+    terms = np.where(mask, values, -np.inf)
+    top = np.max(terms)
+    if not np.isfinite(top):
+        return np.inf, None, None
+    weights = np.exp(sharpness * (terms - top))
+    total = weights.sum()
+    weights /= total
+    grad = np.where(mask[:, None], grad, 0.0)
+    dgrad = np.where(mask[:, None, None], dgrad, 0.0)
+    g = weights @ grad
+    hess = sharpness * (np.einsum("n,ni,nj->ij", weights, grad[:, :2], grad) - np.outer(g[:2], g))
+    hess += np.einsum("n,nij->ij", weights, dgrad)
+    return top + np.log(total) / sharpness, g, hess
+
+
+class Evaluation(NamedTuple):
+    u: np.ndarray
+    stencils: list  # per scenario, the curves at `_stencil(u, central)`
+    host_terms: tuple  # (values, mask, grad, dgrad), all scenarios' terms concatenated
+    stroke_terms: tuple
+
+    def centres(self) -> list[_Curves]:
+        return [stencil[0] for stencil in self.stencils]
+
+    def converged(self) -> bool:
+        return all(curves.converged for curves in self.centres())
+
+
+def evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> Evaluation:
+    """Curves at the design u and its stencil for every scenario (shooting from `z_inits`,
+    one state array per scenario), and the terms of the smooth maxima: each scenario's log
+    host peaks less its offset, and its log inerter peaks."""
+    designs = _stencil(u, central)
+    points = []
+    for scenario, z in zip(scenarios, z_inits, strict=True):
+        points += [
+            (ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z) for v in designs
+        ]
+    curves = ctx.evaluate(points)
+    n = len(designs)
+    stencils = [curves[i : i + n] for i in range(0, len(curves), n)]
+    host, stroke = [], []
+    for scenario, stencil in zip(scenarios, stencils, strict=True):
+        values, mask, grad, dgrad = coordinates(ctx, designs[0], stencil, "x")
+        host.append((values - scenario.offset, mask, grad, dgrad))
+        stroke.append(coordinates(ctx, designs[0], stencil, "y"))
+
+    def join(parts):
+        return tuple(np.concatenate([part[i] for part in parts]) for i in range(4))
+
+    return Evaluation(designs[0], stencils, join(host), join(stroke))
+
+
+def cold_start(ctx: Context, u, scenarios) -> list[np.ndarray]:
+    """Orbit states at the design u for every scenario, one `frequency_response` call per
+    host-frequency scale."""
+    states = [None] * len(scenarios)
+    for scale in sorted({scenario.scale for scenario in scenarios}):
+        index = [i for i, scenario in enumerate(scenarios) if scenario.scale == scale]
+        amplitudes = [scenarios[i].amplitude for i in index]
+        for i, z in zip(index, ctx.cold_states(*ctx.tuning(u), amplitudes, scale), strict=True):
+            states[i] = z
+    return states
+
+
+
+# --- checks of user input ------------------------------------------------------------------
+
+
+def check_amplitude(amplitude) -> float:
+    if isinstance(amplitude, jax.core.Tracer):
+        raise ValueError("amplitude must be concrete (not traced)")
+    array = check_grid("amplitude", amplitude)
+    if array.ndim != 0:
+        raise ValueError(f"amplitude must be a scalar, got shape {array.shape}")
+    return float(array)
+
+
+def check_amplitudes(amplitudes) -> np.ndarray:
+    array = np.atleast_1d(check_grid("amplitudes", amplitudes))
+    if np.unique(array).size != array.size:
+        raise ValueError(f"amplitudes must be distinct, got {array.tolist()}")
+    return array
+
+
+def check_scales(scales) -> np.ndarray:
+    array = np.atleast_1d(check_grid("host_frequency_scales", scales))
+    if np.unique(array).size != array.size:
+        raise ValueError(f"host_frequency_scales must be distinct, got {array.tolist()}")
+    return array
+
+
+
+# --- the best tuning per scenario, any tuning against it, the robust tuning ---------------
+
+
+class BestTunings(eqx.Module):
+    """For each host-frequency scale and forcing amplitude, the retuned optimum: the tuning
+    that `retune` finds (the minimiser of the smooth maximum over the band of the host
+    displacement), and the peaks it achieves. Arrays are `[scales, amps]`; SI.
+
+    - `system`: the nominal system; a scale s multiplies its host stiffness by s**2 (host
+      frequency by s) and its band `omegas` (rad/s) by s.
+    - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
+    - `host_peak`: peak |x| over the band's grid with it (refined by a parabola, as the
+      robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
+      `retune` (`RetuneSettings.check_refinement` times finer than the band).
+    - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, sharpness
+      `ROBUST_SHARPNESS[-1]`, ln m), the reference of the worst-case ratio of
+      `robust_tune`.
+    - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
+      `converged`: `retune`'s status is ok (stationary, every steady state converged, the
+      peak inside the band and no higher than the starting tuning's on the check grid);
+      `damping_at_bound`: c = 0 is optimal.
+    """
+
+    system: TIDSystem
+    omegas: Float[Array, " freqs"]
+    amplitudes: Float[Array, " amps"]
+    host_frequency_scales: Float[Array, " scales"]
+    tid_stiffness: Float[Array, "scales amps"]
+    tid_damping: Float[Array, "scales amps"]
+    host_peak: Float[Array, "scales amps"]
+    stroke_peak: Float[Array, "scales amps"]
+    objective: Float[Array, "scales amps"]
+    iterations: Int[Array, "scales amps"]
+    stationary: Bool[Array, "scales amps"]
+    converged: Bool[Array, "scales amps"]
+    damping_at_bound: Bool[Array, "scales amps"]
+
+
+def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
+    """One system per scale s (batched fields): host stiffness times s**2 and, keeping the
+    TID's frequency ratio and damping ratio (Den Hartog's k scales with K and c with
+    sqrt(k b)), TID stiffness times s**2 and damping times s."""
+    scales = jnp.asarray(scales, float)
+    lanes = batched(system, scales.size)
+    return eqx.tree_at(
+        lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
+        lanes,
+        (lanes.host_stiffness * scales**2, lanes.tid_stiffness * scales**2,
+         lanes.tid_damping * scales),
+    )
+
+
+def _smooth_objective(values, omegas) -> np.ndarray:
+    """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
+    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, ROBUST_SHARPNESS[-1]))
+    return np.asarray(smooth(jnp.asarray(values), jnp.asarray(omegas)))
+
+
+def best_tunings(
+    system: TIDSystem,
+    amplitudes: ArrayLike,
+    *,
+    host_frequency_scales: ArrayLike = (1.0,),
+    omegas: ArrayLike | None = None,
+    settings: SolverSettings = SolverSettings(),
+    max_steps: int = 60,
+    tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
+    progress: Callable[[str], None] | None = None,
+) -> BestTunings:
+    """The best achievable peak host displacement for each forcing amplitude (N) and host
+    frequency scale (host stiffness times scale**2), over the band `omegas` (rad/s, for
+    the nominal system; default `default_omegas(system)`) scaled with the host frequency.
+
+    Every scenario is retuned by `retune`'s optimiser (`max_steps`, `tol`,
+    `retune_settings` as there), all of them in one batch, from the system's tuning (k
+    times scale**2, c times scale). `progress`, if given, gets a line as each step of the
+    retune ends."""
+    check_system(system)
+    amps = check_amplitudes(amplitudes)
+    scales = check_scales(host_frequency_scales)
+    band = _band(system, omegas)
+    check_retune_options(max_steps, tol, retune_settings)
+    lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
+    bands = jnp.asarray(lane_scales[:, None] * np.asarray(band)[None])
+    result = optimal_tunings(
+        _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
+        max_steps=max_steps, tol=tol, retune_settings=retune_settings, progress=progress,
+    )
+    # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
+    # which the check grid holds at every `check_refinement`-th point.
+    on_band = np.asarray(result.x_response)[:, ::retune_settings.check_refinement]
+    band_peaks = np.asarray(jax.vmap(lambda v, w: grid_peak(v, w)[0])(
+        jnp.asarray(on_band), bands))
+    shape = (scales.size, amps.size)
+    grid = lambda a: jnp.asarray(np.asarray(a).reshape(shape))
+    return BestTunings(
+        system=system,
+        omegas=band,
+        amplitudes=jnp.asarray(amps),
+        host_frequency_scales=jnp.asarray(scales),
+        tid_stiffness=grid(result.tid_stiffness),
+        tid_damping=grid(result.tid_damping),
+        host_peak=grid(band_peaks),
+        stroke_peak=grid(result.y_peak),
+        objective=grid(_smooth_objective(on_band, bands)),
+        iterations=grid(result.iterations),
+        stationary=grid(np.asarray(result.status) != 1),
+        converged=grid(result.converged),
+        damping_at_bound=grid(result.damping_at_bound),
+    )
+
+
+
+def _same(a: float | None, b: float | None) -> bool:
+    """Two field values agree (`None`, the default friction width, only with itself)."""
+    if a is None or b is None:
+        return a is b
+    return bool(np.isclose(a, b, rtol=1e-12, atol=0.0))
+
+
+def check_best(best, system: TIDSystem) -> None:
+    if not isinstance(best, BestTunings):
+        raise ValueError(f"best must be a BestTunings, got {type(best).__name__}")
+    nominal = best.system.to_dict()
+    given = system.to_dict()
+    different = [
+        name
+        for name in FIELD_NAMES
+        if name not in ("tid_stiffness", "tid_damping")
+        and not _same(nominal[name], given[name])
+    ]
+    if different:
+        raise ValueError(
+            f"best was computed for another system: {different[0]} is "
+            f"{nominal[different[0]]!r} there and {given[different[0]]!r} here"
+        )
+
+

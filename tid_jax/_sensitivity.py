@@ -1,0 +1,294 @@
+"""Sensitivities of the peak response, at a given tuning and at the retuned optimum."""
+
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ._checks import check_system
+from ._design import (
+    MAX_STEP,
+    NOISE_FACTOR,
+    OTHER,
+    PARAMETERS,
+    BestTunings,
+    Context,
+    Scenario,
+    best_tunings,
+    check_amplitude,
+    check_best,
+    coordinates,
+    evaluate_design,
+    smooth_max,
+)
+from ._retune import (
+    RetuneSettings,
+    _band,
+    check_retune_options,
+)
+from ._sqp import Model, decrement, trust_step
+from ._steady_state import SolverSettings
+from ._system import TIDSystem
+
+_POLISH = 3  # Newton steps with central differences before differentiating an optimum
+POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the polishing
+
+# --- sensitivities -------------------------------------------------------------------------
+
+
+class OptimumSensitivities(eqx.Module):
+    """How the retuned optimum moves with each parameter. The optimum is the tuning
+    (k*, c*) minimising the smooth maximum over the band of the host displacement (see
+    `best_tunings`), solved to stationarity. Arrays are ordered as
+    `Sensitivities.parameters`; their `tid_stiffness` and `tid_damping` entries are 0, as
+    the optimum does not depend on the tuning it starts from. SI units.
+
+    - `tid_stiffness` (N/m), `tid_damping` (N s/m): k*, c*.
+    - `host_peak`, `stroke_peak`: peak |x| and |y| over the band at the optimum, m.
+    - `smooth_peak`: the smooth maximum over the band of |x| that the optimum minimises
+      (a few tenths of a percent above `host_peak`), m.
+    - `host_elasticity`: d ln peak* / d ln p of the optimal host peak: of `smooth_peak`
+      exactly, by the envelope theorem (the partial derivative at fixed k*, c*);
+      `host_derivative = host_peak * host_elasticity / p`, m per unit of p.
+    - `stroke_derivative`, `stroke_elasticity`: of the inerter peak at the optimum, as the
+      optimum moves (partial derivative plus the change through k* and c*).
+    - `stiffness_derivative`, `stiffness_elasticity`, `damping_derivative`,
+      `damping_elasticity`: dk*/dp, dc*/dp (units of k or c per unit of p) and their
+      elasticities, by implicit differentiation of the stationarity condition (elasticities
+      of c* are 0 when c* is at its bound 0).
+    - `gradient_norm`: |dG/du| at the optimum, G the smooth log peak and u the design
+      variables (ln k, sqrt c); `iterations`: Newton steps; `converged`: a stationary point
+      was found and every steady state converged; `damping_at_bound`: c* = 0.
+    """
+
+    tid_stiffness: Float[Array, ""]
+    tid_damping: Float[Array, ""]
+    host_peak: Float[Array, ""]
+    stroke_peak: Float[Array, ""]
+    smooth_peak: Float[Array, ""]
+    host_derivative: Float[Array, " params"]
+    host_elasticity: Float[Array, " params"]
+    stroke_derivative: Float[Array, " params"]
+    stroke_elasticity: Float[Array, " params"]
+    stiffness_derivative: Float[Array, " params"]
+    stiffness_elasticity: Float[Array, " params"]
+    damping_derivative: Float[Array, " params"]
+    damping_elasticity: Float[Array, " params"]
+    gradient_norm: Float[Array, ""]
+    iterations: Int[Array, ""]
+    converged: Bool[Array, ""]
+    damping_at_bound: Bool[Array, ""]
+
+
+class Sensitivities(eqx.Module):
+    """Derivatives of the peak host displacement and of the inerter stroke over the band with
+    respect to each parameter in `parameters` (the physical fields of `TIDSystem` and the
+    forcing `amplitude`; their units in `PARAMETER_UNITS`), at the given tuning and, in
+    `optimum` (None if not asked for), at the retuned optimum. SI units.
+
+    - `values`: the parameters' values.
+    - `host_peak`, `stroke_peak`: peak |x| and |y| over the band, m.
+    - `host_derivative`, `stroke_derivative`: d peak / dp, m per unit of p.
+    - `host_elasticity`, `stroke_elasticity`: d ln peak / d ln p = (p / peak) d peak / dp.
+    - `converged`: every steady state in the band converged.
+
+    `as_dict()` gives the same numbers keyed by parameter name.
+    """
+
+    parameters: tuple[str, ...] = eqx.field(static=True)
+    values: Float[Array, " params"]
+    host_peak: Float[Array, ""]
+    stroke_peak: Float[Array, ""]
+    host_derivative: Float[Array, " params"]
+    host_elasticity: Float[Array, " params"]
+    stroke_derivative: Float[Array, " params"]
+    stroke_elasticity: Float[Array, " params"]
+    converged: Bool[Array, ""]
+    optimum: OptimumSensitivities | None
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        """`{parameter: {quantity: value}}` with the per-parameter arrays of this result
+        and, prefixed `optimum_`, of `optimum`."""
+        arrays = {
+            name: getattr(self, name)
+            for name in (
+                "values",
+                "host_derivative",
+                "host_elasticity",
+                "stroke_derivative",
+                "stroke_elasticity",
+            )
+        }
+        if self.optimum is not None:
+            for name in (
+                "host_derivative",
+                "host_elasticity",
+                "stroke_derivative",
+                "stroke_elasticity",
+                "stiffness_derivative",
+                "stiffness_elasticity",
+                "damping_derivative",
+                "damping_elasticity",
+            ):
+                arrays[f"optimum_{name}"] = getattr(self.optimum, name)
+        return {
+            parameter: {key: float(array[i]) for key, array in arrays.items()}
+            for i, parameter in enumerate(self.parameters)
+        }
+
+
+def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
+    """The evaluation (central stencil) at the optimum of the smooth log peak of `retune`
+    (of its last stage's `sharpness`) near u, its smooth maximum, gradient and
+    derivatives: at most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0,
+    where the damping is at its bound)."""
+    final = evaluate_design(ctx, u, [scenario], [z_init], central=True)
+    model = Model(*smooth_max(*final.host_terms, sharpness))
+    free = slice(0, 1) if at_bound else slice(0, 2)
+    for _ in range(_POLISH):
+        g, h = model.grad[free], model.curvature()[free, free]
+        if decrement(g, h) < tol:
+            break
+        step = np.zeros(2)
+        step[free] = trust_step(g, h, MAX_STEP)
+        trial = evaluate_design(ctx, final.u + step, [scenario],
+                                 [curves.states for curves in final.centres()], central=True)
+        trial_model = Model(*smooth_max(*trial.host_terms, sharpness))
+        if not trial_model.value < model.value:
+            break
+        final, model = trial, trial_model
+    return final, model
+
+
+def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol, sharpness):
+    """`OptimumSensitivities` at the best tuning `best[index]`, polished (see `_polished`)
+    and differentiated through its stationarity condition: in (u0, u1), or where the
+    damping is at its bound, in u0 alone with dc*/dp = 0 (the bound stays active)."""
+    at_bound = bool(best.damping_at_bound[index])
+    k, c = float(best.tid_stiffness[index]), float(best.tid_damping[index])
+    u = ctx.design(k, 0.0 if at_bound else c)
+    z_init = ctx.cold_states(k, c, [scenario.amplitude], scenario.scale)[0]
+    final, model = _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness)
+    u = final.u
+    k, c = ctx.tuning(u)
+    g, h_uu = model.grad, model.curvature()
+    free = [0] if at_bound else [0, 1]
+    du_dp = np.zeros((2, len(OTHER)))
+    du_dp[free] = -np.linalg.solve(h_uu[np.ix_(free, free)], model.hess[free, 2:])
+    centre = final.centres()[0]
+    values, _, stroke_grads, _ = coordinates(ctx, u, final.stencils[0], "y")
+    stroke_grad = stroke_grads[int(np.argmax(np.where(centre.peak_y, values, -np.inf)))]
+    n = len(PARAMETERS)
+    d_log_host, d_log_stroke, dk, dc = (np.zeros(n) for _ in range(4))
+    # Envelope theorem, with the first-order effect of the gradient left at the optimum
+    # (the smooth maximum is stiff across a balance of peaks: a small step there leaves a
+    # gradient that is not negligible against the partial derivative).
+    d_log_host[list(OTHER)] = g[2:] + g[:2] @ du_dp
+    d_log_stroke[list(OTHER)] = stroke_grad[2:] + stroke_grad[:2] @ du_dp
+    dk[list(OTHER)] = k * du_dp[0]
+    dc[list(OTHER)] = 2 * ctx.c_ref * u[1] * du_dp[1]
+    host_peak, stroke_peak = centre.host_peak(), centre.stroke_peak()
+    at_optimum = decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
+    # At the bound the peak must rise with the damping (a positive curvature in u1).
+    at_optimum &= not at_bound or h_uu[1, 1] > 0
+    return OptimumSensitivities(
+        tid_stiffness=jnp.asarray(k),
+        tid_damping=jnp.asarray(c),
+        host_peak=jnp.asarray(host_peak),
+        stroke_peak=jnp.asarray(stroke_peak),
+        smooth_peak=jnp.asarray(float(np.exp(model.value))),
+        host_derivative=jnp.asarray(host_peak * d_log_host),
+        host_elasticity=jnp.asarray(theta * d_log_host),
+        stroke_derivative=jnp.asarray(stroke_peak * d_log_stroke),
+        stroke_elasticity=jnp.asarray(theta * d_log_stroke),
+        stiffness_derivative=jnp.asarray(dk),
+        stiffness_elasticity=jnp.asarray(theta * dk / k),
+        damping_derivative=jnp.asarray(dc),
+        # The elasticity of a quantity held at zero is undefined.
+        damping_elasticity=jnp.asarray(np.full(n, np.nan) if at_bound else theta * dc / c),
+        gradient_norm=jnp.asarray(float(np.linalg.norm(g[free]))),
+        iterations=jnp.asarray(int(best.iterations[index])),
+        converged=jnp.asarray(bool(at_optimum and final.converged()
+                                   and best.converged[index])),
+        damping_at_bound=jnp.asarray(at_bound),
+    )
+
+
+def _best_index(best: "BestTunings", system, band, amplitude) -> tuple[int, int]:
+    """Where `best` holds the nominal scenario at `amplitude`, else `ValueError`."""
+    check_best(best, system)
+    if best.omegas.shape != band.shape or not np.allclose(best.omegas, band, rtol=1e-12):
+        raise ValueError("omegas differ from the band best was computed on")
+    scales, amps = np.asarray(best.host_frequency_scales), np.asarray(best.amplitudes)
+    i, j = np.flatnonzero(np.isclose(scales, 1.0, rtol=1e-12)), np.flatnonzero(
+        np.isclose(amps, amplitude, rtol=1e-12))
+    if not (i.size and j.size):
+        raise ValueError(f"best holds no tuning for {amplitude:g} N at the nominal host "
+                         f"frequency (amplitudes {amps.tolist()}, scales {scales.tolist()})")
+    return int(i[0]), int(j[0])
+
+
+def sensitivities(
+    system: TIDSystem,
+    amplitude: ArrayLike,
+    *,
+    omegas: ArrayLike | None = None,
+    optimum: bool = True,
+    best: "BestTunings | None" = None,
+    settings: SolverSettings = SolverSettings(),
+    max_steps: int = 60,
+    tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
+) -> Sensitivities:
+    """Sensitivities of the peak steady-state host displacement and inerter stroke over the
+    band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
+    (N) to every physical parameter and the amplitude: derivatives and elasticities, by
+    forward-mode implicit differentiation through the periodic orbits.
+
+    With `optimum=True` also at the retuned optimum (see `OptimumSensitivities`): the
+    tuning that `retune` finds (from `best`, a `BestTunings` of this system and band
+    holding `amplitude`, or else from `best_tunings` with `max_steps`, `tol` and
+    `retune_settings`), polished by at most `_POLISH` Newton steps on the same objective
+    (the smooth maximum of `retune_settings.sharpness[-1]`, aiming at a Newton decrement
+    below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
+    through its stationarity condition rather than re-optimised. Where the optimal damping
+    is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
+    """
+    check_system(system)
+    amplitude = check_amplitude(amplitude)
+    band = _band(system, omegas)
+    if not isinstance(optimum, bool):
+        raise ValueError(f"optimum must be True or False, got {optimum!r}")
+    check_retune_options(max_steps, tol, retune_settings)
+    ctx = Context(system, band, settings, locate=True)
+    scenario = Scenario(amplitude, 1.0, 0.0)
+    k, c = float(system.tid_stiffness), float(system.tid_damping)
+    theta = ctx.theta(k, c, amplitude)
+    z_given = ctx.cold_states(k, c, [amplitude], 1.0)[0]
+    given = ctx.evaluate([(theta, 1.0, z_given)])[0]
+    log_host, d_log_host = given.top("x")
+    log_stroke, d_log_stroke = given.top("y")
+    optimal = None
+    if optimum:
+        if best is None:
+            best = best_tunings(system, [amplitude], omegas=band, settings=settings,
+                                max_steps=max_steps, tol=tol, retune_settings=retune_settings)
+        index = _best_index(best, system, band, amplitude)
+        optimal = _optimum_sensitivities(ctx, scenario, theta, best, index, POLISH_TOL,
+                                         retune_settings.sharpness[-1])
+    host_peak, stroke_peak = np.exp(log_host), np.exp(log_stroke)
+    return Sensitivities(
+        parameters=PARAMETERS,
+        values=jnp.asarray(theta),
+        host_peak=jnp.asarray(host_peak),
+        stroke_peak=jnp.asarray(stroke_peak),
+        host_derivative=jnp.asarray(host_peak * d_log_host),
+        host_elasticity=jnp.asarray(theta * d_log_host),
+        stroke_derivative=jnp.asarray(stroke_peak * d_log_stroke),
+        stroke_elasticity=jnp.asarray(theta * d_log_stroke),
+        converged=jnp.asarray(given.converged),
+        optimum=optimal,
+    )
+
+
