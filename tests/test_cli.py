@@ -210,7 +210,8 @@ def test_flags_override_config_and_table_is_printed(frf_run, tmp_path):
     assert stderr == ""
     lines = stdout.splitlines()
     assert lines[1].split()[:2] == ["A", "[N]"]
-    assert [line.split()[0] for line in lines[3:]] == ["300", "700"]
+    assert [line.split()[0] for line in lines[3:-1]] == ["300", "700"]
+    assert lines[-1].startswith("Breakaway amplitude over the band:")
     data = json.loads((tmp_path / "out" / "frf.json").read_text())
     k_dh, _ = tj.den_hartog_tuning(1500.0, stiffness, tj.paper_system().inertance)
     assert data["system"]["host_mass"] == 1500.0  # flag beats config
@@ -235,7 +236,8 @@ def test_retune_prints_the_table_and_writes_every_file(retune_run):
     assert leftovers(out) == []
     lines = stdout.splitlines()
     assert "k/k_DH" in lines[1] and "c/c_DH" in lines[1] and "stroke [cm] (limit 0.5)" in lines[1]
-    assert [line.split()[0] for line in lines[3:]] == ["200", "600"]
+    assert [line.split()[0] for line in lines[3:-1]] == ["200", "600"]
+    assert lines[-1].startswith("With the initial tuning: Breakaway amplitude over the band:")
     assert "retune stage" in stderr and f"results in {out}/" in stderr
 
 

@@ -1,0 +1,457 @@
+"""What the commands share: their constants, arguments, inputs (flags and TOML to library
+objects), output folder, progress and tables."""
+
+import argparse
+import contextlib
+import math
+import shutil
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from .. import __version__
+from .._cache import CACHE_ENVIRONMENT_VARIABLE
+from .._io import check_writable_dir, json_text
+from .._linear import (
+    den_hartog_tuning,
+    linear_receptance,
+    stuck_receptance,
+)
+from .._retune import DEFAULT_FREQUENCIES, default_omegas
+from .._steady_state import SolverSettings
+from .._system import (
+    PAPER_AMPLITUDES,
+    PAPER_FRICTION_FORCE,
+    PAPER_HOST_DAMPING_RATIO,
+    PAPER_HOST_FREQUENCY_HZ,
+    PAPER_HOST_MASS,
+    PAPER_INERTANCE,
+    PAPER_STROKE,
+    TIDSystem,
+)
+
+PROG = "tid-jax"
+EXIT_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+# Physical inputs: (key, unit, description, allowed values). The key is the TOML key and,
+# with '-' for '_', the flag. Frequencies are in Hz here; the library works in rad/s.
+PHYSICAL_INPUTS = (
+    ("host_mass", "kg", "modal mass M of the host structure", "positive"),
+    ("host_frequency_hz", "Hz", "natural frequency sqrt(K/M)/(2 pi) of the host", "positive"),
+    ("host_stiffness", "N/m", "host stiffness K (instead of host_frequency_hz)", "positive"),
+    ("host_damping_ratio", "-", "host damping ratio C/(2 sqrt(K M))", "non-negative"),
+    ("host_damping", "N s/m", "host damping C (instead of host_damping_ratio)", "non-negative"),
+    ("inertance", "kg", "inertance b of the inerter", "positive"),
+    ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
+    ("friction_width", "m/s", "velocity scale of the smoothed friction sign (default: "
+     "0.02 omega A/K at each forcing point)", "positive"),
+    ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
+    ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
+    ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
+)
+GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
+INPUT_KEYS = tuple(key for key, *_ in PHYSICAL_INPUTS) + GRID_INPUTS
+SOLVER_TABLE = "solver"
+# Pairs of which at most one may be given; the first has a default.
+ALTERNATIVES = (("host_frequency_hz", "host_stiffness"), ("host_damping_ratio", "host_damping"))
+DEFAULTS = {
+    "host_mass": PAPER_HOST_MASS,
+    "host_frequency_hz": PAPER_HOST_FREQUENCY_HZ,
+    "host_damping_ratio": PAPER_HOST_DAMPING_RATIO,
+    "inertance": PAPER_INERTANCE,
+    "friction_force": PAPER_FRICTION_FORCE,
+    "stroke_limit": PAPER_STROKE,
+    "amplitudes": list(PAPER_AMPLITUDES),
+    "n_frequencies": DEFAULT_FREQUENCIES,
+}
+MIN_FREQUENCIES = 5
+
+
+class CLIError(Exception):
+    """A problem with the user's input, reported as one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)  # a mistyped flag is an error, not a guess
+        super().__init__(*args, **kwargs)
+
+    def error(self, message):
+        raise CLIError(f"{message} (see '{self.prog} --help')")
+
+
+# --- shared arguments -------------------------------------------------------------------
+
+
+def _add_structure_arguments(parser: argparse.ArgumentParser, config_help: str) -> None:
+    """The "structure and device" group: --config and a flag per physical input."""
+    group = parser.add_argument_group(
+        "structure and device",
+        "SI units, frequencies in Hz. Defaults: the paper's system (1500 kg, 4 Hz, 2% "
+        "damping, b = 75 kg, ff = 20 N, Den Hartog k and c). Flags override --config.",
+    )
+    group.add_argument("--config", metavar="FILE.toml", help=config_help)
+    for key, unit, description, _ in PHYSICAL_INPUTS:
+        group.add_argument(
+            f"--{key.replace('_', '-')}",
+            dest=key,
+            type=float,
+            metavar="RATIO" if unit == "-" else unit,
+            help=f"{description} [{unit}]"
+            + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
+        )
+
+
+def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_structure_arguments(
+        parser,
+        "TOML file with any of the keys below (flag names with '_' for "
+        "'-') and an optional [solver] table; see the README",
+    )
+    grid = parser.add_argument_group("forcing and frequency band")
+    grid.add_argument(
+        "--amplitudes",
+        nargs="+",
+        type=float,
+        metavar="N",
+        help="forcing amplitudes A of A sin(wt) [N] (default: the paper's twelve, 100-3000 N)",
+    )
+    grid.add_argument(
+        "--band-hz",
+        dest="band_hz",
+        nargs=2,
+        type=float,
+        metavar=("LOW", "HIGH"),
+        help="forcing frequency band [Hz] (default: 0.65-1.4 times the host "
+        "frequency, both resonance peaks)",
+    )
+    grid.add_argument(
+        "--n-frequencies",
+        dest="n_frequencies",
+        type=int,
+        metavar="N",
+        help=f"frequencies in the band (default {DEFAULT_FREQUENCIES})",
+    )
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("output")
+    group.add_argument(
+        "--out",
+        default="tid-results",
+        metavar="DIR",
+        help="folder for the CSV, JSON, TOML and PNG files (default: ./tid-results/)",
+    )
+    group.add_argument(
+        "--json",
+        action="store_true",
+        help="print the machine-readable result (the saved JSON) on stdout instead of the table",
+    )
+    group.add_argument("--quiet", action="store_true", help="no progress messages")
+    cache = parser.add_argument_group("compilation cache")
+    cache.add_argument(
+        "--cache-dir",
+        dest="cache_dir",
+        metavar="DIR",
+        help=f"folder of the compiled-program cache that makes later runs start fast "
+        f"(default: ${CACHE_ENVIRONMENT_VARIABLE}, else ~/.cache/tid_jax)",
+    )
+    cache.add_argument(
+        "--no-cache",
+        dest="no_cache",
+        action="store_true",
+        help=f"compile afresh and save nothing (also: {CACHE_ENVIRONMENT_VARIABLE}=off)",
+    )
+
+
+# --- from flags and TOML to library objects ---------------------------------------------
+
+
+def _read_config(path: str) -> dict:
+    try:
+        with open(path, "rb") as file:
+            config = tomllib.load(file)
+    except tomllib.TOMLDecodeError as error:
+        raise CLIError(f"config {path} is not valid TOML: {error}") from None
+    except OSError as error:
+        raise CLIError(f"cannot read config {path}: {error.strerror}") from None
+    unknown = [key for key in config if key not in INPUT_KEYS and key != SOLVER_TABLE]
+    if unknown:
+        raise CLIError(
+            f"config {path}: unknown key {unknown[0]!r}; "
+            f"allowed keys are {', '.join(INPUT_KEYS)} and a [{SOLVER_TABLE}] table"
+        )
+    solver = config.get(SOLVER_TABLE, {})
+    if not isinstance(solver, dict):
+        raise CLIError(f"config {path}: {SOLVER_TABLE} must be a table [{SOLVER_TABLE}]")
+    fields = tuple(SolverSettings.__dataclass_fields__)
+    unknown = [key for key in solver if key not in fields]
+    if unknown:
+        raise CLIError(
+            f"config {path}: unknown key {unknown[0]!r} in [{SOLVER_TABLE}]; "
+            f"allowed keys are {', '.join(fields)}"
+        )
+    return config
+
+
+def _number(name: str, value, allowed: str) -> float:
+    """`value` as a float if it is a finite number and `allowed` ("positive" or
+    "non-negative"), else `CLIError` naming `name`."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise CLIError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if not (math.isfinite(value) and (value > 0 if allowed == "positive" else value >= 0)):
+        raise CLIError(f"{name} must be finite and {allowed}, got {value!r}")
+    return value
+
+
+def _inputs(args) -> dict:
+    """Config file, then flags, then defaults, checked: a dict of `INPUT_KEYS` (those
+    given) and the `solver` table."""
+    config = _read_config(args.config) if args.config else {}
+    flags = {key: getattr(args, key) for key in INPUT_KEYS if getattr(args, key) is not None}
+    for group in ALTERNATIVES:
+        if any(key in flags for key in group):
+            for key in group:
+                config.pop(key, None)
+    given = {**config, **flags}
+    inputs = {**DEFAULTS, **given}
+    for first, second in ALTERNATIVES:
+        if first in given and second in given:
+            raise CLIError(f"give {first} or {second}, not both")
+        if second in given:
+            del inputs[first]
+    inputs = {key: inputs[key] for key in INPUT_KEYS if key in inputs}
+    for key, _, _, allowed in PHYSICAL_INPUTS:
+        if key in inputs:
+            inputs[key] = _number(key, inputs[key], allowed)
+    amplitudes = inputs["amplitudes"]
+    amplitudes = amplitudes if isinstance(amplitudes, list) else [amplitudes]
+    if not amplitudes:
+        raise CLIError("amplitudes must not be empty")
+    inputs["amplitudes"] = [_number("amplitudes", a, "positive") for a in amplitudes]
+    n = inputs["n_frequencies"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < MIN_FREQUENCIES:
+        raise CLIError(f"n_frequencies must be an integer >= {MIN_FREQUENCIES}, got {n!r}")
+    if "band_hz" in inputs:
+        band = inputs["band_hz"]
+        if not (isinstance(band, list) and len(band) == 2):
+            raise CLIError(f"band_hz must be two frequencies [LOW, HIGH] in Hz, got {band!r}")
+        low, high = (_number("band_hz", f, "positive") for f in band)
+        if not low < high:
+            raise CLIError(f"band_hz is empty: LOW must be below HIGH, got {low:g} to {high:g} Hz")
+        inputs["band_hz"] = [low, high]
+    inputs[SOLVER_TABLE] = dict(config.get(SOLVER_TABLE, {}))
+    return inputs
+
+
+def _system(inputs: dict) -> TIDSystem:
+    mass = inputs["host_mass"]
+    stiffness = inputs.get("host_stiffness")
+    if stiffness is None:
+        stiffness = mass * (2 * math.pi * inputs["host_frequency_hz"]) ** 2
+    damping = inputs.get("host_damping")
+    if damping is None:
+        damping = 2 * inputs["host_damping_ratio"] * math.sqrt(stiffness * mass)
+    k_dh, c_dh = den_hartog_tuning(mass, stiffness, inputs["inertance"])
+    return TIDSystem(
+        host_mass=mass,
+        host_stiffness=stiffness,
+        host_damping=damping,
+        inertance=inputs["inertance"],
+        friction_force=inputs["friction_force"],
+        tid_stiffness=inputs.get("tid_stiffness", k_dh),
+        tid_damping=inputs.get("tid_damping", c_dh),
+        friction_width=inputs.get("friction_width"),
+    )
+
+
+def _settings(inputs: dict) -> SolverSettings:
+    return SolverSettings(**inputs[SOLVER_TABLE])
+
+
+def _frequencies(inputs: dict, system: TIDSystem) -> tuple[np.ndarray, np.ndarray]:
+    """The forcing frequencies in Hz and in rad/s."""
+    n = inputs["n_frequencies"]
+    if "band_hz" not in inputs:
+        omegas = np.asarray(default_omegas(system, n))
+        return omegas / (2 * math.pi), omegas
+    frequencies_hz = np.linspace(*inputs["band_hz"], n)
+    return frequencies_hz, 2 * math.pi * frequencies_hz
+
+
+def _den_hartog(system: TIDSystem) -> tuple[float, float]:
+    k, c = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
+    return float(k), float(c)
+
+
+def _linear_normalised(system: TIDSystem, frequencies_hz) -> tuple[np.ndarray, np.ndarray]:
+    """|x| and |y| over A / K of the frictionless TID at `frequencies_hz`."""
+    receptance = linear_receptance(system, 2 * math.pi * np.asarray(frequencies_hz))
+    stiffness = float(system.host_stiffness)
+    return np.abs(np.asarray(receptance.host)) * stiffness, np.abs(
+        np.asarray(receptance.inerter)
+    ) * stiffness
+
+
+def _linear_curves(system: TIDSystem, frequencies_hz, points: int = 400):
+    """`(frequencies, x, y)` of the frictionless TID over A / K on a fine grid spanning
+    `frequencies_hz`, for plots."""
+    fine = np.linspace(frequencies_hz[0], frequencies_hz[-1], points)
+    return (fine, *_linear_normalised(system, fine))
+
+
+def _stuck_curve(system: TIDSystem, frequencies_hz, points: int = 400):
+    """`(frequencies, x)` of the host over A / K with the inerter stuck, on a fine grid
+    spanning `frequencies_hz`, for plots."""
+    fine = np.linspace(frequencies_hz[0], frequencies_hz[-1], points)
+    receptance = stuck_receptance(system, 2 * math.pi * fine)
+    return fine, np.abs(np.asarray(receptance)) * float(system.host_stiffness)
+
+
+def _host_frequency_hz(system: TIDSystem) -> float:
+    return float(system.host_frequency) / (2 * math.pi)
+
+
+def _describe(system: TIDSystem) -> str:
+    f_n = _host_frequency_hz(system)
+    return (
+        f"M = {float(system.host_mass):g} kg, f_n = {f_n:.3g} Hz, "
+        f"C = {float(system.host_damping):.4g} N s/m, b = {float(system.inertance):g} kg, "
+        f"ff = {float(system.friction_force):g} N, k = {float(system.tid_stiffness):.5g} N/m, "
+        f"c = {float(system.tid_damping):.4g} N s/m"
+    )
+
+
+# --- output -------------------------------------------------------------------------------
+
+
+class _Output:
+    """Output folder (checked before computing), progress messages and the record of the
+    files written."""
+
+    def __init__(self, args):
+        self.args = args
+        self.folder = Path(args.out)
+        if self.folder.exists() and not self.folder.is_dir():
+            raise CLIError(f"output folder {self.folder} is a file, not a folder")
+        try:
+            check_writable_dir(self.folder)
+        except OSError as error:
+            reason = error.strerror or str(error)
+            raise CLIError(f"output folder {self.folder} is not writable: {reason}") from None
+        self.files: list[Path] = []
+        self.start = time.perf_counter()
+        self.bar: tqdm | None = None
+
+    def say(self, message: str) -> None:
+        if self.args.quiet:
+            return
+        if self.bar is not None:
+            self.bar.write(f"{PROG}: {message}", file=sys.stderr)
+        else:
+            print(f"{PROG}: {message}", file=sys.stderr, flush=True)
+
+    @contextlib.contextmanager
+    def steps(self, total: int):
+        """A progress bar of `total` steps on stderr (on a terminal, and not with
+        --quiet), with the elapsed and remaining time; yields the function that says a
+        step's message above it and advances it by one step (more steps than `total`
+        extend it)."""
+        # (A terminal that reports no width, as some pseudo-terminals do, gets 80 columns.)
+        self.bar = tqdm(total=total, file=sys.stderr, leave=False, mininterval=0,
+                        ncols=shutil.get_terminal_size().columns,
+                        disable=self.args.quiet or not sys.stderr.isatty(),
+                        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}]")
+
+        def step(message: str) -> None:
+            self.say(message)
+            if self.bar.n >= self.bar.total:
+                self.bar.total = self.bar.n + 1
+            self.bar.update(1)
+
+        try:
+            yield step
+        finally:
+            self.bar.close()
+            self.bar = None
+
+    def path(self, name: str) -> Path:
+        path = self.folder / name
+        self.files.append(path)
+        return path
+
+    def document(
+        self, command: str, inputs: dict, system: TIDSystem, settings, frequencies_hz, **results
+    ) -> dict:
+        """The JSON record of a run: inputs, system, solver settings, version, results."""
+        k_dh, c_dh = _den_hartog(system)
+        return {
+            "command": f"{PROG} {command}",
+            "version": __version__,
+            "inputs": inputs,
+            "system": system.to_dict(),
+            "den_hartog": {"tid_stiffness": k_dh, "tid_damping": c_dh},
+            "solver": settings.to_dict(),
+            "frequencies_hz": [float(f) for f in frequencies_hz],
+            **results,
+            "files": [str(path) for path in self.files],
+        }
+
+    def finish(self, data: dict, table: str) -> int:
+        if self.args.json:
+            print(json_text(data))
+        else:
+            print(table)
+        names = ", ".join(path.name for path in self.files)
+        self.say(
+            f"done in {time.perf_counter() - self.start:.0f} s; results in {self.folder}/: {names}"
+        )
+        return 0
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _format_table(header: list[str], rows: list[list[str]]) -> str:
+    """Columns of numbers right-aligned, columns of text left-aligned."""
+    columns = list(zip(header, *rows, strict=True))
+    widths = [max(len(cell) for cell in column) for column in columns]
+    numeric = [all(_is_number(cell) for cell in column[1:]) for column in columns]
+    lines = [
+        "  ".join(
+            cell.rjust(width) if right else cell.ljust(width)
+            for cell, width, right in zip(row, widths, numeric, strict=True)
+        ).rstrip()
+        for row in [header, *rows]
+    ]
+    lines.insert(1, "  ".join("-" * width for width in widths))
+    return "\n".join(lines)
+
+
+def _config_comment(command: str) -> str:
+    return (
+        f"Inputs of `{PROG} {command}` (tid_jax {__version__}); rerun with\n"
+        f"{PROG} {command} --config THIS_FILE"
+    )
+
+
+def _config_data(inputs: dict) -> dict:
+    return {key: value for key, value in inputs.items() if value != {}}
+
+
+def _breakaway_line(breakaway) -> str:
+    """What the minimum breakaway amplitude over the band means, in one line."""
+    return (f"Breakaway amplitude over the band: {float(breakaway.minimum):.4g} N at "
+            f"{float(breakaway.omega_minimum) / (2 * math.pi):.3f} Hz; below it the inerter "
+            f"never slips and the TID acts as a spring and damper to ground.")

@@ -1,0 +1,174 @@
+"""`tid-jax frf`: the steady-state frequency response and the breakaway amplitude."""
+
+import math
+
+import numpy as np
+
+from .. import plot
+from .._io import write_csv, write_json, write_toml
+from .._linear import breakaway_amplitude
+from .._response import frequency_response
+from ._common import (
+    _add_output_arguments,
+    _add_system_arguments,
+    _breakaway_line,
+    _config_comment,
+    _config_data,
+    _describe,
+    _format_table,
+    _frequencies,
+    _host_frequency_hz,
+    _inputs,
+    _linear_curves,
+    _linear_normalised,
+    _Output,
+    _settings,
+    _stuck_curve,
+    _system,
+)
+
+FRF_COLUMNS = (
+    "amplitude_N",
+    "frequency_Hz",
+    "x_max_m",
+    "y_max_m",
+    "x_over_A_K",
+    "y_over_A_K",
+    "x_linear_over_A_K",
+    "y_linear_over_A_K",
+    "converged",
+    "stable",
+)
+
+
+def _add_frf_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "frf",
+        help="steady-state frequency response over a band and a list of amplitudes",
+        description="Peak steady-state host displacement x and inerter displacement y over "
+        "the frequency band for each forcing amplitude (the paper's Figure 5), "
+        "beside the linear (frictionless) TID. Saves frf.csv, frf.json, "
+        "frf_config.toml and frf.png to --out.",
+    )
+    _add_system_arguments(parser)
+    _add_output_arguments(parser)
+
+
+def _run_frf(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
+        f"frequencies; {_describe(system)}"
+    )
+    shape = (amplitudes.size, omegas.size)
+    x_max, y_max = np.empty(shape), np.empty(shape)
+    converged, stable = np.empty(shape, bool), np.empty(shape, bool)
+    with output.steps(amplitudes.size) as step:
+        for i, amplitude in enumerate(amplitudes):
+            response = frequency_response(system, omegas, amplitude, settings=settings)
+            x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
+            converged[i] = np.asarray(response.converged)
+            stable[i] = np.asarray(response.stable)
+            step(
+                f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
+                f"{converged[i].sum()}/{omegas.size} steady states converged"
+            )
+
+    static = (amplitudes / float(system.host_stiffness))[:, None]
+    x_norm, y_norm = x_max / static, y_max / static
+    x_linear, y_linear = _linear_normalised(system, frequencies_hz)
+    rows = [
+        [
+            float(amplitudes[i]),
+            float(frequencies_hz[j]),
+            float(x_max[i, j]),
+            float(y_max[i, j]),
+            float(x_norm[i, j]),
+            float(y_norm[i, j]),
+            float(x_linear[j]),
+            float(y_linear[j]),
+            bool(converged[i, j]),
+            bool(stable[i, j]),
+        ]
+        for i in range(amplitudes.size)
+        for j in range(omegas.size)
+    ]
+    peak = np.argmax(np.where(converged, x_max, -np.inf), axis=1)
+    summary = [
+        {
+            "amplitude_N": float(amplitudes[i]),
+            "x_peak_over_A_K": float(x_norm[i, peak[i]]),
+            "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
+            "stroke_m": float(np.max(np.where(converged[i], y_max[i], -np.inf))),
+            "converged_points": int(converged[i].sum()),
+            "unstable_points": int((converged[i] & ~stable[i]).sum()),
+        }
+        for i in range(amplitudes.size)
+    ]
+
+    breakaway = breakaway_amplitude(system, omegas)
+    write_csv(output.path("frf.csv"), FRF_COLUMNS, rows)
+    write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
+    plot.save_figure(
+        plot.plot_frequency_response(
+            frequencies_hz,
+            amplitudes,
+            x_norm,
+            y_norm,
+            linear=_linear_curves(system, frequencies_hz),
+            stuck=(*_stuck_curve(system, frequencies_hz), float(breakaway.minimum)),
+            host_frequency_hz=_host_frequency_hz(system),
+        ),
+        output.path("frf.png"),
+    )
+    json_path = output.path("frf.json")
+    data = output.document(
+        "frf",
+        inputs,
+        system,
+        settings,
+        frequencies_hz,
+        amplitudes_N=[float(a) for a in amplitudes],
+        x_max_m=x_max.tolist(),
+        y_max_m=y_max.tolist(),
+        converged=converged.tolist(),
+        stable=stable.tolist(),
+        x_linear_over_A_K=x_linear.tolist(),
+        y_linear_over_A_K=y_linear.tolist(),
+        breakaway_amplitude_N=np.asarray(breakaway.amplitude).tolist(),
+        breakaway_minimum_N=float(breakaway.minimum),
+        breakaway_minimum_frequency_Hz=float(breakaway.omega_minimum) / (2 * math.pi),
+        summary=summary,
+    )
+    write_json(json_path, data)
+
+    stroke_limit = inputs["stroke_limit"]
+    header = [
+        "A [N]",
+        "peak x/(A/K)",
+        "at f [Hz]",
+        f"stroke [cm] (limit {100 * stroke_limit:g})",
+        "converged",
+        "unstable",
+    ]
+    table_rows = [
+        [
+            f"{s['amplitude_N']:g}",
+            f"{s['x_peak_over_A_K']:.2f}",
+            f"{s['peak_frequency_Hz']:.3f}",
+            f"{100 * s['stroke_m']:.2f}",
+            f"{s['converged_points']}/{omegas.size}",
+            str(s["unstable_points"]),
+        ]
+        for s in summary
+    ]
+    title = (
+        f"Frequency response ({_describe(system)}); peaks on the grid, x normalised by "
+        f"the static displacement A/K"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, table_rows) + "\n"
+                         + _breakaway_line(breakaway))

@@ -1,0 +1,198 @@
+"""`tid-jax retune`: the TID retuned for each amplitude."""
+
+import math
+
+import numpy as np
+
+from .. import plot
+from .._io import write_csv, write_json, write_toml
+from .._linear import breakaway_amplitude
+from .._retune import RetuneSettings, retune
+from ._common import (
+    _add_output_arguments,
+    _add_system_arguments,
+    _breakaway_line,
+    _config_comment,
+    _config_data,
+    _den_hartog,
+    _describe,
+    _format_table,
+    _frequencies,
+    _host_frequency_hz,
+    _inputs,
+    _linear_curves,
+    _Output,
+    _settings,
+    _system,
+)
+
+RETUNE_COLUMNS = (
+    "amplitude_N",
+    "k_over_k_den_hartog",
+    "k_N_per_m",
+    "c_over_c_den_hartog",
+    "c_N_s_per_m",
+    "x_peak_before_over_A_K",
+    "x_peak_after_over_A_K",
+    "peak_frequency_after_Hz",
+    "stroke_before_m",
+    "stroke_after_m",
+    "stroke_limit_m",
+    "within_stroke_limit",
+    "iterations",
+    "converged",
+    "status",
+)
+
+
+def _add_retune_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "retune",
+        help="retune the TID's k and c for each forcing amplitude",
+        description="For each forcing amplitude, find the TID stiffness k and damping c that "
+        "minimise the peak steady-state host displacement over the frequency "
+        "band, starting from the given (default: Den Hartog) tuning. Prints a "
+        "table and saves retune.csv, retune.json, retune_config.toml, "
+        "retune_frequency_response.png and retune_summary.png to --out.",
+    )
+    _add_system_arguments(parser)
+    _add_output_arguments(parser)
+
+
+def _run_retune(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies, "
+        f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "
+        f"{_describe(system)}"
+    )
+    with output.steps(RetuneSettings().progress_steps()) as step:
+        result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
+
+    stiffness = float(system.host_stiffness)
+    # The frequency responses before and after retuning, on retune's check grid.
+    check_hz = np.asarray(result.check_omegas) / (2 * math.pi)
+    x_before = np.asarray(result.x_response_initial) / (amplitudes[:, None] / stiffness)
+    x_after = np.asarray(result.x_response) / (amplitudes[:, None] / stiffness)
+
+    k_dh, c_dh = _den_hartog(system)
+    stroke_limit = inputs["stroke_limit"]
+    static = amplitudes / stiffness
+    k_ratio = np.asarray(result.tid_stiffness) / k_dh
+    c_ratio = np.asarray(result.tid_damping) / c_dh
+    x_peak_before = np.asarray(result.x_peak_initial) / static
+    x_peak_after = np.asarray(result.x_peak) / static
+    y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
+    within = y_after <= stroke_limit
+    improved = x_peak_after <= x_peak_before
+    statuses = result.status_messages()
+    breakaway = breakaway_amplitude(system, omegas)
+    stuck = amplitudes < float(breakaway.minimum)
+    records = [
+        dict(
+            zip(
+                RETUNE_COLUMNS,
+                (
+                    float(amplitudes[i]),
+                    float(k_ratio[i]),
+                    float(result.tid_stiffness[i]),
+                    float(c_ratio[i]),
+                    float(result.tid_damping[i]),
+                    float(x_peak_before[i]),
+                    float(x_peak_after[i]),
+                    float(result.omega_peak[i]) / (2 * math.pi),
+                    float(y_before[i]),
+                    float(y_after[i]),
+                    stroke_limit,
+                    bool(within[i]),
+                    int(result.iterations[i]),
+                    bool(result.converged[i]),
+                    statuses[i]
+                    + ("" if within[i] else "; stroke over limit")
+                    + ("" if improved[i] else "; peak above the initial tuning's")
+                    + (f"; below the breakaway amplitude {float(breakaway.minimum):.4g} N: "
+                       "with the initial tuning the inerter stays stuck" if stuck[i] else ""),
+                ),
+                strict=True,
+            )
+        )
+        for i in range(amplitudes.size)
+    ]
+
+    write_csv(
+        output.path("retune.csv"),
+        RETUNE_COLUMNS,
+        [[record[key] for key in RETUNE_COLUMNS] for record in records],
+    )
+    write_toml(
+        output.path("retune_config.toml"), _config_data(inputs), comment=_config_comment("retune")
+    )
+    linear_hz, x_linear, _ = _linear_curves(system, frequencies_hz)
+    plot.save_figure(
+        plot.plot_retune_responses(
+            check_hz,
+            amplitudes,
+            x_before,
+            x_after,
+            k_ratio,
+            c_ratio,
+            linear=(linear_hz, x_linear),
+            host_frequency_hz=_host_frequency_hz(system),
+        ),
+        output.path("retune_frequency_response.png"),
+    )
+    plot.save_figure(
+        plot.plot_retune_summary(
+            amplitudes,
+            k_ratio,
+            c_ratio,
+            x_peak_before,
+            x_peak_after,
+            y_before,
+            y_after,
+            stroke_limit=stroke_limit,
+            converged=np.asarray(result.converged),
+        ),
+        output.path("retune_summary.png"),
+    )
+    json_path = output.path("retune.json")
+    data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
+    write_json(json_path, data)
+
+    header = [
+        "A [N]",
+        "k/k_DH",
+        "k [kN/m]",
+        "c/c_DH",
+        "c [N s/m]",
+        "x/(A/K) before",
+        "x/(A/K) after",
+        "f_peak [Hz]",
+        f"stroke [cm] (limit {100 * stroke_limit:g})",
+        "status",
+    ]
+    rows = [
+        [
+            f"{r['amplitude_N']:g}",
+            f"{r['k_over_k_den_hartog']:.3f}",
+            f"{r['k_N_per_m'] / 1e3:.2f}",
+            f"{r['c_over_c_den_hartog']:.3f}",
+            f"{r['c_N_s_per_m']:.1f}",
+            f"{r['x_peak_before_over_A_K']:.2f}",
+            f"{r['x_peak_after_over_A_K']:.2f}",
+            f"{r['peak_frequency_after_Hz']:.3f}",
+            f"{100 * r['stroke_after_m']:.2f}",
+            r["status"],
+        ]
+        for r in records
+    ]
+    title = (
+        f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
+        f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows) + "\n"
+                         + "With the initial tuning: " + _breakaway_line(breakaway))

@@ -1,0 +1,220 @@
+"""`tid-jax robust`: one tuning for every amplitude (and host frequency)."""
+
+import math
+
+import numpy as np
+
+from .. import plot
+from .._design import ROBUST_SHARPNESS
+from .._io import write_csv, write_json, write_toml
+from .._retune import RetuneSettings
+from .._robust import robust_tune, tuning_performance
+from ._common import (
+    CLIError,
+    _add_output_arguments,
+    _add_system_arguments,
+    _config_comment,
+    _config_data,
+    _den_hartog,
+    _describe,
+    _format_table,
+    _frequencies,
+    _inputs,
+    _Output,
+    _settings,
+    _system,
+)
+
+ROBUST_COLUMNS = (
+    "host_frequency_scale",
+    "amplitude_N",
+    "best_k_N_per_m",
+    "best_c_N_s_per_m",
+    "best_x_peak_m",
+    "robust_x_peak_m",
+    "robust_ratio",
+    "robust_stroke_m",
+    "given_ratio",
+    "given_stroke_m",
+)
+
+
+def _add_robust_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "robust",
+        help="one TID tuning for a range of forcing amplitudes (and host frequencies)",
+        description="The TID stiffness k and damping c minimising the worst case, over the "
+        "forcing amplitudes (and host frequencies), of the peak host displacement over "
+        "the best achievable at that amplitude, with the inerter stroke within the "
+        "stroke limit; compared with the given (default: Den Hartog) tuning. Prints a "
+        "table and saves robust.csv, robust.json, robust_config.toml and robust.png "
+        "to --out.",
+    )
+    _add_system_arguments(parser)
+    parser.add_argument(
+        "--host-frequency-tolerance",
+        dest="host_frequency_tolerance",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="also hold for host frequencies (1 +- FRACTION) times the nominal one, "
+        "e.g. 0.05 (default 0: nominal only)",
+    )
+    parser.add_argument(
+        "--no-stroke-limit",
+        action="store_true",
+        help="leave the inerter stroke free",
+    )
+    _add_output_arguments(parser)
+
+
+def _run_robust(args) -> int:
+    inputs = _inputs(args)
+    tolerance = args.host_frequency_tolerance
+    if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
+        raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
+    stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
+    output = _Output(args)
+    output.say(
+        f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} host "
+        f"frequencies, {omegas.size} frequencies each; {_describe(system)}"
+    )
+    # The retune's steps, then the robust design's: its start, its stages and its end.
+    with output.steps(RetuneSettings().progress_steps() + 3 + len(ROBUST_SHARPNESS)) as step:
+        result = robust_tune(
+            system,
+            amplitudes,
+            host_frequency_scales=scales,
+            stroke_limit=stroke_limit,
+            omegas=omegas,
+            settings=settings,
+            progress=step,
+        )
+    given = tuning_performance(system, result.best, settings=settings)
+    robust = result.performance
+    best = result.best
+    records = [
+        dict(
+            zip(
+                ROBUST_COLUMNS,
+                (
+                    float(scale),
+                    float(amplitude),
+                    float(best.tid_stiffness[i, j]),
+                    float(best.tid_damping[i, j]),
+                    float(best.host_peak[i, j]),
+                    float(robust.host_peak[i, j]),
+                    float(robust.ratio[i, j]),
+                    float(robust.stroke_peak[i, j]),
+                    float(given.ratio[i, j]),
+                    float(given.stroke_peak[i, j]),
+                ),
+                strict=True,
+            )
+        )
+        for i, scale in enumerate(scales)
+        for j, amplitude in enumerate(amplitudes)
+    ]
+    write_csv(
+        output.path("robust.csv"),
+        ROBUST_COLUMNS,
+        [[r[key] for key in ROBUST_COLUMNS] for r in records],
+    )
+    write_toml(
+        output.path("robust_config.toml"), _config_data(inputs), comment=_config_comment("robust")
+    )
+    nominal = scales.index(1.0)
+    plot.save_figure(
+        plot.plot_robust_comparison(
+            amplitudes,
+            [
+                (
+                    f"given tuning: worst {float(given.worst_ratio):.3f}",
+                    np.asarray(given.ratio[nominal]),
+                    np.asarray(given.stroke_peak[nominal]),
+                    dict(color="tab:red", linestyle="--", marker="."),
+                ),
+                (
+                    f"robust: worst {float(result.worst_ratio):.3f}",
+                    np.asarray(robust.ratio[nominal]),
+                    np.asarray(robust.stroke_peak[nominal]),
+                    dict(color="tab:blue", linewidth=2.0, marker="."),
+                ),
+            ],
+            stroke_limit=stroke_limit,
+            title="Robust TID tuning" + (" (nominal host frequency)" if tolerance > 0 else ""),
+        ),
+        output.path("robust.png"),
+    )
+    k_dh, c_dh = _den_hartog(system)
+    k, c = float(result.tid_stiffness), float(result.tid_damping)
+    summary = {
+        "tid_stiffness": k,
+        "tid_damping": c,
+        "k_over_k_den_hartog": k / k_dh,
+        "c_over_c_den_hartog": c / c_dh,
+        "worst_ratio": float(result.worst_ratio),
+        "worst_amplitude_N": float(result.worst_amplitude),
+        "worst_host_frequency_scale": float(result.worst_host_frequency_scale),
+        "stroke_limit_m": stroke_limit,
+        "max_stroke_m": float(result.max_stroke),
+        "given_worst_ratio": float(given.worst_ratio),
+        "given_worst_amplitude_N": float(given.worst_amplitude),
+        "iterations": int(result.iterations),
+        "converged": bool(result.converged),
+        "status": result.status_messages()[0],
+    }
+    json_path = output.path("robust.json")
+    data = output.document(
+        "robust",
+        inputs,
+        system,
+        settings,
+        frequencies_hz,
+        host_frequency_scales=list(scales),
+        robust=summary,
+        results=records,
+    )
+    write_json(json_path, data)
+
+    header = [
+        "f_n x",
+        "A [N]",
+        "best k/k_DH",
+        "best c/c_DH",
+        "ratio robust",
+        "ratio given",
+        "stroke robust [cm]",
+        "stroke given [cm]",
+    ]
+    rows = [
+        [
+            f"{r['host_frequency_scale']:g}",
+            f"{r['amplitude_N']:g}",
+            f"{r['best_k_N_per_m'] / k_dh:.3f}",
+            f"{r['best_c_N_s_per_m'] / c_dh:.3f}",
+            f"{r['robust_ratio']:.3f}",
+            f"{r['given_ratio']:.3f}",
+            f"{100 * r['robust_stroke_m']:.2f}",
+            f"{100 * r['given_stroke_m']:.2f}",
+        ]
+        for r in records
+    ]
+    limit_text = (
+        "no stroke limit"
+        if stroke_limit is None
+        else (f"max stroke {100 * summary['max_stroke_m']:.2f} cm (limit {100 * stroke_limit:g})")
+    )
+    title = (
+        f"Robust tuning ({_describe(system)}): k = {k:.5g} N/m ({k / k_dh:.3f} k_DH), "
+        f"c = {c:.4g} N s/m ({c / c_dh:.3f} c_DH); worst ratio to the best tuning "
+        f"{summary['worst_ratio']:.3f} at {summary['worst_amplitude_N']:g} N"
+        + (f", host frequency x {summary['worst_host_frequency_scale']:g}" if tolerance else "")
+        + f" (given tuning: {summary['given_worst_ratio']:.3f} at "
+        f"{summary['given_worst_amplitude_N']:g} N); {limit_text}; {summary['status']}"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows))

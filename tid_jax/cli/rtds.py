@@ -1,0 +1,288 @@
+"""`tid-jax rtds`: a virtual real-time substructuring test of the inerter."""
+
+import math
+
+import numpy as np
+
+from .. import plot
+from .._io import write_csv, write_json
+from .._retune import DEFAULT_FREQUENCIES
+from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
+from ._common import (
+    CLIError,
+    _add_output_arguments,
+    _add_structure_arguments,
+    _describe,
+    _format_table,
+    _frequencies,
+    _inputs,
+    _number,
+    _Output,
+    _read_config,
+    _settings,
+    _system,
+)
+
+RTDS_COLUMNS = (
+    "frequency_Hz",
+    "amplitude_N",
+    "x_whole_m",
+    "y_whole_m",
+    "x_test_m",
+    "y_test_m",
+    "x_amplitude_error",
+    "y_amplitude_error",
+    "x_phase_error_rad",
+    "y_phase_error_rad",
+    "stable",
+    "diverged",
+    "growth",
+)
+RTDS_AMPLITUDE = 200.0  # N, default forcing of `tid-jax rtds`
+
+
+def _add_rtds_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "rtds",
+        help="plan a real-time dynamic substructuring test of the inerter",
+        description="Simulate a real-time dynamic substructuring test of the inerter (paper "
+        "section 5) as a digital controller runs it: host, TID spring and damper numerical, "
+        "the inerter physical behind an actuator with delay, compensated by default by "
+        "harmonic forward prediction as in the paper's tests (--prediction none turns it "
+        "off: with the default 10 ms delay the host amplitude is then about 10%% off). "
+        "Compares the test with the "
+        "whole system (amplitude and phase errors) and reports unstable tests. Prints a "
+        "table and saves rtds.csv, rtds.json and rtds.png to --out.",
+    )
+    _add_structure_arguments(
+        parser,
+        "TOML file with the structure and device keys (and amplitudes, band_hz, "
+        "n_frequencies), as for the other commands",
+    )
+    forcing = parser.add_argument_group("forcing")
+    forcing.add_argument(
+        "--amplitude",
+        dest="amplitudes",
+        type=float,
+        metavar="N",
+        help=f"forcing amplitude A of A sin(wt) [N] (default {RTDS_AMPLITUDE:g})",
+    )
+    forcing.add_argument(
+        "--frequency-hz",
+        dest="frequency_hz",
+        nargs="+",
+        type=float,
+        metavar="HZ",
+        help="forcing frequencies [Hz] (instead of --band-hz)",
+    )
+    forcing.add_argument(
+        "--band-hz",
+        dest="band_hz",
+        nargs=2,
+        type=float,
+        metavar=("LOW", "HIGH"),
+        help="forcing frequency band [Hz] (default: 0.65-1.4 times the host frequency)",
+    )
+    forcing.add_argument(
+        "--n-frequencies",
+        dest="n_frequencies",
+        type=int,
+        metavar="N",
+        help=f"frequencies in the band (default {DEFAULT_FREQUENCIES})",
+    )
+    test = parser.add_argument_group("substructuring test")
+    test.add_argument(
+        "--scheme",
+        choices=SCHEMES,
+        default="error_feedback",
+        help="feed back the measured force (conventional, unstable for any delay) or its "
+        "error from the guessed inertance (error_feedback, default)",
+    )
+    test.add_argument(
+        "--delay-ms", type=float, default=10.0, metavar="MS", help="actuator delay [ms] (10)"
+    )
+    test.add_argument(
+        "--guessed-inertance-ratio",
+        type=float,
+        default=1.0,
+        metavar="RATIO",
+        help="guessed inertance b_g over the inerter's b (1.0)",
+    )
+    test.add_argument(
+        "--guessed-force",
+        choices=GUESSED_FORCES,
+        default="acceleration",
+        help="b_g times the actuator's acceleration, or the paper's -b_g w^2 y* (harmonic)",
+    )
+    test.add_argument(
+        "--prediction",
+        choices=("none", *PREDICTIONS),
+        default="harmonic",
+        help="compensation of the delay: forward prediction of the commanded motion "
+        "(default harmonic, as in the paper's tests; none: uncompensated)",
+    )
+    test.add_argument(
+        "--actuator-lag-ms",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="time constant of the actuator's first-order lag [ms] (0: none)",
+    )
+    test.add_argument(
+        "--parasitic-stiffness",
+        type=float,
+        metavar="N/m",
+        help="stiffness in series with the physical inerter [N/m] (default: rigid)",
+    )
+    test.add_argument(
+        "--sample-rate",
+        type=float,
+        default=1000.0,
+        metavar="HZ",
+        help="controller sample rate [Hz] (1000)",
+    )
+    test.add_argument(
+        "--periods",
+        type=int,
+        default=60,
+        metavar="N",
+        help="simulated duration in forcing periods (60)",
+    )
+    _add_output_arguments(parser)
+
+
+def _run_rtds(args) -> int:
+    if args.amplitudes is None and not (args.config and "amplitudes" in _read_config(args.config)):
+        args.amplitudes = RTDS_AMPLITUDE
+    inputs = _inputs(args)
+    if len(inputs["amplitudes"]) != 1:
+        raise CLIError(f"rtds takes one amplitude, got {inputs['amplitudes']}")
+    amplitude = inputs["amplitudes"][0]
+    delay = _number("delay_ms", args.delay_ms, "non-negative") / 1e3
+    ratio = _number("guessed_inertance_ratio", args.guessed_inertance_ratio, "positive")
+    lag = _number("actuator_lag_ms", args.actuator_lag_ms, "non-negative") / 1e3
+    rate = _number("sample_rate", args.sample_rate, "positive")
+    parasitic = args.parasitic_stiffness
+    if parasitic is not None:
+        parasitic = _number("parasitic_stiffness", parasitic, "positive")
+    system, settings = _system(inputs), _settings(inputs)
+    if args.frequency_hz is not None:
+        if args.band_hz is not None:
+            raise CLIError("give --frequency-hz or --band-hz, not both")
+        frequencies_hz = np.asarray(
+            [_number("frequency_hz", f, "positive") for f in args.frequency_hz]
+        )
+        omegas = 2 * math.pi * frequencies_hz
+    else:
+        frequencies_hz, omegas = _frequencies(inputs, system)
+    prediction = None if args.prediction == "none" else args.prediction
+    test = {
+        "scheme": args.scheme,
+        "amplitude_N": amplitude,
+        "delay_s": delay,
+        "guessed_inertance_kg": ratio * float(system.inertance),
+        "guessed_force": args.guessed_force,
+        "prediction": args.prediction,
+        "actuator_lag_s": lag,
+        "parasitic_stiffness_N_per_m": parasitic,
+        "sample_rate_Hz": rate,
+        "periods": args.periods,
+    }
+    output = _Output(args)
+    output.say(
+        f"substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
+        f"prediction {args.prediction}) at {omegas.size} frequencies, A = {amplitude:g} N; "
+        f"{_describe(system)}"
+    )
+    result = simulate_substructuring(
+        system,
+        omegas,
+        amplitude,
+        scheme=args.scheme,
+        delay=delay,
+        guessed_inertance=test["guessed_inertance_kg"],
+        guessed_force=args.guessed_force,
+        prediction=prediction,
+        actuator_lag=lag,
+        parasitic_stiffness=parasitic,
+        sample_rate=rate,
+        periods=args.periods,
+        settings=settings,
+    )
+    columns = {
+        "x_whole_m": result.reference_x_max,
+        "y_whole_m": result.reference_y_max,
+        "x_test_m": result.x_max,
+        "y_test_m": result.y_max,
+        "x_amplitude_error": result.x_amplitude_error,
+        "y_amplitude_error": result.y_amplitude_error,
+        "x_phase_error_rad": result.x_phase_error,
+        "y_phase_error_rad": result.y_phase_error,
+        "stable": result.stable,
+        "diverged": result.diverged,
+        "growth": result.growth,
+    }
+    columns = {key: np.atleast_1d(np.asarray(value)).tolist() for key, value in columns.items()}
+    rows = [
+        [float(f), amplitude, *(columns[key][j] for key in RTDS_COLUMNS[2:])]
+        for j, f in enumerate(frequencies_hz)
+    ]
+    write_csv(output.path("rtds.csv"), RTDS_COLUMNS, rows)
+    label = f"test: {args.scheme}, {1e3 * delay:g} ms, b_g = {ratio:g} b"
+    plot.save_figure(
+        plot.plot_substructuring_response(
+            frequencies_hz,
+            columns["x_whole_m"],
+            columns["y_whole_m"],
+            [(label, columns["x_test_m"], columns["y_test_m"], columns["stable"])],
+            title=f"Virtual substructuring test, A = {amplitude:g} N, {rate:g} Hz controller",
+        ),
+        output.path("rtds.png"),
+    )
+    json_path = output.path("rtds.json")
+    data = output.document("rtds", inputs, system, settings, frequencies_hz, test=test, **columns)
+    write_json(json_path, data)
+
+    header = [
+        "f [Hz]",
+        "x whole [mm]",
+        "x test [mm]",
+        "x err [%]",
+        "y whole [mm]",
+        "y test [mm]",
+        "y err [%]",
+        "phase err x/y [deg]",
+        "test",
+    ]
+    table_rows = []
+    for j, f in enumerate(frequencies_hz):
+        stable = columns["stable"][j]
+        status = "stable" if stable else ("diverged" if columns["diverged"][j] else "growing")
+
+        def shown(value, scale, digits, stable=stable):
+            return f"{scale * value:.{digits}f}" if stable else "-"
+
+        table_rows.append(
+            [
+                f"{f:.3f}",
+                f"{1e3 * columns['x_whole_m'][j]:.4f}",
+                shown(columns["x_test_m"][j], 1e3, 4),
+                shown(columns["x_amplitude_error"][j], 100, 2),
+                f"{1e3 * columns['y_whole_m'][j]:.4f}",
+                shown(columns["y_test_m"][j], 1e3, 4),
+                shown(columns["y_amplitude_error"][j], 100, 2),
+                (
+                    f"{math.degrees(columns['x_phase_error_rad'][j]):.2f}/"
+                    f"{math.degrees(columns['y_phase_error_rad'][j]):.2f}"
+                )
+                if stable
+                else "-",
+                status,
+            ]
+        )
+    title = (
+        f"Substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
+        f"prediction {args.prediction}, {rate:g} Hz) against the whole system, "
+        f"A = {amplitude:g} N; {_describe(system)}"
+    )
+    return output.finish(data, title + "\n" + _format_table(header, table_rows))

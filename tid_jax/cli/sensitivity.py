@@ -1,0 +1,210 @@
+"""`tid-jax sensitivity`: sensitivities of the peaks, at the tuning and the optimum."""
+
+
+import numpy as np
+
+from .. import plot
+from .._design import PARAMETER_UNITS, best_tunings
+from .._io import write_csv, write_json, write_toml
+from .._retune import RetuneSettings
+from .._sensitivity import sensitivities
+from ._common import (
+    _add_output_arguments,
+    _add_system_arguments,
+    _config_comment,
+    _config_data,
+    _describe,
+    _format_table,
+    _frequencies,
+    _inputs,
+    _Output,
+    _settings,
+    _system,
+)
+
+SENSITIVITY_COLUMNS = (
+    "amplitude_N",
+    "parameter",
+    "value",
+    "unit",
+    "host_peak_m",
+    "host_derivative_m_per_unit",
+    "host_elasticity",
+    "stroke_peak_m",
+    "stroke_derivative_m_per_unit",
+    "stroke_elasticity",
+    "optimum_k_N_per_m",
+    "optimum_c_N_s_per_m",
+    "optimum_host_elasticity",
+    "optimum_stroke_elasticity",
+    "optimum_stiffness_elasticity",
+    "optimum_damping_elasticity",
+    "converged",
+    "optimum_converged",
+    "optimum_damping_at_bound",
+)
+
+
+def _add_sensitivity_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sensitivity",
+        help="derivatives of the peak responses with respect to every parameter",
+        description="For each forcing amplitude: derivatives and elasticities (d ln peak / "
+        "d ln p) of the peak host displacement and inerter stroke over the band with "
+        "respect to the host mass, stiffness and damping, the inertance, the friction "
+        "force, the TID stiffness and damping and the amplitude, at the given tuning and "
+        "at the tuning retuned for that amplitude (envelope theorem and implicit "
+        "differentiation). Prints a table ranked by the host elasticity and saves "
+        "sensitivity.csv, sensitivity.json, sensitivity_config.toml and, for several "
+        "amplitudes, sensitivity.png to --out.",
+    )
+    _add_system_arguments(parser)
+    parser.add_argument(
+        "--no-optimum",
+        action="store_true",
+        help="only at the given tuning (skips finding the retuned optimum)",
+    )
+    _add_output_arguments(parser)
+
+
+def _run_sensitivity(args) -> int:
+    inputs = _inputs(args)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    amplitudes = np.asarray(inputs["amplitudes"])
+    output = _Output(args)
+    output.say(
+        f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
+        f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
+    )
+    best = None
+    results = []
+    retune_steps = 0 if args.no_optimum else RetuneSettings().progress_steps()
+    with output.steps(retune_steps + amplitudes.size) as step:
+        if not args.no_optimum:
+            output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
+            best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
+                                progress=step)
+        for i, amplitude in enumerate(amplitudes):
+            results.append(
+                sensitivities(system, amplitude, omegas=omegas, optimum=not args.no_optimum,
+                              best=best, settings=settings)
+            )
+            step(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
+
+    records = []
+    for amplitude, result in zip(amplitudes, results, strict=True):
+        optimum = result.optimum
+        for i, name in enumerate(result.parameters):
+            at_bound = optimum is not None and bool(optimum.damping_at_bound)
+            optimal = (
+                [None] * 8
+                if optimum is None
+                else [
+                    float(optimum.tid_stiffness),
+                    float(optimum.tid_damping),
+                    float(optimum.host_elasticity[i]),
+                    float(optimum.stroke_elasticity[i]),
+                    float(optimum.stiffness_elasticity[i]),
+                    # Undefined (c* held at 0 by its bound): left empty.
+                    None if at_bound else float(optimum.damping_elasticity[i]),
+                    at_bound,
+                    bool(optimum.converged),
+                ]
+            )
+            values = [
+                float(amplitude),
+                name,
+                float(result.values[i]),
+                PARAMETER_UNITS[name],
+                float(result.host_peak),
+                float(result.host_derivative[i]),
+                float(result.host_elasticity[i]),
+                float(result.stroke_peak),
+                float(result.stroke_derivative[i]),
+                float(result.stroke_elasticity[i]),
+                *optimal[:6],
+                bool(result.converged),
+                optimal[7],
+                optimal[6],
+            ]
+            records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
+
+    write_csv(
+        output.path("sensitivity.csv"),
+        SENSITIVITY_COLUMNS,
+        [["" if r[key] is None else r[key] for key in SENSITIVITY_COLUMNS] for r in records],
+    )
+    write_toml(
+        output.path("sensitivity_config.toml"),
+        _config_data(inputs),
+        comment=_config_comment("sensitivity"),
+    )
+    if amplitudes.size > 1:
+        parameters = results[0].parameters
+
+        def series(get, names):
+            return {n: np.array([get(r)[parameters.index(n)] for r in results]) for n in names}
+
+        design = ("tid_stiffness", "tid_damping")
+        physical = [n for n in parameters if n not in design]
+        optimum_given = not args.no_optimum
+        plot.save_figure(
+            plot.plot_elasticities(
+                amplitudes,
+                series(lambda r: np.asarray(r.host_elasticity), parameters),
+                series(lambda r: np.asarray(r.stroke_elasticity), parameters),
+                optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical)
+                if optimum_given
+                else None,
+                optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical)
+                if optimum_given
+                else None,
+            ),
+            output.path("sensitivity.png"),
+        )
+    json_path = output.path("sensitivity.json")
+    data = output.document("sensitivity", inputs, system, settings, frequencies_hz, results=records)
+    write_json(json_path, data)
+
+    header = ["A [N]", "parameter", "value", "unit", "d x/dp [m/unit]", "e_x", "e_y"]
+    if not args.no_optimum:
+        header += ["e_x retuned", "e_y retuned", "e_k*", "e_c*"]
+    rows = []
+    for amplitude in amplitudes:
+        ranked = sorted(
+            (r for r in records if r["amplitude_N"] == float(amplitude)),
+            key=lambda r: -abs(r["host_elasticity"]),
+        )
+        for r in ranked:
+            row = [
+                f"{amplitude:g}",
+                r["parameter"],
+                f"{r['value']:.5g}",
+                r["unit"],
+                f"{r['host_derivative_m_per_unit']:.3e}",
+                f"{r['host_elasticity']:.4f}",
+                f"{r['stroke_elasticity']:.4f}",
+            ]
+            if not args.no_optimum:
+                row += [
+                    f"{r['optimum_host_elasticity']:.4f}",
+                    f"{r['optimum_stroke_elasticity']:.4f}",
+                    f"{r['optimum_stiffness_elasticity']:.4f}",
+                    "c* at 0" if r["optimum_damping_at_bound"]
+                    else f"{r['optimum_damping_elasticity']:.4f}",
+                ]
+            rows.append(row)
+    unconverged = [
+        f"{a:g} N"
+        for a, r in zip(amplitudes, results, strict=True)
+        if not bool(r.converged) or (r.optimum is not None and not bool(r.optimum.converged))
+    ]
+    title = (
+        f"Sensitivities of the peak responses ({_describe(system)}); e_x, e_y: elasticities "
+        f"d ln(peak) / d ln(p) of the host peak and the inerter stroke; 'retuned': at the "
+        f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c ('c* at 0': the "
+        f"optimal damping is at its bound 0, where it stays); ranked by |e_x|"
+        + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
+    )
+    return output.finish(data, title + "\n" + _format_table(header, rows))
