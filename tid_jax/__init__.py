@@ -18,13 +18,15 @@ from ._response import (
     FrequencyResponse as FrequencyResponse,
     frequency_response as frequency_response,
 )
-from ._retune import (
+from ._band import (
     Peaks as Peaks,
-    RetuneResult as RetuneResult,
-    RetuneSettings as RetuneSettings,
     default_omegas as default_omegas,
     peak_response as peak_response,
     peaks as peaks,
+)
+from ._retune import (
+    RetuneResult as RetuneResult,
+    RetuneSettings as RetuneSettings,
     retune as retune,
 )
 from ._design import (

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._band import _band, sweep
 from ._cache import compiled
 from ._checks import check_grid, check_system
 from ._linear import den_hartog_tuning
@@ -25,13 +26,7 @@ from ._peaks import (
     true_peaks,
 )
 from ._response import batched, frequency_response, scaled_states
-from ._retune import (
-    RetuneSettings,
-    _band,
-    check_retune_options,
-    optimal_tunings,
-    sweep,
-)
+from ._retune import RetuneSettings, check_retune_options, optimal_tunings
 from ._steady_state import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
 

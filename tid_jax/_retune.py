@@ -10,6 +10,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._band import Peaks, _band, response_peaks
 from ._cache import compiled
 from ._checks import check_grid, check_optimiser_options, check_system
 from ._dynamics import PARAMETERS, parameters
@@ -18,7 +19,6 @@ from ._peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
     bracket,
-    grid_peak,
     interpolated,
     located_peak,
     newton_peak,
@@ -26,7 +26,6 @@ from ._peaks import (
     stencil,
     stencil_points,
     top_peaks,
-    true_peaks,
 )
 from ._response import (
     FrequencyResponse,
@@ -39,11 +38,6 @@ from ._response import (
 from ._sharding import map_batch, sharded_batch
 from ._steady_state import SolverSettings, refined_peak, settled_state
 from ._system import TIDSystem
-
-# Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
-# for TID frequencies from well below to 25% above Den Hartog's.
-BAND = (0.65, 1.4)
-DEFAULT_FREQUENCIES = 61
 
 
 class RetuneSettings(eqx.Module):
@@ -108,163 +102,6 @@ STATUS_MESSAGES = {
     4: "the retuned peak was above the initial tuning's on the check grid: initial tuning kept",
 }
 
-
-def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Array, " freqs"]:
-    """`n` circular frequencies (rad/s) spanning 0.65-1.4 times the host frequency."""
-    if not (isinstance(n, int) and n >= 5):
-        raise ValueError(f"n must be an integer >= 5, got {n!r}")
-    return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
-
-
-def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
-    """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
-    one amplitude, shooting from `z_init` (one state per frequency) if given."""
-
-    def one(omega, z0):
-        orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z0)
-        return x_max, y_max, orbit.converged, orbit.state
-
-    if z_init is None:
-        return jax.vmap(lambda omega: one(omega, None))(omegas)
-    return jax.vmap(one)(omegas, z_init)
-
-
-class Peaks(eqx.Module):
-    """Peak steady-state responses over a frequency band, per amplitude (SI): of the host,
-    the maximum in continuous frequency; of the inerter terminal (the stroke), the grid's
-    refined by a parabola (see `response_peaks`)."""
-
-    amplitudes: Float[Array, " amps"]
-    x_peak: Float[Array, " amps"]  # m, NaN where a steady state in the band did not converge
-    y_peak: Float[Array, " amps"]  # m
-    omega_x: Float[Array, " amps"]  # rad/s where the host peak occurs
-    omega_y: Float[Array, " amps"]
-    at_edge: Bool[Array, " amps"]  # host peak at an end of the band
-    converged: Bool[Array, " amps"]  # every steady state in the band converged
-
-
-def response_peaks(systems: TIDSystem, response: FrequencyResponse,
-                   settings: SolverSettings) -> Peaks:
-    """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
-    true maxima over frequency of |x| (`_peaks.true_peaks`; every Newton step's stencils
-    of every lane solved in one batch, each steady state shot from the grid's orbits,
-    interpolated), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
-    can have corners, where the highest of the terminal's excursions within a period
-    changes, which Newton steps on its slope would miss). NaN where a steady state in the
-    band, or of a stencil, did not converge."""
-    omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
-    states = scaled_states(response, systems.host_stiffness)
-    converged = jnp.all(response.converged, axis=-1)
-    # Selection only: an orbit that was not found makes the lane's peaks NaN below.
-    grid = jnp.where(response.converged, response.x_max, 0.0)
-    index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
-    lower, upper, interior = jax.vmap(bracket)(index, omegas)
-
-    def solve(at):
-        flat = at.reshape(at.shape[0], -1)
-        warm = jax.vmap(interpolated)(states, omegas, flat)
-        solved = lane_response(systems, response.amplitudes, flat, settings, warm)
-        return solved.x_max.reshape(at.shape), jnp.all(solved.converged, axis=-1)
-
-    for step in range(PEAK_NEWTON_STEPS):
-        at = jax.vmap(ft.partial(stencil, points=stencil_points(step)))(centre, interior)
-        values, ok = solve(at)
-        converged &= ok
-        estimate, centre = jax.vmap(newton_peak)(values, at, lower, upper, interior)
-    values, ok = solve(centre[..., None])
-    converged &= ok
-    peak = located_peak(estimate, values[..., 0])
-    best = jnp.argmax(jnp.where(valid, peak, -jnp.inf), axis=1)
-
-    def take(a):
-        return jnp.take_along_axis(a, best[:, None], axis=1)[:, 0]
-
-    y, omega_y, _ = jax.vmap(grid_peak)(response.y_max, omegas)
-    return Peaks(
-        amplitudes=response.amplitudes,
-        x_peak=jnp.where(converged, take(peak), jnp.nan),
-        y_peak=jnp.where(converged, y, jnp.nan),
-        omega_x=take(centre),
-        omega_y=omega_y,
-        at_edge=(take(index) == 0) | (take(index) == omegas.shape[-1] - 1),
-        converged=converged,
-    )
-
-
-def _band(system, omegas):
-    if omegas is None:
-        return default_omegas(system)
-    array = check_grid("omegas", omegas)
-    if array.ndim != 1 or array.size < 5:
-        raise ValueError(f"omegas must be a 1-d grid of at least 5 frequencies, got {array!r}")
-    if np.any(np.diff(array) <= 0):
-        raise ValueError("omegas must be strictly increasing")
-    return jnp.asarray(array, dtype=jnp.result_type(float))
-
-
-def peaks(
-    system: TIDSystem,
-    amplitudes: ArrayLike,
-    omegas: ArrayLike | None = None,
-    *,
-    settings: SolverSettings = SolverSettings(),
-) -> Peaks:
-    """Peak host and inerter displacement over the band `omegas` (rad/s; default
-    `default_omegas(system)`) for each amplitude (N): the maxima in continuous frequency
-    (each of the highest local maxima on the grid located by Newton steps on the slope of
-    the response, see `_peaks`), all amplitudes in one batch."""
-    check_system(system)
-    band = _band(system, omegas)
-    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
-    systems = batched(system, amps.size)
-    return response_peaks(systems, lane_response(systems, amps, band, settings), settings)
-
-
-def peak_response(
-    system: TIDSystem,
-    amplitude: ArrayLike,
-    omegas: ArrayLike | None = None,
-    *,
-    response: str = "host",
-    settings: SolverSettings = SolverSettings(),
-) -> Float[Array, ""]:
-    """Peak steady-state displacement (m) over the frequency band `omegas` (rad/s; default
-    `default_omegas(system)`) at forcing amplitude `amplitude` (N): of the host
-    (`response="host"`, max |x|) or of the inerter terminal (`"inerter"`, max |y|, the
-    stroke). Differentiable with respect to every field of `system` and `amplitude`
-    (implicit differentiation through the periodic orbits; envelope theorem at the peak).
-    The host's peak is the maximum in continuous frequency, the inerter's the grid's
-    refined by a parabola (see `response_peaks`). NaN where a steady state in the band did
-    not converge."""
-    check_system(system)
-    if response not in ("host", "inerter"):
-        raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
-    if not isinstance(amplitude, jax.core.Tracer):
-        check_grid("amplitude", amplitude)
-        if np.ndim(amplitude) != 0:
-            raise ValueError(f"amplitude must be a scalar, got shape {np.shape(amplitude)}")
-    band = _band(system, omegas)
-    return _peak_response(system, amplitude, band, response == "host", settings)
-
-
-@compiled
-def _peak_response(system, amplitude, omegas, host, settings):
-    xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
-    if host:
-        def solve(step, at):
-            del step
-            z0 = interpolated(states, omegas, at)
-            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
-                system, amplitude, at, settings, z0)
-            return jnp.where(ok, x, jnp.nan)
-
-        selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
-        _, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
-        peak = jnp.max(jnp.where(valid, peaks, -jnp.inf))
-    else:
-        peak = grid_peak(ys, omegas)[0]  # see `response_peaks`
-    # The maximum over a band with an orbit that was not found is unknown.
-    return jnp.where(jnp.all(converged), peak, jnp.nan)
 
 
 class RetuneResult(eqx.Module):

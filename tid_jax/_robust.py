@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._band import _band
 from ._checks import check_optimiser_options, check_system
 from ._design import (
     MAX_STEP,
@@ -31,10 +32,7 @@ from ._peaks import (
     grid_peak,
 )
 from ._response import frequency_response
-from ._retune import (
-    RetuneSettings,
-    _band,
-)
+from ._retune import RetuneSettings
 from ._sqp import Model, minimise_stage, stationary
 from ._steady_state import SolverSettings
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem

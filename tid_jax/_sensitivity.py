@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._band import _band
 from ._checks import check_system
 from ._design import (
     MAX_STEP,
@@ -22,11 +23,7 @@ from ._design import (
     evaluate_design,
     smooth_max,
 )
-from ._retune import (
-    RetuneSettings,
-    _band,
-    check_retune_options,
-)
+from ._retune import RetuneSettings, check_retune_options
 from ._sqp import Model, decrement, trust_step
 from ._steady_state import SolverSettings
 from ._system import TIDSystem

@@ -14,6 +14,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import __version__
+from .._band import DEFAULT_FREQUENCIES, default_omegas
 from .._cache import CACHE_ENVIRONMENT_VARIABLE
 from .._io import check_writable_dir, json_text
 from .._linear import (
@@ -21,7 +22,6 @@ from .._linear import (
     linear_receptance,
     stuck_receptance,
 )
-from .._retune import DEFAULT_FREQUENCIES, default_omegas
 from .._steady_state import SolverSettings
 from .._system import (
     PAPER_AMPLITUDES,

@@ -5,8 +5,8 @@ import math
 import numpy as np
 
 from .. import plot
+from .._band import DEFAULT_FREQUENCIES
 from .._io import write_csv, write_json
-from .._retune import DEFAULT_FREQUENCIES
 from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._common import (
     CLIError,
