@@ -169,6 +169,21 @@ def test_design_worse_on_the_check_grid_keeps_the_initial_tuning(system):
         float(tj.peaks(system, [1000.0], fine).x_peak[0]), rel=1e-7)
 
 
+def test_amplitude_below_breakaway_keeps_the_initial_tuning_and_says_so(system):
+    # 15 N is below the paper system's breakaway amplitude over the band (22.8 N): the
+    # inerter never slips, and a stiffer damper to ground only lowers the stuck peak
+    # further, so the smoothed model has no TID optimum there.
+    coarse = np.linspace(0.8, 1.2, 7) * float(system.host_frequency)
+    assert 15.0 < float(tj.breakaway_amplitude(system, coarse).minimum)
+    result = tj.retune(system, [15.0], omegas=coarse)
+    assert int(result.status[0]) == 5 and not bool(result.converged[0])
+    assert "below the breakaway amplitude" in result.status_messages()[0]
+    assert float(result.tid_stiffness[0]) == float(system.tid_stiffness)
+    assert float(result.tid_damping[0]) == float(system.tid_damping)
+    damper = system.replace(tid_damping=1.5 * float(system.tid_damping))
+    assert float(tj.peaks(damper, [15.0], coarse).x_peak[0]) < 0.95 * float(result.x_peak[0])
+
+
 def test_bad_arguments(system):
     with pytest.raises(ValueError, match="amplitudes must be finite and positive"):
         tj.retune(system, [-100.0])

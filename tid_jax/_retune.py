@@ -14,7 +14,7 @@ from ._band import Peaks, _band, response_peaks
 from ._cache import compiled
 from ._checks import check_grid, check_optimiser_options, check_system
 from ._dynamics import PARAMETERS, parameters
-from ._linear import den_hartog_tuning
+from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -100,6 +100,8 @@ STATUS_MESSAGES = {
     2: "some steady states did not converge",
     3: "peak at the edge of the frequency band",
     4: "the retuned peak was above the initial tuning's on the check grid: initial tuning kept",
+    5: "below the breakaway amplitude: the inerter never slips and the TID is a spring and "
+       "damper to ground, which retuning would only stiffen; initial tuning kept",
 }
 
 
@@ -364,7 +366,10 @@ def retune(
     the true peaks and renew the monodromy matrices at their grid points. The initial and
     retuned designs are then solved afresh (each steady state starting from the design's
     orbits) on a grid `retune_settings.check_refinement` times finer; a design whose peak
-    there is above the initial tuning's is replaced by the initial tuning (status 4).
+    there is above the initial tuning's is replaced by the initial tuning (status 4), as
+    is the design at an amplitude below the initial tuning's breakaway amplitude
+    (`breakaway_amplitude`; status 5): there the inerter never slips, and the smoothed
+    model's optimum would be an ever stiffer spring and damper to ground.
 
     **Arguments:**
 
@@ -466,18 +471,30 @@ def optimal_tunings(
     both = lane_response(both_systems, jnp.concatenate([amps, amps]),
                          jnp.concatenate([fine, fine]), settings, warm)
     found = response_peaks(both_systems, both, settings)
-    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref)
+    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref,
+                             _below_breakaway(systems, amps, bands))
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(jnp.sum(result.converged))}/{amps.size} ok")
     return result
 
 
+def _below_breakaway(systems: TIDSystem, amplitudes, bands):
+    """Whether each lane's amplitude is below its system's smallest breakaway amplitude
+    over its band (`breakaway_amplitude`): the inerter then never slips."""
+    minimum = [
+        float(breakaway_amplitude(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
+        for i in range(amplitudes.shape[0])
+    ]
+    return jnp.asarray(np.asarray(amplitudes) < np.asarray(minimum))
+
+
 @eqx.filter_jit
 def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, iterations,
-                    c_ref):
+                    c_ref, stuck):
     """The `RetuneResult` from the check `both` of the initial designs (`k0`, `c0`, its first
     half of amplitudes) and the retuned ones (`k`, `c`, the second half), and their true
-    peaks `found`."""
+    peaks `found`; `stuck` marks the amplitudes below the initial tuning's breakaway
+    amplitude."""
     n = k0.shape[0]
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
     before = jax.tree.map(lambda a: a[:n], found)
@@ -489,6 +506,10 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
     # misled the optimiser) is not returned: the initial tuning is kept and flagged.
     worse = after.x_peak > before.x_peak
     status = jnp.where(worse, 4, status)
+    # Below the breakaway amplitude the smoothed model's optimum is a stiffer and stiffer
+    # spring-damper to ground (the inerter stays stuck): not a TID design, so not returned.
+    status = jnp.where(stuck, 5, status)
+    worse = worse | stuck
     k, c = jnp.where(worse, k0, k), jnp.where(worse, c0, c)
     after = jax.tree.map(lambda b, a: jnp.where(worse, b, a), before, after)
     x_response = jnp.where(worse[:, None], initial.x_max, retuned.x_max)
