@@ -415,91 +415,13 @@ def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSett
 # Public functions ------------------------------------------------------------------------
 
 
-def simulate_substructuring(
-    system: TIDSystem,
-    omega: ArrayLike,
-    amplitude: ArrayLike,
-    *,
-    scheme: str = "error_feedback",
-    delay: ArrayLike = DEFAULT_DELAY,
-    guessed_inertance: ArrayLike | None = None,
-    guessed_force: str = "acceleration",
-    prediction: str | None = "harmonic",
-    prediction_order: int = 2,
-    prediction_horizon: float | None = None,
-    actuator_lag: float = 0.0,
-    parasitic_stiffness: float | None = None,
-    sample_rate: float = DEFAULT_SAMPLE_RATE,
-    substeps: int = 4,
-    periods: int = 60,
-    measure_periods: int = 5,
-    divergence_factor: float = 100.0,
-    growth_tolerance: float = 0.02,
-    reference: bool = True,
-    settings: SolverSettings = SolverSettings(),  # noqa: B008 (immutable)
-) -> Substructuring:
-    """Simulate a real-time dynamic substructuring test of the inerter (paper section 5)
-    as a digital controller runs it, and compare it with the whole system.
-
-    Every sample period the controller commands the interface kinematics (y, y', y'') of
-    the numerical substructure (host M, K, C and the TID's k, c, plus b_g for error
-    feedback), optionally predicted `prediction_horizon` ahead. The actuator imposes them
-    after the pure `delay` (interpolated linearly between samples) and a first-order lag
-    `actuator_lag` (discretised per sample). The physical inerter answers with
-    f_s = b y*'' + ff sgn(y*') (the smoothed sign of `frequency_response`), or through a
-    parasitic spring. The fed-back force is held over the sample while RK4 advances the
-    numerical substructure (zero-order hold, so even with no delay the loop lags by the
-    sampling: errors are first order in 1 / `sample_rate`). The test starts on the
-    frictionless steady state with the matching history. A test whose |x| or |y| leaves
-    the divergence bound is frozen and reported as diverged, never as NaN.
-
-    **Arguments:**
-
-    - `system`: the emulated `TIDSystem`; its inertance and friction are the physical
-      inerter's.
-    - `omega`: forcing circular frequency, rad/s.
-    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N.
-    - `scheme`: "conventional" (feed back f_s, eqs. (13)-(14): an advanced equation,
-      unstable for any delay) or "error_feedback" (feed back e = f_s - b_g y*'',
-      eq. (16)).
-    - `delay`: actuator delay tau, s.
-    - `guessed_inertance`: b_g, kg (default the system's inertance; unused by the
-      conventional scheme).
-    - `guessed_force`: "acceleration" (b_g y*'' from the actuator's acceleration) or
-      "harmonic" (the paper's -b_g omega^2 y*, exact only for harmonic motion).
-    - `prediction`: the compensation of the delay: "harmonic" (the default, as in the
-      paper's tests: advance the phase of the current y, y', y'' by omega * horizon,
-      exact for harmonic motion at the forcing frequency); "polynomial" (extrapolate the
-      polynomial through the last `prediction_order + 1` commanded samples, the usual
-      model-free compensation); or None (no compensation: with a 10 ms delay the host
-      amplitude is then about 10% off on the paper's system).
-    - `prediction_order`: degree of the "polynomial" prediction, 0 to 4.
-    - `prediction_horizon`: how far ahead to predict, s (default: the delay plus half a
-      sample period, the mean lag of the zero-order hold).
-    - `actuator_lag`: time constant of the actuator's first-order lag, s (0: none).
-    - `parasitic_stiffness`: stiffness in series with the physical inerter, N/m (None:
-      rigid).
-    - `sample_rate`: controller sample rate, Hz.
-    - `substeps`: RK4 steps per sample.
-    - `periods`: simulated duration, in periods of the lowest forcing frequency.
-    - `measure_periods`: peaks and phases come from the last `measure_periods` periods;
-      the peak between mid-run and them is used to detect growth.
-    - `divergence_factor`: the test diverged once |x| or |y| exceeds this multiple of the
-      largest of A / K and the frictionless |X|, |Y|.
-    - `growth_tolerance`: a test whose last-window peak exceeds the peak from mid-run up
-      to that window by more than this fraction counts as unstable.
-    - `reference`: also solve the whole system (`frequency_response`'s model) and report
-      amplitude and phase errors.
-    - `settings`: `SolverSettings` of that whole-system solve.
-
-    `omega`, `amplitude`, `delay` and `guessed_inertance` broadcast against each other;
-    all points run in one compiled, vmapped call.
-
-    **Returns:** a `Substructuring`.
-    """
-    check_concrete_system(system)
-    if not isinstance(settings, SolverSettings):
-        raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
+def _planned_tests(system, omega, amplitude, *, scheme, delay, guessed_inertance,
+                   guessed_force, prediction, prediction_order, prediction_horizon,
+                   actuator_lag, parasitic_stiffness, sample_rate, substeps, periods,
+                   measure_periods, divergence_factor, growth_tolerance):
+    """The checked options of `simulate_substructuring` as the static `_Plan`, the
+    `_Controller` and the flat batch of `_Point`s, with the broadcast grid's shape and
+    arrays `(omega, amplitude, delay, guessed_inertance)`."""
     choice("scheme", scheme, SCHEMES)
     choice("guessed_force", guessed_force, GUESSED_FORCES)
     if prediction is not None:
@@ -608,41 +530,142 @@ def simulate_substructuring(
         bound=jnp.asarray(factor * scale, dtype),
         window=jnp.asarray(measure_periods * 2 * np.pi / omegas, dtype),
     )
+    arrays = (omega_array, amplitude_array, delay_array, guess_array)
+    return plan, controller, points, shape, arrays, growth_tolerance
+
+
+def simulate_substructuring(
+    system: TIDSystem,
+    omega: ArrayLike,
+    amplitude: ArrayLike,
+    *,
+    scheme: str = "error_feedback",
+    delay: ArrayLike = DEFAULT_DELAY,
+    guessed_inertance: ArrayLike | None = None,
+    guessed_force: str = "acceleration",
+    prediction: str | None = "harmonic",
+    prediction_order: int = 2,
+    prediction_horizon: float | None = None,
+    actuator_lag: float = 0.0,
+    parasitic_stiffness: float | None = None,
+    sample_rate: float = DEFAULT_SAMPLE_RATE,
+    substeps: int = 4,
+    periods: int = 60,
+    measure_periods: int = 5,
+    divergence_factor: float = 100.0,
+    growth_tolerance: float = 0.02,
+    reference: bool = True,
+    settings: SolverSettings = SolverSettings(),  # noqa: B008 (immutable)
+) -> Substructuring:
+    """Simulate a real-time dynamic substructuring test of the inerter (paper section 5)
+    as a digital controller runs it, and compare it with the whole system.
+
+    Every sample period the controller commands the interface kinematics (y, y', y'') of
+    the numerical substructure (host M, K, C and the TID's k, c, plus b_g for error
+    feedback), optionally predicted `prediction_horizon` ahead. The actuator imposes them
+    after the pure `delay` (interpolated linearly between samples) and a first-order lag
+    `actuator_lag` (discretised per sample). The physical inerter answers with
+    f_s = b y*'' + ff sgn(y*') (the smoothed sign of `frequency_response`), or through a
+    parasitic spring. The fed-back force is held over the sample while RK4 advances the
+    numerical substructure (zero-order hold, so even with no delay the loop lags by the
+    sampling: errors are first order in 1 / `sample_rate`). The test starts on the
+    frictionless steady state with the matching history. A test whose |x| or |y| leaves
+    the divergence bound is frozen and reported as diverged, never as NaN.
+
+    **Arguments:**
+
+    - `system`: the emulated `TIDSystem`; its inertance and friction are the physical
+      inerter's.
+    - `omega`: forcing circular frequency, rad/s.
+    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N.
+    - `scheme`: "conventional" (feed back f_s, eqs. (13)-(14): an advanced equation,
+      unstable for any delay) or "error_feedback" (feed back e = f_s - b_g y*'',
+      eq. (16)).
+    - `delay`: actuator delay tau, s.
+    - `guessed_inertance`: b_g, kg (default the system's inertance; unused by the
+      conventional scheme).
+    - `guessed_force`: "acceleration" (b_g y*'' from the actuator's acceleration) or
+      "harmonic" (the paper's -b_g omega^2 y*, exact only for harmonic motion).
+    - `prediction`: the compensation of the delay: "harmonic" (the default, as in the
+      paper's tests: advance the phase of the current y, y', y'' by omega * horizon,
+      exact for harmonic motion at the forcing frequency); "polynomial" (extrapolate the
+      polynomial through the last `prediction_order + 1` commanded samples, the usual
+      model-free compensation); or None (no compensation: with a 10 ms delay the host
+      amplitude is then about 10% off on the paper's system).
+    - `prediction_order`: degree of the "polynomial" prediction, 0 to 4.
+    - `prediction_horizon`: how far ahead to predict, s (default: the delay plus half a
+      sample period, the mean lag of the zero-order hold).
+    - `actuator_lag`: time constant of the actuator's first-order lag, s (0: none).
+    - `parasitic_stiffness`: stiffness in series with the physical inerter, N/m (None:
+      rigid).
+    - `sample_rate`: controller sample rate, Hz.
+    - `substeps`: RK4 steps per sample.
+    - `periods`: simulated duration, in periods of the lowest forcing frequency.
+    - `measure_periods`: peaks and phases come from the last `measure_periods` periods;
+      the peak between mid-run and them is used to detect growth.
+    - `divergence_factor`: the test diverged once |x| or |y| exceeds this multiple of the
+      largest of A / K and the frictionless |X|, |Y|.
+    - `growth_tolerance`: a test whose last-window peak exceeds the peak from mid-run up
+      to that window by more than this fraction counts as unstable.
+    - `reference`: also solve the whole system (`frequency_response`'s model) and report
+      amplitude and phase errors.
+    - `settings`: `SolverSettings` of that whole-system solve.
+
+    `omega`, `amplitude`, `delay` and `guessed_inertance` broadcast against each other;
+    all points run in one compiled, vmapped call.
+
+    **Returns:** a `Substructuring`.
+    """
+    check_concrete_system(system)
+    if not isinstance(settings, SolverSettings):
+        raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
+    plan, controller, points, shape, arrays, growth_tolerance = _planned_tests(
+        system, omega, amplitude, scheme=scheme, delay=delay,
+        guessed_inertance=guessed_inertance, guessed_force=guessed_force,
+        prediction=prediction, prediction_order=prediction_order,
+        prediction_horizon=prediction_horizon, actuator_lag=actuator_lag,
+        parasitic_stiffness=parasitic_stiffness, sample_rate=sample_rate,
+        substeps=substeps, periods=periods, measure_periods=measure_periods,
+        divergence_factor=divergence_factor, growth_tolerance=growth_tolerance,
+    )
     out = _simulate_batch(plan, controller, system, points)
     out["stable"] = ~out["diverged"] & (out["growth"] <= 1 + growth_tolerance)
     fields = {key: jnp.reshape(value, shape) for key, value in out.items()}
-
     if reference:
-        pairs, inverse = np.unique(
-            np.stack([omegas, amplitudes], axis=1), axis=0, return_inverse=True
-        )
-        whole = _reference_batch(
-            system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype), settings
-        )
-        whole = {
-            key: jnp.reshape(value[inverse.reshape(-1)], shape) for key, value in whole.items()
-        }
-
-        def wrap(angle):
-            return jnp.angle(jnp.exp(1j * angle))
-
-        fields.update(
-            reference_x_max=whole["x_max"],
-            reference_y_max=whole["y_max"],
-            reference_x_phase=whole["x_phase"],
-            reference_y_phase=whole["y_phase"],
-            x_amplitude_error=fields["x_max"] / whole["x_max"] - 1,
-            y_amplitude_error=fields["y_max"] / whole["y_max"] - 1,
-            x_phase_error=wrap(fields["x_phase"] - whole["x_phase"]),
-            y_phase_error=wrap(fields["y_phase"] - whole["y_phase"]),
-            reference_converged=whole["converged"],
-        )
+        fields.update(_against_whole(system, points, shape, fields, settings))
+    dtype = jnp.result_type(float)
     return Substructuring(
-        omega=jnp.asarray(np.broadcast_to(omega_array, shape), dtype),
-        amplitude=jnp.asarray(np.broadcast_to(amplitude_array, shape), dtype),
-        delay=jnp.asarray(np.broadcast_to(delay_array, shape), dtype),
-        guessed_inertance=jnp.asarray(np.broadcast_to(guess_array, shape), dtype),
+        **{name: jnp.asarray(np.broadcast_to(array, shape), dtype) for name, array in zip(
+            ("omega", "amplitude", "delay", "guessed_inertance"), arrays, strict=True)},
         **fields,
+    )
+
+
+def _against_whole(system, points: _Point, shape, fields, settings) -> dict:
+    """The whole system's steady state at each test's (omega, amplitude) (each distinct
+    pair solved once) and the test's amplitude and phase errors against it."""
+    omegas, amplitudes = np.asarray(points.omega), np.asarray(points.amplitude)
+    pairs, inverse = np.unique(np.stack([omegas, amplitudes], axis=1), axis=0,
+                               return_inverse=True)
+    dtype = jnp.result_type(float)
+    whole = _reference_batch(
+        system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype), settings
+    )
+    whole = {key: jnp.reshape(value[inverse.reshape(-1)], shape) for key, value in whole.items()}
+
+    def wrap(angle):
+        return jnp.angle(jnp.exp(1j * angle))
+
+    return dict(
+        reference_x_max=whole["x_max"],
+        reference_y_max=whole["y_max"],
+        reference_x_phase=whole["x_phase"],
+        reference_y_phase=whole["y_phase"],
+        x_amplitude_error=fields["x_max"] / whole["x_max"] - 1,
+        y_amplitude_error=fields["y_max"] / whole["y_max"] - 1,
+        x_phase_error=wrap(fields["x_phase"] - whole["x_phase"]),
+        y_phase_error=wrap(fields["y_phase"] - whole["y_phase"]),
+        reference_converged=whole["converged"],
     )
 
 
