@@ -4,8 +4,9 @@ The host structure and the TID's spring and damper are numerical; the inerter is
 "physical", emulated by the friction model of eq. (12), optionally behind a parasitic
 compliance. A digital controller advances the numerical substructure sample by sample,
 commands the interface kinematics to an actuator (a delay line with an optional
-first-order lag, compensated by default by forward prediction, as in the paper) and feeds the force
-measured at the interface back into the numerical model, held over each sample.
+first-order lag, compensated by default by forward prediction, as in the paper) and
+feeds the force measured at the interface back into the numerical model, held over each
+sample.
 """
 
 import math
