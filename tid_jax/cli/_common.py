@@ -9,6 +9,7 @@ import sys
 import time
 import tomllib
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -283,6 +284,28 @@ def _frequencies(inputs: dict, system: TIDSystem) -> tuple[np.ndarray, np.ndarra
         return omegas / (2 * math.pi), omegas
     frequencies_hz = np.linspace(*inputs["band_hz"], n)
     return frequencies_hz, 2 * math.pi * frequencies_hz
+
+
+class _Start(NamedTuple):
+    """What a command starts from: its inputs (flags over TOML over defaults), the system,
+    the solver settings, the band (Hz and rad/s), the amplitudes (N) and the checked
+    output folder."""
+
+    inputs: dict
+    system: TIDSystem
+    settings: SolverSettings
+    frequencies_hz: np.ndarray
+    omegas: np.ndarray
+    amplitudes: np.ndarray
+    output: "_Output"
+
+
+def _start(args) -> _Start:
+    inputs = _inputs(args)
+    system = _system(inputs)
+    frequencies_hz, omegas = _frequencies(inputs, system)
+    return _Start(inputs, system, _settings(inputs), frequencies_hz, omegas,
+                  np.asarray(inputs["amplitudes"]), _Output(args))
 
 
 def _den_hartog(system: TIDSystem) -> tuple[float, float]:

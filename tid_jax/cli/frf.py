@@ -16,15 +16,11 @@ from ._common import (
     _config_data,
     _describe,
     _format_table,
-    _frequencies,
     _host_frequency_hz,
-    _inputs,
     _linear_curves,
     _linear_normalised,
-    _Output,
-    _settings,
+    _start,
     _stuck_curve,
-    _system,
 )
 
 FRF_COLUMNS = (
@@ -55,11 +51,7 @@ def _add_frf_parser(subparsers) -> None:
 
 
 def _run_frf(args) -> int:
-    inputs = _inputs(args)
-    system, settings = _system(inputs), _settings(inputs)
-    frequencies_hz, omegas = _frequencies(inputs, system)
-    amplitudes = np.asarray(inputs["amplitudes"])
-    output = _Output(args)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     output.say(
         f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
         f"frequencies; {_describe(system)}"

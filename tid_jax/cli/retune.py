@@ -17,13 +17,9 @@ from ._common import (
     _den_hartog,
     _describe,
     _format_table,
-    _frequencies,
     _host_frequency_hz,
-    _inputs,
     _linear_curves,
-    _Output,
-    _settings,
-    _system,
+    _start,
 )
 
 RETUNE_COLUMNS = (
@@ -60,11 +56,7 @@ def _add_retune_parser(subparsers) -> None:
 
 
 def _run_retune(args) -> int:
-    inputs = _inputs(args)
-    system, settings = _system(inputs), _settings(inputs)
-    frequencies_hz, omegas = _frequencies(inputs, system)
-    amplitudes = np.asarray(inputs["amplitudes"])
-    output = _Output(args)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     output.say(
         f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies, "
         f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "

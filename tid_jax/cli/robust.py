@@ -18,11 +18,7 @@ from ._common import (
     _den_hartog,
     _describe,
     _format_table,
-    _frequencies,
-    _inputs,
-    _Output,
-    _settings,
-    _system,
+    _start,
 )
 
 ROBUST_COLUMNS = (
@@ -69,16 +65,12 @@ def _add_robust_parser(subparsers) -> None:
 
 
 def _run_robust(args) -> int:
-    inputs = _inputs(args)
     tolerance = args.host_frequency_tolerance
     if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
         raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
-    system, settings = _system(inputs), _settings(inputs)
-    frequencies_hz, omegas = _frequencies(inputs, system)
-    amplitudes = np.asarray(inputs["amplitudes"])
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
     stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
-    output = _Output(args)
     output.say(
         f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} host "
         f"frequencies, {omegas.size} frequencies each; {_describe(system)}"

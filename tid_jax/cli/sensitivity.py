@@ -15,11 +15,7 @@ from ._common import (
     _config_data,
     _describe,
     _format_table,
-    _frequencies,
-    _inputs,
-    _Output,
-    _settings,
-    _system,
+    _start,
 )
 
 SENSITIVITY_COLUMNS = (
@@ -68,11 +64,7 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 
 def _run_sensitivity(args) -> int:
-    inputs = _inputs(args)
-    system, settings = _system(inputs), _settings(inputs)
-    frequencies_hz, omegas = _frequencies(inputs, system)
-    amplitudes = np.asarray(inputs["amplitudes"])
-    output = _Output(args)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     output.say(
         f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
         f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
