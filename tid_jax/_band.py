@@ -140,10 +140,20 @@ def peaks(
     *,
     settings: SolverSettings = SolverSettings(),
 ) -> Peaks:
-    """Peak host and inerter displacement over the band `omegas` (rad/s; default
-    `default_omegas(system)`) for each amplitude (N): the maxima in continuous frequency
-    (each of the highest local maxima on the grid located by Newton steps on the slope of
-    the response, see `_peaks`), all amplitudes in one batch."""
+    """Peak host and inerter displacement over a frequency band for each amplitude: of
+    the host, the maximum in continuous frequency (each of the highest local maxima on
+    the grid located by Newton steps on the slope of the response, see `_peaks`); of the
+    inerter, the grid's refined by a parabola. All amplitudes in one batch.
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`.
+    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
+    - `omegas`: the band's grid, rad/s, increasing (default `default_omegas(system)`).
+    - `settings`: `SolverSettings` of the steady states.
+
+    **Returns:** `Peaks`, one entry per amplitude.
+    """
     check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
@@ -159,14 +169,23 @@ def peak_response(
     response: str = "host",
     settings: SolverSettings = SolverSettings(),
 ) -> Float[Array, ""]:
-    """Peak steady-state displacement (m) over the frequency band `omegas` (rad/s; default
-    `default_omegas(system)`) at forcing amplitude `amplitude` (N): of the host
-    (`response="host"`, max |x|) or of the inerter terminal (`"inerter"`, max |y|, the
-    stroke). Differentiable with respect to every field of `system` and `amplitude`
-    (implicit differentiation through the periodic orbits; envelope theorem at the peak).
-    The host's peak is the maximum in continuous frequency, the inerter's the grid's
-    refined by a parabola (see `response_peaks`). NaN where a steady state in the band did
-    not converge."""
+    """Peak steady-state displacement over a frequency band at one forcing amplitude, of
+    the host (max |x|) or of the inerter terminal (max |y|, the stroke). Differentiable
+    with respect to every field of `system` and `amplitude` (implicit differentiation
+    through the periodic orbits; envelope theorem at the peak). The host's peak is the
+    maximum in continuous frequency, the inerter's the grid's refined by a parabola (see
+    `response_peaks`).
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`.
+    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (scalar; may be traced).
+    - `omegas`: the band's grid, rad/s, increasing (default `default_omegas(system)`).
+    - `response`: `"host"` or `"inerter"`.
+    - `settings`: `SolverSettings` of the steady states.
+
+    **Returns:** the peak, m; NaN where a steady state in the band did not converge.
+    """
     check_system(system)
     if response not in ("host", "inerter"):
         raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")

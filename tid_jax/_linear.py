@@ -128,8 +128,17 @@ class Breakaway(eqx.Module):
 
 
 def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
-    """The `Breakaway` amplitudes of `system` at the frequencies `omegas` (rad/s; a
-    scalar or a 1-d array of finite positive values) and their minimum over the band."""
+    """The forcing amplitudes up to which the steady state with the inerter stuck exists,
+    at each frequency, and their smallest over the band (see `Breakaway`).
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`.
+    - `omegas`: circular frequencies, rad/s (scalar or 1-d, finite and positive); the
+      minimum is taken over `[min(omegas), max(omegas)]`.
+
+    **Returns:** a `Breakaway`.
+    """
     check_system(system)
     check_values("omegas", omegas, "positive")
     w = jnp.atleast_1d(jnp.asarray(omegas, dtype=float))
