@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._checks import check_system
+from ._checks import check_grid, check_system
 from ._system import (
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -140,10 +140,7 @@ def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     **Returns:** a `Breakaway`.
     """
     check_system(system)
-    check_values("omegas", omegas, "positive")
-    w = jnp.atleast_1d(jnp.asarray(omegas, dtype=float))
-    if w.ndim != 1:
-        raise ValueError(f"omegas must be a scalar or 1-d, got shape {w.shape}")
+    w = jnp.atleast_1d(jnp.asarray(check_grid("omegas", omegas)))
     mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
     stiffness = system.host_stiffness + k
     damping = system.host_damping + c

@@ -90,9 +90,6 @@ class RetuneSettings(eqx.Module):
         initial tuning's steady states, each stage, the check."""
         return len(self.sharpness) + 2
 
-    def to_dict(self) -> dict:
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
-
 
 STATUS_MESSAGES = {
     0: "ok",
@@ -509,10 +506,10 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
     # Below the breakaway amplitude the smoothed model's optimum is a stiffer and stiffer
     # spring-damper to ground (the inerter stays stuck): not a TID design, so not returned.
     status = jnp.where(stuck, 5, status)
-    worse = worse | stuck
-    k, c = jnp.where(worse, k0, k), jnp.where(worse, c0, c)
-    after = jax.tree.map(lambda b, a: jnp.where(worse, b, a), before, after)
-    x_response = jnp.where(worse[:, None], initial.x_max, retuned.x_max)
+    kept = worse | stuck
+    k, c = jnp.where(kept, k0, k), jnp.where(kept, c0, c)
+    after = jax.tree.map(lambda b, a: jnp.where(kept, b, a), before, after)
+    x_response = jnp.where(kept[:, None], initial.x_max, retuned.x_max)
     return RetuneResult(
         amplitudes=initial.amplitudes,
         tid_stiffness=k,

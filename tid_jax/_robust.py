@@ -11,7 +11,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_optimiser_options, check_system
+from ._checks import check_system
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
@@ -32,7 +32,7 @@ from ._peaks import (
     grid_peak,
 )
 from ._response import frequency_response
-from ._retune import RetuneSettings
+from ._retune import RetuneSettings, check_retune_options
 from ._sqp import Model, minimise_stage, stationary
 from ._steady_state import SolverSettings
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
@@ -312,11 +312,8 @@ def robust_tune(
     check_system(system)
     amps = check_amplitudes(amplitudes)
     scales = check_scales(host_frequency_scales)
-    if not isinstance(retune_settings, RetuneSettings):
-        raise ValueError("retune_settings must be a RetuneSettings, got "
-                         f"{type(retune_settings).__name__}")
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
-    check_optimiser_options(max_steps, tol)
+    check_retune_options(max_steps, tol, retune_settings)
     say = progress if progress is not None else (lambda message: None)
     if best is None:
         best = best_tunings(
