@@ -18,6 +18,7 @@ from ._steady_state import (
     shoot_queue,
     solve_orbit,
     verified_samples,
+    y_peak,
 )
 from ._system import TIDSystem
 
@@ -38,7 +39,8 @@ class FrequencyResponse(eqx.Module):
     - `floquet_multipliers`: eigenvalues of the monodromy matrix.
     - `monodromy`: the monodromy matrix dPhi_T/dz, in the scaled state units of
       `solve_orbit` (displacements in A / K, velocities in omega A / K).
-    - `stick_fraction`: share of the period with |y'| below two friction widths.
+    - `stick_fraction`: share of the period with |y'| below two friction widths (stuck,
+      with exact friction).
     """
 
     omegas: Float[Array, "*freqs"]
@@ -71,11 +73,12 @@ def point_response(
     if given, with chord iterations first if `monodromy_init` is given; see `solve_orbit`)
     and its peaks |x|, |y| in metres."""
     p = parameters(system, amplitude, omega)
-    orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
+    orbit = solve_orbit(p, settings.for_system(system), z_init, monodromy_init, directions)
     scale = amplitude / system.host_stiffness
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
-    x_max, y_max = (_finite_or_inf(refined_peak(s) * scale)
-                    for s in (orbit.x_samples, orbit.y_samples))
+    peaks = (refined_peak(orbit.x_samples),
+             y_peak(orbit.y_samples, orbit.y_events, settings.for_system(system)))
+    x_max, y_max = (_finite_or_inf(peak * scale) for peak in peaks)
     return orbit, x_max, y_max
 
 
@@ -103,6 +106,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     `warm`; then one integration per orbit samples it and verifies its periodicity.
     Points where `valid` is False (padding, after the valid ones) are skipped by the
     queue."""
+    settings = settings.for_system(systems)
     p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
 
     def start(q, z, warm_start):
@@ -117,16 +121,19 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * 2, axis=-1)
     peak = jax.vmap(refined_peak)
+    y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
+                                                                       samples.y_events)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
     multipliers = jnp.linalg.eigvals(shots.monodromy)
     width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
         systems, amplitudes, omegas
     )
-    stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) < 2 * width[:, None]
+    # (exact friction: width 0, and the samples of a stuck terminal's velocity are 0)
+    stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) <= 2 * width[:, None]
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
     return dict(
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
-        y_max=jnp.where(converged, peak(samples.ys) * static, jnp.nan),
+        y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
         stable=jnp.max(jnp.abs(multipliers), axis=-1) < 1,
         state=shots.state * units,

@@ -233,7 +233,7 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
 
         def settle(omega, z0, monodromy):
             p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
-            z, x_samples = settled_state(z0, p, settings, monodromy)
+            z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
             return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
 
         states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)

@@ -11,6 +11,7 @@ import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
+from . import _coulomb
 from ._dynamics import tangent_field, vector_field
 
 
@@ -28,6 +29,11 @@ class SolverSettings(eqx.Module):
       (scaled), checked by a separate integration of the final orbit.
     - `samples`: points per period at which x and y are sampled; each peak is refined by a
       parabola through the three samples around it.
+    - `exact_friction`: the exact Coulomb friction of a system with `friction_width=0`
+      (the stick-slip flow of `_coulomb`, in closed form between transitions; `rtol`,
+      `atol`, `max_steps` and `implicit` then play no part, and the samples also serve
+      to find the transitions). The entry points set it from the system
+      (`for_system`).
     """
 
     rtol: float = 1e-8
@@ -38,6 +44,7 @@ class SolverSettings(eqx.Module):
     periodicity_tol: float = 1e-6
     samples: int = 128
     implicit: bool = False
+    exact_friction: bool = False
 
     def __check_init__(self):
         for name in ("rtol", "atol", "periodicity_tol"):
@@ -70,6 +77,13 @@ class SolverSettings(eqx.Module):
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
+    def for_system(self, system) -> "SolverSettings":
+        """These settings with the friction model of `system` (a `TIDSystem`): exact
+        Coulomb friction where its `friction_width` is 0."""
+        if self.exact_friction == system.exact_friction:
+            return self
+        return eqx.tree_at(lambda s: s.exact_friction, self, system.exact_friction)
+
 
 class Orbit(eqx.Module):
     """The periodic steady state at one (frequency, amplitude), scaled state units
@@ -79,6 +93,7 @@ class Orbit(eqx.Module):
     x_samples: Float[Array, " samples"]  # scaled x over one period
     y_samples: Float[Array, " samples"]
     y_velocity_samples: Float[Array, " samples"]
+    y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction; else 0)
     monodromy: Float[Array, "4 4"]  # dPhi_T/dz at `state`
     # d state / d p[i] for i in the `directions` of `solve_orbit` (implicit derivatives)
     state_derivatives: Float[Array, "4 directions"]
@@ -119,14 +134,18 @@ def _phases(settings: SolverSettings, dtype):
 
 
 def _period_samples(z0, p, settings: SolverSettings):
-    """x, y and y' sampled over one period from `z0`, and the state after the period."""
+    """x, y and y' sampled over one period from `z0`, the state after the period, and
+    the largest |y| at a stick-slip transition (exact friction; else 0)."""
+    if settings.exact_friction:
+        states, z_end, _, y_events = _coulomb.period(z0, p, settings.samples)
+        return states[:, 0], states[:, 2], states[:, 3], z_end, y_events
     phases = _phases(settings, z0.dtype)
     sol = _integrate(
         vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
         settings.max_steps,
     )
     ys = sol.ys
-    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1]
+    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1], jnp.zeros((), z0.dtype)
 
 
 def _field_and_tangents(theta, y, p):
@@ -140,7 +159,11 @@ def _period_tangents(z, p, settings: SolverSettings):
     """The state after one period from `z` and its Jacobian with respect to `z` (the
     monodromy matrix), by the variational equations (their step sizes follow the error of
     the state alone: accurate enough for Newton's iterations, whose answer does not depend
-    on them)."""
+    on them). With exact friction, the forward derivatives of the hybrid period map."""
+    if settings.exact_friction:
+        end = lambda z0: _coulomb.period(z0, p, settings.samples)[1]
+        return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
+            jnp.eye(4, dtype=z.dtype))
     sol = _integrate(
         _field_and_tangents, (z, jnp.eye(4, dtype=z.dtype)), p, 2 * jnp.pi, settings,
         dfx.SaveAt(t1=True), settings.max_steps,
@@ -188,6 +211,12 @@ def _transient(z, p, settings: SolverSettings, periods=None):
     traced) periods from `z` (keeps `z` if that fails)."""
     if settings.transient_periods == 0:
         return z
+    if settings.exact_friction:
+        count = settings.transient_periods if periods is None else periods
+        end = jax.lax.fori_loop(
+            0, count, lambda _, z: _coulomb.period(z, p, settings.samples)[1], z
+        )
+        return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
     sol = _integrate(
         vector_field,
         z,
@@ -203,6 +232,17 @@ def _transient(z, p, settings: SolverSettings, periods=None):
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 
 
+def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
+    """`I - monodromy`, the Jacobian of the periodicity residual, with every zero row
+    replaced by its unit row: a coordinate that the period returns unchanged whatever the
+    start (the position of an inerter terminal stuck for the whole period, exact friction)
+    is a family of periodic orbits, of which the one through the current value is kept."""
+    eye = jnp.eye(monodromy.shape[-1], dtype=monodromy.dtype)
+    matrix = eye - monodromy
+    held = jnp.all(matrix == 0, axis=-1, keepdims=True)
+    return jnp.where(held, eye, matrix)
+
+
 def _limited(z, update):
     size = jnp.max(jnp.abs(update))
     limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
@@ -216,7 +256,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
     `settings.max_newton_steps` iterations. Returns the last iterate while the residuals
     fall, else the best one evaluated (`z0` if none is finite), and the x samples of the
     best iterate evaluated."""
-    lu = jax.scipy.linalg.lu_factor(jnp.eye(4, dtype=z0.dtype) - monodromy)
+    lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
     inf = jnp.asarray(jnp.inf, z0.dtype)
     no_samples = jnp.full(settings.samples, jnp.nan, z0.dtype)
 
@@ -226,7 +266,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
 
     def body(carry):
         z, best, best_residual, best_xs, _, steps = carry
-        xs, _, _, z_end = _period_samples(z, p, settings)
+        xs, _, _, z_end, _ = _period_samples(z, p, settings)
         r = z_end - z
         ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
         residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
@@ -263,7 +303,7 @@ class _Newton(eqx.Module):
 def _newton(z, p, settings: SolverSettings) -> _Newton:
     z_end, monodromy = _period_tangents(z, p, settings)
     residual = z_end - z
-    update = jnp.linalg.solve(jnp.eye(4, dtype=z.dtype) - monodromy, residual)
+    update = jnp.linalg.solve(fixed_point_matrix(monodromy), residual)
     finite = jnp.all(jnp.isfinite(update))
     return _Newton(
         z=z,
@@ -366,6 +406,7 @@ class Samples(eqx.Module):
     ys: Float[Array, " samples"]
     ws: Float[Array, " samples"]
     z_end: Float[Array, " 4"]
+    y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction)
 
 
 class _Periodic(eqx.Module):
@@ -398,7 +439,7 @@ class _TangentNewton(eqx.Module):
 def _tangent_newton(z, p, settings: SolverSettings, directions) -> _TangentNewton:
     samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
     residual = samples.z_end - z
-    update = jnp.linalg.solve(jnp.eye(4, dtype=z.dtype) - of_state.z_end, residual)
+    update = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), residual)
     finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(samples.xs))
     finite = finite & jnp.all(jnp.isfinite(samples.ys))
     return _TangentNewton(
@@ -483,8 +524,8 @@ def _orbit_jvp(settings, directions, primals, tangents):
             orbit.z, jnp.stack(p), settings, tuple(active)
         )
     p_active_dot = jnp.stack([p_dot[i] for i in active])
-    eye = jnp.eye(4, dtype=orbit.z.dtype)
-    z_dot = jnp.linalg.solve(eye - of_state.z_end, of_parameters.z_end) @ p_active_dot
+    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_parameters.z_end)
+    z_dot = z_dot @ p_active_dot
     samples_dot = jax.tree.map(
         lambda j_state, j_parameters: j_state @ z_dot + j_parameters @ p_active_dot,
         of_state, of_parameters,
@@ -527,10 +568,9 @@ def solve_orbit(
     orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit.samples.xs))
     monodromy = jax.lax.stop_gradient(orbit.monodromy)
-    eye = jnp.eye(4, dtype=monodromy.dtype)
     if directions:
         state_derivatives = jnp.linalg.solve(
-            eye - monodromy, jax.lax.stop_gradient(orbit.parameter_jacobians.z_end)
+            fixed_point_matrix(monodromy), jax.lax.stop_gradient(orbit.parameter_jacobians.z_end)
         )
     else:
         state_derivatives = jnp.zeros((4, 0), monodromy.dtype)
@@ -539,6 +579,7 @@ def solve_orbit(
         x_samples=orbit.samples.xs,
         y_samples=orbit.samples.ys,
         y_velocity_samples=orbit.samples.ws,
+        y_events=orbit.samples.y_events,
         monodromy=monodromy,
         state_derivatives=state_derivatives,
         floquet_multipliers=jnp.linalg.eigvals(monodromy),
@@ -546,6 +587,16 @@ def solve_orbit(
         newton_steps=steps,
         converged=converged,
     )
+
+
+def y_peak(y_samples: Float[Array, " n"], y_events: Float[Array, ""],
+           settings: SolverSettings) -> Float[Array, ""]:
+    """max |y| over a period: with exact friction, the largest of the samples and of y at
+    the transitions (where every extremum lies: y is not twice differentiable there, so
+    no parabola is fitted); else the refined peak of the samples."""
+    if settings.exact_friction:
+        return jnp.maximum(jnp.max(jnp.abs(y_samples)), y_events)
+    return refined_peak(y_samples)
 
 
 def refined_peak(samples: Float[Array, " n"]) -> Float[Array, ""]:

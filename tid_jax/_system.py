@@ -27,7 +27,7 @@ _FIELD_RULES = (
     ("friction_force", "non-negative"),
     ("tid_stiffness", "positive"),
     ("tid_damping", "non-negative"),
-    ("friction_width", "positive or None"),
+    ("friction_width", "non-negative or None"),
 )
 FIELD_NAMES = tuple(name for name, _ in _FIELD_RULES)
 
@@ -64,13 +64,28 @@ def _as_float_array(name: str, value, allowed: str) -> Array:
     return array
 
 
+def _is_exact(width) -> bool:
+    """Whether a checked `friction_width` selects exact Coulomb friction (all zero); a
+    width that mixes zero and positive entries is an error."""
+    if width is None or isinstance(width, jax.core.Tracer):
+        return False
+    zero = np.asarray(width) == 0
+    if np.any(zero) and not np.all(zero):
+        raise ValueError(
+            "friction_width must be 0 (exact Coulomb friction) everywhere or positive "
+            f"everywhere, got {np.asarray(width).tolist()}"
+        )
+    return bool(np.all(zero))
+
+
 class TIDSystem(eqx.Module):
     """A single-degree-of-freedom host with a tuned inerter damper (TID), eq. (12):
 
         M x'' + C x' + K x + c (x' - y') + k (x - y) = A sin(w t)
         b y'' + c (y' - x') + k (y - x) + ff sgn(y') = 0
 
-    with the inerter's dry friction `sgn` smoothed as `tanh(y' / width)`.
+    with the inerter's dry friction `sgn` smoothed as `tanh(y' / width)`, or exact (with
+    sticking) where `friction_width` is 0.
 
     **Fields** (SI units):
 
@@ -99,6 +114,7 @@ class TIDSystem(eqx.Module):
     tid_stiffness: Float[Array, ""]
     tid_damping: Float[Array, ""]
     friction_width: Float[Array, ""] | None
+    exact_friction: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -113,11 +129,13 @@ class TIDSystem(eqx.Module):
     ):
         values = locals()
         for name, allowed in _FIELD_RULES:
-            if allowed == "positive or None":
+            if allowed == "non-negative or None":
                 value = values[name]
-                setattr(self, name, None if value is None else _as_float_array(name, value, "positive"))
+                setattr(self, name,
+                        None if value is None else _as_float_array(name, value, "non-negative"))
             else:
                 setattr(self, name, _as_float_array(name, values[name], allowed))
+        self.exact_friction = _is_exact(self.friction_width)
 
     @property
     def mass_ratio(self) -> Float[Array, ""]:
@@ -147,6 +165,8 @@ class TIDSystem(eqx.Module):
         if unknown:
             raise ValueError(f"unknown TIDSystem field(s) {unknown}; fields are {list(FIELD_NAMES)}")
         values = {name: getattr(self, name) for name in FIELD_NAMES}
+        if self.exact_friction:
+            values["friction_width"] = 0.0  # the model, even where the width is traced
         values.update(changes)
         return TIDSystem(**values)
 
