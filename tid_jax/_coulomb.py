@@ -51,7 +51,7 @@ class _Segment(eqx.Module):
 
 class _Period(eqx.Module):
     segment: _Segment  # the segment in progress
-    samples: Float[Array, "samples 4"]
+    samples: Float[Array, "samples 4"]  # none without keep_samples
     z_end: Float[Array, " 4"]  # the state after the period, once reached
     transitions: Int[Array, ""]
     y_events: Float[Array, ""]  # max |y| at the transitions so far
@@ -84,17 +84,28 @@ def _forcing(p):
     return jnp.stack([zero, stiffness / (mass * omega**2), zero, zero])
 
 
+def _eig(matrix):
+    """Eigenvalues and right eigenvectors, differentiable: the motion depends on the
+    eigenvectors only through `vectors diag(.) vectors^-1`, which does not depend on their
+    normalisation, and the modes' eigenvalues are distinct (a damped oscillator's
+    complex pair, or two real ones off critical damping)."""
+    eigenvalues, vectors = jax.lax.linalg.eig(
+        matrix, compute_left_eigenvectors=False, enable_eigvec_derivs=True
+    )
+    return eigenvalues, vectors
+
+
 def _modes(p) -> tuple[_Mode, _Mode]:
     """The slipping mode (both signs share it) and the stuck mode, whose homogeneous part
     moves only the host (the terminal's rows are zero)."""
     matrix = _slip_matrix(p)
     forcing = _forcing(p).astype(complex)
     eye = jnp.eye(4, dtype=complex)
-    eigenvalues, vectors = jnp.linalg.eig(matrix)
+    eigenvalues, vectors = _eig(matrix)
     slip = _Mode(vectors, jnp.linalg.inv(vectors), eigenvalues,
                  jnp.linalg.solve(1j * eye - matrix, -1j * forcing))
     host = matrix[:2, :2]
-    host_values, host_vectors = jnp.linalg.eig(host)
+    host_values, host_vectors = _eig(host)
 
     def embed(block, rest):
         return jnp.zeros((4, 4), complex).at[:2, :2].set(block).at[2:, 2:].set(rest)
@@ -161,9 +172,10 @@ def _event(segment: _Segment, z, dz, p):
     return g, dg
 
 
-def _root(segment, mode, p, low, high):
+def _root(segment, mode, p, low, high, active):
     """The phase in `[low, high]` where the event function changes sign (positive at
-    `low`, negative at `high`), by Newton steps kept inside the shrinking bracket."""
+    `low`, negative at `high`), by Newton steps kept inside the shrinking bracket; no
+    iterations where not `active`."""
     g_of = lambda theta: _event(segment, *_state(segment, mode, theta), p)
     g_low, g_high = g_of(low)[0], g_of(high)[0]
     first = low + (high - low) * jnp.clip(g_low / (g_low - g_high), 0.1, 0.9)
@@ -183,7 +195,7 @@ def _root(segment, mode, p, low, high):
         return low, high, new, new - theta, i + 1
 
     _, _, theta, _, _ = jax.lax.while_loop(
-        cond, body, (low, high, first, jnp.asarray(np.inf, low.dtype), 0)
+        cond, body, (low, high, first, jnp.where(active, jnp.inf, 0.0).astype(low.dtype), 0)
     )
     return theta
 
@@ -215,14 +227,16 @@ def _initial_sign(z, p):
     return jnp.where(z[3] > 0, 1, jnp.where(z[3] < 0, -1, from_force))
 
 
-def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int):
+def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
+           keep_samples: bool = True):
     """One forcing period of the hybrid flow from the scaled state `z0` at phase 0: the
     states at the `samples` phases `2 pi j / samples` (rows `(x, x', y, y')`), the state
     after the period, the number of stick-slip transitions (mode changes) in it, and the
     largest |y| at a transition. Every extremum of y is at a transition (where y' turns
     0) or on a stuck segment, so that the peak |y| is the largest of that and the samples.
     The state after the period is NaN where the orbit needed more than `MAX_SEGMENTS`
-    segments."""
+    segments. Without `keep_samples`, the samples (zeros) are not formed and only find
+    the transitions, and derivatives reach the state after the period alone."""
     modes = _modes(p)
     dtype = z0.dtype
     grid = jnp.arange(samples + 1, dtype=dtype) * (2 * np.pi / samples)
@@ -231,17 +245,19 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int):
     def body(state: _Period):
         segment = state.segment
         mode = _mode_of(segment, modes)
-        zs, dzs = jax.vmap(lambda theta: _state(segment, mode, theta))(grid)
+        on_grid = segment if keep_samples else jax.lax.stop_gradient(segment)
+        zs, dzs = jax.vmap(lambda theta: _state(on_grid, mode, theta))(grid)
         g = jax.vmap(lambda z, dz: _event(segment, z, dz, p)[0])(zs, dzs)
         crossing = (grid > segment.start + guard) & (g < 0)
         ends = jnp.any(crossing)
         j = jnp.argmax(crossing)
         low = jnp.maximum(grid[jnp.maximum(j - 1, 0)], segment.start)
         high = jnp.where(ends, grid[j], low + 1.0)
-        theta = _differentiable_root(segment, mode, p, _root(segment, mode, p, low, high))
+        theta = _root(segment, mode, p, low, high, ends)
+        theta = _differentiable_root(segment, mode, p, theta)
         theta = jnp.where(ends, theta, 2 * np.pi)
         own = (grid[:-1] >= segment.start) & (grid[:-1] < theta)
-        samples = jnp.where(own[:, None], zs[:-1], state.samples)
+        samples = jnp.where(own[:, None], zs[:-1], state.samples) if keep_samples else state.samples
         z, _ = _state(segment, mode, theta)
         z = jnp.where(segment.sign == _STICK, z, z.at[3].set(0.0))
         following = _start(_transition(segment, z, p), theta, z, p, modes)
@@ -250,14 +266,16 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int):
         return _Period(
             segment=jax.tree.map(lambda a, b: jnp.where(ends, a, b), following, segment),
             samples=samples,
-            z_end=jnp.where(ends, jnp.where(too_many, jnp.nan, state.z_end), zs[-1]),
+            z_end=jnp.where(ends, jnp.where(too_many, jnp.nan, state.z_end),
+                            _state(segment, mode, grid[-1])[0]),
             transitions=transitions,
             y_events=jnp.where(ends, jnp.maximum(state.y_events, jnp.abs(z[2])), state.y_events),
             done=~ends | too_many,
         )
 
     first = _start(_initial_sign(z0, p), jnp.zeros((), dtype), z0, p, modes)
-    start = _Period(first, jnp.zeros((samples, 4), dtype), jnp.zeros(4, dtype),
+    no_samples = jnp.zeros((samples if keep_samples else 0, 4), dtype)
+    start = _Period(first, no_samples, jnp.zeros(4, dtype),
                     jnp.zeros((), int), jnp.zeros((), dtype), jnp.asarray(False))
     end = jax.lax.while_loop(lambda state: ~state.done, body, start)
     return end.samples, end.z_end, end.transitions, end.y_events

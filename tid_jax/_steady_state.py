@@ -161,7 +161,7 @@ def _period_tangents(z, p, settings: SolverSettings):
     the state alone: accurate enough for Newton's iterations, whose answer does not depend
     on them). With exact friction, the forward derivatives of the hybrid period map."""
     if settings.exact_friction:
-        end = lambda z0: _coulomb.period(z0, p, settings.samples)[1]
+        end = lambda z0: _coulomb.period(z0, p, settings.samples, keep_samples=False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = _integrate(
@@ -214,7 +214,7 @@ def _transient(z, p, settings: SolverSettings, periods=None):
     if settings.exact_friction:
         count = settings.transient_periods if periods is None else periods
         end = jax.lax.fori_loop(
-            0, count, lambda _, z: _coulomb.period(z, p, settings.samples)[1], z
+            0, count, lambda _, z: _coulomb.period(z, p, settings.samples, False)[1], z
         )
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
     sol = _integrate(

@@ -65,11 +65,14 @@ def _as_float_array(name: str, value, allowed: str) -> Array:
 
 
 def _is_exact(width) -> bool:
-    """Whether a checked `friction_width` selects exact Coulomb friction (all zero); a
-    width that mixes zero and positive entries is an error."""
+    """Whether a `friction_width` selects exact Coulomb friction (all zero); a width that
+    mixes zero and positive entries is an error."""
     if width is None or isinstance(width, jax.core.Tracer):
         return False
-    zero = np.asarray(width) == 0
+    try:
+        zero = np.asarray(width, dtype=float) == 0
+    except (TypeError, ValueError):
+        return False  # not a number: the field's check names the problem
     if np.any(zero) and not np.all(zero):
         raise ValueError(
             "friction_width must be 0 (exact Coulomb friction) everywhere or positive "
@@ -128,6 +131,8 @@ class TIDSystem(eqx.Module):
         friction_width: ArrayLike | None = None,
     ):
         values = locals()
+        # decided on the value given: arrays made here are traced inside `jax.jit`
+        self.exact_friction = _is_exact(friction_width)
         for name, allowed in _FIELD_RULES:
             if allowed == "non-negative or None":
                 value = values[name]
@@ -135,7 +140,6 @@ class TIDSystem(eqx.Module):
                         None if value is None else _as_float_array(name, value, "non-negative"))
             else:
                 setattr(self, name, _as_float_array(name, values[name], allowed))
-        self.exact_friction = _is_exact(self.friction_width)
 
     @property
     def mass_ratio(self) -> Float[Array, ""]:

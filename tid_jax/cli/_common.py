@@ -49,8 +49,9 @@ PHYSICAL_INPUTS = (
     ("host_damping", "N s/m", "host damping C (instead of host_damping_ratio)", "non-negative"),
     ("inertance", "kg", "inertance b of the inerter", "positive"),
     ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
-    ("friction_width", "m/s", "velocity scale of the smoothed friction sign (default: "
-     "0.02 omega A/K at each forcing point)", "positive"),
+    ("friction_width", "m/s", "velocity scale of the smoothed friction sign; 0: exact "
+     "Coulomb friction with sticking (default: 0.02 omega A/K at each forcing point)",
+     "non-negative"),
     ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
     ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),

@@ -1,0 +1,124 @@
+"""Exact Coulomb friction (`friction_width=0`) against the independent event-driven
+reference `tests/reference/coulomb.py`, and its derivatives against finite differences."""
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import tid_jax as tj
+
+try:
+    from reference.coulomb import coulomb_steady_state
+except ImportError:  # tests/ imported as a package
+    from tests.reference.coulomb import coulomb_steady_state
+
+jax.config.update("jax_enable_x64", True)
+
+PAPER = tj.paper_system().replace(friction_width=0.0)
+AMPLITUDES = np.array([100.0, 200.0, 400.0, 1000.0, 3000.0])
+FREQUENCIES_HZ = np.array([3.0, 3.5, 3.8, 4.0, 4.2, 4.5, 5.0])
+
+
+def _reference(system: tj.TIDSystem, omega: float, amplitude: float) -> dict:
+    fields = {name: float(value) for name, value in system.to_dict().items()
+              if name != "friction_width"}
+    return coulomb_steady_state(**fields, omega=omega, amplitude=amplitude)
+
+
+def _compare(system, omegas, amplitudes):
+    response = tj.frequency_response(system, omegas, amplitudes)
+    assert np.all(np.asarray(response.converged))
+    for i, amplitude in enumerate(amplitudes):
+        for j, omega in enumerate(omegas):
+            ref = _reference(system, omega, amplitude)
+            assert ref["converged"]
+            where = f"A = {amplitude} N, {omega / (2 * math.pi):.2f} Hz"
+            assert float(response.x_max[i, j]) == pytest.approx(ref["x_max"], rel=1e-5), where
+            if ref["stick_fraction"] < 1:  # a terminal stuck throughout has no unique y
+                assert float(response.y_max[i, j]) == pytest.approx(ref["y_max"], rel=1e-5), where
+            else:
+                assert float(response.stick_fraction[i, j]) == 1.0, where
+            # the share of the period stuck, at the samples' resolution
+            assert abs(float(response.stick_fraction[i, j]) - ref["stick_fraction"]) < 0.02, where
+    return response
+
+
+def test_exact_friction_is_selected_by_zero_width():
+    assert PAPER.exact_friction
+    assert not tj.paper_system().exact_friction
+    assert PAPER.replace(tid_stiffness=4e4).exact_friction
+    assert not PAPER.replace(friction_width=1e-4).exact_friction
+    with pytest.raises(ValueError, match="friction_width must be 0"):
+        PAPER.replace(friction_width=np.array([0.0, 1e-4]))
+    with pytest.raises(ValueError, match="friction_width must be finite and non-negative"):
+        PAPER.replace(friction_width=-1e-4)
+
+
+@pytest.mark.parametrize("stiffness_factor, damping_factor", [(1.0, 1.0), (0.9, 1.6), (1.1, 0.4)])
+def test_agrees_with_reference(stiffness_factor, damping_factor):
+    system = PAPER.replace(tid_stiffness=stiffness_factor * PAPER.tid_stiffness,
+                           tid_damping=damping_factor * PAPER.tid_damping)
+    response = _compare(system, 2 * math.pi * FREQUENCIES_HZ, AMPLITUDES)
+    stick = np.asarray(response.stick_fraction)
+    # the spread covers stuck, stick-slip and sliding orbits
+    assert np.any(stick == 1) and np.any((stick > 0) & (stick < 1)) and np.any(stick == 0)
+
+
+@pytest.mark.parametrize(
+    "host_hz, mass, friction_ratio",
+    [(0.15, 1e6, 0.3), (0.3, 2e5, 0.45), (0.8, 5e4, 0.6), (9.0, 1e2, 0.55)],
+)
+def test_slow_and_high_friction_structures(host_hz, mass, friction_ratio):
+    # where the smoothed friction is stiff: hosts below 1 Hz, friction a large part of
+    # the forcing
+    stiffness = mass * (2 * math.pi * host_hz) ** 2
+    k, c = tj.den_hartog_tuning(mass, stiffness, 0.05 * mass)
+    amplitude = 1000.0
+    system = tj.TIDSystem(mass, stiffness, 2 * 0.02 * math.sqrt(stiffness * mass), 0.05 * mass,
+                          friction_ratio * amplitude, k, c, friction_width=0.0)
+    omegas = 2 * math.pi * host_hz * np.array([0.6, 0.9, 1.0, 1.1, 1.5])
+    _compare(system, omegas, np.array([amplitude]))
+
+
+def test_stuck_inerter_is_the_stuck_linear_system():
+    # friction far above the spring-damper force: the terminal never moves, and the host
+    # is a single degree of freedom with K + k and C + c
+    system = PAPER.replace(friction_force=1e5)
+    omegas = 2 * math.pi * np.array([3.0, 4.0, 5.0])
+    response = tj.frequency_response(system, omegas, 300.0)
+    M, K, C = (float(getattr(system, name)) for name in ("host_mass", "host_stiffness",
+                                                          "host_damping"))
+    k, c = float(system.tid_stiffness), float(system.tid_damping)
+    expected = 300.0 / np.abs(K + k - M * omegas**2 + 1j * omegas * (C + c))
+    np.testing.assert_allclose(np.asarray(response.x_max), expected, rtol=1e-6)
+    assert np.all(np.asarray(response.y_max) == 0)
+    assert np.all(np.asarray(response.stick_fraction) == 1)
+    # the terminal's position is a neutral direction (multiplier 1); the host's decay
+    multipliers = np.sort(np.abs(np.asarray(response.floquet_multipliers)), axis=-1)
+    assert np.all(multipliers[:, -1] == pytest.approx(1.0))
+    assert np.all(multipliers[:, :2] < 1)
+
+
+def test_gradients_match_finite_differences():
+    # the peak host displacement over a band, with respect to k, c, ff and A, at a
+    # stick-slip and a sliding peak, against central differences (steps too small to
+    # change the stick-slip pattern)
+    omegas = 2 * math.pi * np.linspace(3.4, 4.6, 13)
+    names = ("tid_stiffness", "tid_damping", "friction_force")
+
+    def peak(values):
+        system = PAPER.replace(**dict(zip(names, values[:3], strict=True)))
+        return tj.peak_response(system, values[3], omegas)
+
+    gradient = jax.jit(jax.grad(peak))
+    for amplitude in (150.0, 600.0):
+        values = np.array([float(getattr(PAPER, name)) for name in names] + [amplitude])
+        exact = np.asarray(gradient(values))
+        assert np.all(np.isfinite(exact))
+        for i, value in enumerate(values):
+            step = np.zeros(4)
+            step[i] = 1e-5 * value
+            central = (float(peak(values + step)) - float(peak(values - step))) / (2 * step[i])
+            assert exact[i] == pytest.approx(central, rel=2e-4), (amplitude, i)
