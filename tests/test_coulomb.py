@@ -42,6 +42,13 @@ def _compare(system, omegas, amplitudes):
                 assert float(response.stick_fraction[i, j]) == 1.0, where
             # the share of the period stuck, at the samples' resolution
             assert abs(float(response.stick_fraction[i, j]) - ref["stick_fraction"]) < 0.02, where
+            transitions = int(response.transitions[i, j])
+            if ref["stick_fraction"] == 0:
+                assert transitions == 2, where  # two reversals
+            elif ref["stick_fraction"] == 1:
+                assert transitions == 0, where
+            else:
+                assert transitions >= 4 and transitions % 2 == 0, where
     return response
 
 
@@ -99,6 +106,7 @@ def test_stuck_inerter_is_the_stuck_linear_system():
     multipliers = np.sort(np.abs(np.asarray(response.floquet_multipliers)), axis=-1)
     assert np.all(multipliers[:, -1] == pytest.approx(1.0))
     assert np.all(multipliers[:, :2] < 1)
+    assert np.all(np.asarray(response.stable))  # neutral along the position only
 
 
 def test_gradients_match_finite_differences():

@@ -14,6 +14,7 @@ from ._steady_state import (
     SolverSettings,
     _transient,
     linear_initial_state,
+    moving_part,
     refined_peak,
     shoot_queue,
     solve_orbit,
@@ -24,15 +25,17 @@ from ._system import TIDSystem
 
 
 class FrequencyResponse(eqx.Module):
-    """Steady-state response of the smoothed-friction model (eq. (12)) on a grid of forcing
-    amplitudes x frequencies. Arrays have shape `(n_amplitudes, n_frequencies)` (axes of
+    """Steady-state response of eq. (12), with smoothed or exact friction, on a grid of
+    forcing amplitudes x frequencies. Arrays have shape `(n_amplitudes, n_frequencies)` (axes of
     scalar inputs dropped). SI units.
 
     - `omegas` (rad/s), `amplitudes` (N): the grid.
     - `x_max`, `y_max`: peak |x| and |y| over one steady period, m; NaN where the orbit
       did not converge.
     - `converged`: the periodic orbit was found and verified (|Phi_T(z0) - z0| small).
-    - `stable`: all Floquet multipliers inside the unit circle (only meaningful if converged).
+    - `stable`: all Floquet multipliers inside the unit circle (only meaningful if
+      converged), but for the multiplier 1 of a terminal stuck for the whole period (exact
+      friction), along whose position the orbits form a neutral family.
     - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s.
     - `residual`: periodicity residual, in units of the static displacement A / K.
     - `newton_steps`: shooting iterations used.
@@ -41,6 +44,9 @@ class FrequencyResponse(eqx.Module):
       `solve_orbit` (displacements in A / K, velocities in omega A / K).
     - `stick_fraction`: share of the period with |y'| below two friction widths (stuck,
       with exact friction).
+    - `transitions`: changes per period of the terminal's state (stuck, slipping forwards,
+      slipping backwards), counted at the samples of the period as `stick_fraction` is:
+      2 for a terminal that slips throughout, more with sticking, 0 stuck throughout.
     """
 
     omegas: Float[Array, "*freqs"]
@@ -55,6 +61,7 @@ class FrequencyResponse(eqx.Module):
     floquet_multipliers: Complex[Array, "*grid 4"]
     monodromy: Float[Array, "*grid 4 4"]
     stick_fraction: Float[Array, "*grid"]
+    transitions: Int[Array, "*grid"]
 
 
 _GRID_FIELDS = tuple(f.name for f in dataclasses.fields(FrequencyResponse))[2:]
@@ -130,18 +137,21 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     )
     # (exact friction: width 0, and the samples of a stuck terminal's velocity are 0)
     stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) <= 2 * width[:, None]
+    phase = jnp.where(stuck, 0, jnp.sign(samples.ws).astype(int))
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
     return dict(
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
         y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
-        stable=jnp.max(jnp.abs(multipliers), axis=-1) < 1,
+        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(shots.monodromy))),
+                       axis=-1) < 1,
         state=shots.state * units,
         residual=residual,
         newton_steps=shots.newton_steps,
         floquet_multipliers=multipliers,
         monodromy=shots.monodromy,
         stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
+        transitions=jnp.sum(phase != jnp.roll(phase, 1, axis=-1), axis=-1),
     )
 
 
@@ -254,8 +264,9 @@ def frequency_response(
     *,
     settings: SolverSettings = SolverSettings(),
 ) -> FrequencyResponse:
-    """Steady-state response of the smoothed-friction model at every (amplitude, frequency)
-    pair, found by shooting on the forcing period (all points solved in one batched call).
+    """Steady-state response at every (amplitude, frequency) pair, found by shooting on the
+    forcing period (all points solved in one batched call); with smoothed friction, or
+    exact Coulomb friction where `system.friction_width` is 0.
 
     **Arguments:**
 

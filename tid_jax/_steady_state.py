@@ -243,6 +243,14 @@ def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
     return jnp.where(held, eye, matrix)
 
 
+def moving_part(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
+    """`monodromy` with the rows of held coordinates (see `fixed_point_matrix`) zeroed:
+    their multiplier 1 becomes 0 and the others are unchanged, so that its multipliers
+    judge the stability of the motion about the family of orbits."""
+    held = jnp.all(jnp.eye(4, dtype=monodromy.dtype) - monodromy == 0, axis=-1)
+    return jnp.where(held[:, None], 0.0, monodromy)
+
+
 def _limited(z, update):
     size = jnp.max(jnp.abs(update))
     limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(z)))

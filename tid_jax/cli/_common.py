@@ -347,7 +347,9 @@ def _describe(system: TIDSystem) -> str:
     return (
         f"M = {float(system.host_mass):g} kg, f_n = {f_n:.3g} Hz, "
         f"C = {float(system.host_damping):.4g} N s/m, b = {float(system.inertance):g} kg, "
-        f"ff = {float(system.friction_force):g} N, k = {float(system.tid_stiffness):.5g} N/m, "
+        f"ff = {float(system.friction_force):g} N"
+        f"{' (exact Coulomb friction)' if system.exact_friction else ''}, "
+        f"k = {float(system.tid_stiffness):.5g} N/m, "
         f"c = {float(system.tid_damping):.4g} N s/m"
     )
 

@@ -34,6 +34,8 @@ FRF_COLUMNS = (
     "y_linear_over_A_K",
     "converged",
     "stable",
+    "stick_fraction",
+    "transitions",
 )
 
 
@@ -59,12 +61,14 @@ def _run_frf(args) -> int:
     shape = (amplitudes.size, omegas.size)
     x_max, y_max = np.empty(shape), np.empty(shape)
     converged, stable = np.empty(shape, bool), np.empty(shape, bool)
+    stick, transitions = np.empty(shape), np.empty(shape, int)
     with output.steps(amplitudes.size) as step:
         for i, amplitude in enumerate(amplitudes):
             response = frequency_response(system, omegas, amplitude, settings=settings)
             x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
             converged[i] = np.asarray(response.converged)
             stable[i] = np.asarray(response.stable)
+            stick[i], transitions[i] = response.stick_fraction, response.transitions
             step(
                 f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
                 f"{converged[i].sum()}/{omegas.size} steady states converged"
@@ -85,6 +89,8 @@ def _run_frf(args) -> int:
             float(y_linear[j]),
             bool(converged[i, j]),
             bool(stable[i, j]),
+            float(stick[i, j]),
+            int(transitions[i, j]),
         ]
         for i in range(amplitudes.size)
         for j in range(omegas.size)
@@ -129,6 +135,8 @@ def _run_frf(args) -> int:
         y_max_m=y_max.tolist(),
         converged=converged.tolist(),
         stable=stable.tolist(),
+        stick_fraction=stick.tolist(),
+        transitions=transitions.tolist(),
         x_linear_over_A_K=x_linear.tolist(),
         y_linear_over_A_K=y_linear.tolist(),
         breakaway_amplitude_N=np.asarray(breakaway.amplitude).tolist(),
