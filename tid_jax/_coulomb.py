@@ -12,10 +12,10 @@ events, located on the sample grid and refined by safeguarded Newton steps:
   it slips back (sign `-s`);
 - stuck: `|F|` reaches `ff`; the terminal slips with the sign of `F`.
 
-Every event time is written as one Newton step from its (constant) root, so that forward
-derivatives of the period map carry the implicit derivative of the event time: the
-monodromy matrix and the parameter Jacobians include the jumps at the transitions
-(saltation) without any special case.
+Every event time carries the derivative of one Newton step from its (constant) root,
+which is the implicit derivative of the event time, so that forward derivatives of the
+period map (the monodromy matrix, the parameter Jacobians) include the jumps at the
+transitions (saltation) without any special case.
 
 Units are those of `_dynamics`: phase `theta = omega t`, displacements in A / K,
 velocities in omega A / K.
@@ -178,7 +178,8 @@ def _root(segment, mode, p, low, high, active):
     iterations where not `active`."""
     g_of = lambda theta: _event(segment, *_state(segment, mode, theta), p)
     g_low, g_high = g_of(low)[0], g_of(high)[0]
-    first = low + (high - low) * jnp.clip(g_low / (g_low - g_high), 0.1, 0.9)
+    secant = g_low / jnp.where(g_low == g_high, 1.0, g_low - g_high)
+    first = low + (high - low) * jnp.clip(secant, 0.1, 0.9)
     tol = 1e-14 * 2 * np.pi
 
     def cond(carry):
@@ -201,12 +202,13 @@ def _root(segment, mode, p, low, high, active):
 
 
 def _differentiable_root(segment, mode, p, theta0):
-    """`theta0`, a root of the event function, as one Newton step from itself: the value
-    is unchanged and the forward derivative is the implicit one, -dg / (dg/dtheta)."""
+    """`theta0`, a root of the event function, with the forward derivative of one Newton
+    step from it: the implicit derivative -dg / (dg/dtheta) of the event time (the value
+    stays `theta0`)."""
     theta0 = jax.lax.stop_gradient(theta0)
     g, dg = _event(segment, *_state(segment, mode, theta0), p)
-    dg = jax.lax.stop_gradient(dg)
-    return theta0 - g / jnp.where(dg == 0, 1.0, dg)
+    dg = jax.lax.stop_gradient(jnp.where(dg == 0, 1.0, dg))
+    return theta0 - (g - jax.lax.stop_gradient(g)) / dg
 
 
 def _transition(segment: _Segment, z, p):

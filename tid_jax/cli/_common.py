@@ -191,7 +191,9 @@ def _read_config(path: str) -> dict:
     solver = config.get(SOLVER_TABLE, {})
     if not isinstance(solver, dict):
         raise CLIError(f"config {path}: {SOLVER_TABLE} must be a table [{SOLVER_TABLE}]")
-    fields = tuple(SolverSettings.__dataclass_fields__)
+    # the friction model follows friction_width (0: exact), not a solver setting
+    fields = tuple(name for name in SolverSettings.__dataclass_fields__
+                   if name != "exact_friction")
     unknown = [key for key in solver if key not in fields]
     if unknown:
         raise CLIError(
@@ -305,7 +307,7 @@ def _start(args) -> _Start:
     inputs = _inputs(args)
     system = _system(inputs)
     frequencies_hz, omegas = _frequencies(inputs, system)
-    return _Start(inputs, system, _settings(inputs), frequencies_hz, omegas,
+    return _Start(inputs, system, _settings(inputs).for_system(system), frequencies_hz, omegas,
                   np.asarray(inputs["amplitudes"]), _Output(args))
 
 
