@@ -52,6 +52,11 @@ def _compare(system, omegas, amplitudes):
     return response
 
 
+def test_real_time_substructuring_asks_for_smoothed_friction():
+    with pytest.raises(ValueError, match="needs smoothed friction"):
+        tj.simulate_substructuring(PAPER, 8 * math.pi, 300.0)
+
+
 def test_exact_friction_is_selected_by_zero_width():
     assert PAPER.exact_friction
     assert not tj.paper_system().exact_friction

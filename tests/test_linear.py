@@ -70,17 +70,18 @@ def test_system_rejects_bad_values(field, bad):
         tj.paper_system().replace(**{field: bad})
 
 
-@pytest.mark.parametrize("field", ["host_mass", "host_stiffness", "inertance", "tid_stiffness",
-                                   "friction_width"])
+@pytest.mark.parametrize("field", ["host_mass", "host_stiffness", "inertance", "tid_stiffness"])
 def test_system_rejects_zero_where_positive_required(field):
     with pytest.raises(ValueError, match=f"{field} must be finite and positive, got 0.0"):
         tj.paper_system().replace(**{field: 0.0})
 
 
-@pytest.mark.parametrize("field", ["host_damping", "friction_force", "tid_damping"])
+@pytest.mark.parametrize("field", ["host_damping", "friction_force", "tid_damping",
+                                   "friction_width"])
 def test_system_accepts_zero_where_allowed(field):
     system = tj.paper_system().replace(**{field: 0.0})
     assert float(getattr(system, field)) == 0.0
+    assert system.exact_friction == (field == "friction_width")  # 0: exact Coulomb friction
 
 
 def test_system_rejects_non_numbers():

@@ -40,6 +40,7 @@ class _Mode(eqx.Module):
     inverse: Complex[Array, "4 4"]
     eigenvalues: Complex[Array, " 4"]
     harmonic: Complex[Array, " 4"]
+    powers: Complex[Array, "grid 4"]  # e^{eigenvalues * m * (2 pi / samples)}, m = 0..samples
 
 
 class _Segment(eqx.Module):
@@ -95,15 +96,18 @@ def _eig(matrix):
     return eigenvalues, vectors
 
 
-def _modes(p) -> tuple[_Mode, _Mode]:
+def _modes(p, samples: int) -> tuple[_Mode, _Mode]:
     """The slipping mode (both signs share it) and the stuck mode, whose homogeneous part
-    moves only the host (the terminal's rows are zero)."""
+    moves only the host (the terminal's rows are zero), for a grid of `samples` phases
+    per period."""
+    steps = jnp.arange(samples + 1) * (2 * np.pi / samples)
+    powers = lambda eigenvalues: jnp.exp(eigenvalues[None, :] * steps[:, None])
     matrix = _slip_matrix(p)
     forcing = _forcing(p).astype(complex)
     eye = jnp.eye(4, dtype=complex)
     eigenvalues, vectors = _eig(matrix)
     slip = _Mode(vectors, jnp.linalg.inv(vectors), eigenvalues,
-                 jnp.linalg.solve(1j * eye - matrix, -1j * forcing))
+                 jnp.linalg.solve(1j * eye - matrix, -1j * forcing), powers(eigenvalues))
     host = matrix[:2, :2]
     host_values, host_vectors = _eig(host)
 
@@ -111,11 +115,13 @@ def _modes(p) -> tuple[_Mode, _Mode]:
         return jnp.zeros((4, 4), complex).at[:2, :2].set(block).at[2:, 2:].set(rest)
 
     host_harmonic = jnp.linalg.solve(1j * eye[:2, :2] - host, -1j * forcing[:2])
+    stuck_values = jnp.concatenate([host_values, jnp.zeros(2, complex)])
     stuck = _Mode(
         embed(host_vectors, jnp.eye(2)),
         embed(jnp.linalg.inv(host_vectors), jnp.eye(2)),
-        jnp.concatenate([host_values, jnp.zeros(2, complex)]),
+        stuck_values,
         jnp.concatenate([host_harmonic, jnp.zeros(2, complex)]),
+        powers(stuck_values),
     )
     return slip, stuck
 
@@ -159,6 +165,21 @@ def _state(segment: _Segment, mode: _Mode, theta):
     harmonic = mode.harmonic * jnp.exp(1j * theta)
     z = jnp.real(harmonic + mode.vectors @ growth) + segment.constant
     dz = jnp.real(1j * harmonic + mode.vectors @ (mode.eigenvalues * growth))
+    return z, dz
+
+
+def _on_grid(segment: _Segment, mode: _Mode, grid, phasors):
+    """`_state` at every phase of the grid (`phasors` = e^{i grid}) from the segment's
+    start on (rows before it are not meaningful), with the exponentials of the grid's
+    steps computed once (`_Mode.powers`)."""
+    step = grid[1]
+    first = jnp.clip(jnp.ceil(segment.start / step), 0, grid.shape[0] - 1)
+    offset = jnp.exp(mode.eigenvalues * (first * step - segment.start))
+    index = jnp.clip(jnp.arange(grid.shape[0]) - first.astype(int), 0, grid.shape[0] - 1)
+    growth = segment.coefficients * offset * mode.powers[index]
+    harmonic = phasors[:, None] * mode.harmonic
+    z = jnp.real(harmonic + growth @ mode.vectors.T) + segment.constant
+    dz = jnp.real(1j * harmonic + (mode.eigenvalues * growth) @ mode.vectors.T)
     return z, dz
 
 
@@ -239,16 +260,17 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
     The state after the period is NaN where the orbit needed more than `MAX_SEGMENTS`
     segments. Without `keep_samples`, the samples (zeros) are not formed and only find
     the transitions, and derivatives reach the state after the period alone."""
-    modes = _modes(p)
+    modes = _modes(p, samples)
     dtype = z0.dtype
     grid = jnp.arange(samples + 1, dtype=dtype) * (2 * np.pi / samples)
+    phasors = jnp.exp(1j * grid)
     guard = 1e-9 * (2 * np.pi / samples)
 
     def body(state: _Period):
         segment = state.segment
         mode = _mode_of(segment, modes)
         on_grid = segment if keep_samples else jax.lax.stop_gradient(segment)
-        zs, dzs = jax.vmap(lambda theta: _state(on_grid, mode, theta))(grid)
+        zs, dzs = _on_grid(on_grid, mode, grid, phasors)
         g = jax.vmap(lambda z, dz: _event(segment, z, dz, p)[0])(zs, dzs)
         crossing = (grid > segment.start + guard) & (g < 0)
         ends = jnp.any(crossing)

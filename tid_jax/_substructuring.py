@@ -618,6 +618,12 @@ def simulate_substructuring(
     **Returns:** a `Substructuring`.
     """
     check_concrete_system(system)
+    if system.exact_friction:
+        raise ValueError(
+            "simulate_substructuring integrates the test in real time with fixed steps and "
+            "needs smoothed friction: give system.friction_width > 0 or None, not 0 (exact "
+            "Coulomb friction)"
+        )
     if not isinstance(settings, SolverSettings):
         raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
     plan, controller, points, shape, arrays, growth_tolerance = _planned_tests(
