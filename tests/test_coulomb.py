@@ -135,3 +135,18 @@ def test_gradients_match_finite_differences():
             step[i] = 1e-5 * value
             central = (float(peak(values + step)) - float(peak(values - step))) / (2 * step[i])
             assert exact[i] == pytest.approx(central, rel=2e-4), (amplitude, i)
+
+
+def test_stuck_stroke_is_no_candidate_of_the_worst_case():
+    # with exact friction a terminal stuck at a band end has stroke 0: its log is no
+    # candidate of the smooth worst case (nor a NaN in its gradient)
+    from tid_jax._design import _log_candidates
+
+    omegas = np.linspace(20.0, 30.0, 6)
+    stroke = np.array([0.0, 1e-3, 2e-3, 3e-3, 2e-3, 1e-3])
+    none = (np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
+    logs, mask = _log_candidates(stroke, omegas, none)
+    assert not mask[0] and np.all(np.isfinite(np.asarray(logs)))
+    assert np.asarray(mask)[1:].any()
+    gradient = jax.jacfwd(lambda s: _log_candidates(s, omegas, none)[0])(stroke)
+    assert np.all(np.isfinite(np.asarray(gradient)))

@@ -76,7 +76,8 @@ def _log_candidates(values, omegas, true):
     order of their grid indices), and the candidates of the smooth worst case: the
     true peaks, and the other interior local maxima and band ends. The value at every
     sample where the samples are concave is the vertex of the parabola through it and its
-    neighbours, clipped to between them (`_peaks.parabola_vertices`). Between nearby
+    neighbours, clipped to between them (`_peaks.parabola_vertices`). A value of 0 (the
+    stroke of a terminal stuck throughout) is no candidate. Between nearby
     designs, the same entry holds the same peak (the true peaks in the order of
     frequency, wherever the grid falls), so that differences of its gradient give its
     curvature."""
@@ -84,8 +85,11 @@ def _log_candidates(values, omegas, true):
     vertex, _, is_peak = parabola_vertices(values, omegas)
     true_mask = jnp.ones(1, dtype=bool)
     grid_mask = jnp.concatenate([true_mask, is_peak, true_mask]).at[index].set(False)
-    logs = jnp.log(jnp.concatenate([values[:1], vertex, values[-1:], peaks]))
-    return logs, jnp.concatenate([grid_mask, valid])
+    candidates = jnp.concatenate([values[:1], vertex, values[-1:], peaks])
+    # A terminal stuck throughout (exact friction) has no stroke: 0, no candidate.
+    moves = candidates != 0
+    logs = jnp.log(jnp.where(moves, candidates, 1.0))
+    return logs, jnp.concatenate([grid_mask, valid]) & moves
 
 
 def _changed_system(system, theta, scale):
