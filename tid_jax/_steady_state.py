@@ -26,7 +26,8 @@ class SolverSettings(eqx.Module):
     - `transient_periods`: periods integrated from the initial guess before shooting.
     - `max_newton_steps`: Newton iterations allowed.
     - `periodicity_tol`: a point counts as converged only if |Phi_T(z0) - z0| is below this
-      (scaled), checked by a separate integration of the final orbit.
+      (scaled), checked by a separate integration of the final orbit (smoothed friction;
+      exact friction takes `exact_periodicity_tol`).
     - `samples`: points per period at which x and y are sampled; each peak is refined by a
       parabola through the three samples around it.
     - `exact_friction`: the exact Coulomb friction of a system with `friction_width=0`
@@ -34,6 +35,10 @@ class SolverSettings(eqx.Module):
       `atol`, `max_steps` and `implicit` then play no part, and the samples also serve
       to find the transitions). The entry points set it from the system
       (`for_system`).
+    - `exact_periodicity_tol`: the `periodicity_tol` of exact friction, whose period map
+      has no integration error: Newton's iterations reach it in about one more step,
+      and it keeps the stroke of a terminal that sticks for most of the period (a small
+      difference of positions) accurate.
     """
 
     rtol: float = 1e-8
@@ -42,12 +47,13 @@ class SolverSettings(eqx.Module):
     transient_periods: int = 2
     max_newton_steps: int = 10
     periodicity_tol: float = 1e-6
+    exact_periodicity_tol: float = 1e-10
     samples: int = 128
     implicit: bool = False
     exact_friction: bool = False
 
     def __check_init__(self):
-        for name in ("rtol", "atol", "periodicity_tol"):
+        for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
@@ -82,7 +88,13 @@ class SolverSettings(eqx.Module):
         Coulomb friction where its `friction_width` is 0."""
         if self.exact_friction == system.exact_friction:
             return self
-        return eqx.tree_at(lambda s: s.exact_friction, self, system.exact_friction)
+        if not system.exact_friction:
+            raise ValueError(
+                "SolverSettings.exact_friction follows the system (friction_width=0); got "
+                "exact_friction=True with a smoothed-friction system"
+            )
+        return eqx.tree_at(lambda s: (s.exact_friction, s.periodicity_tol), self,
+                           (True, self.exact_periodicity_tol))
 
 
 class Orbit(eqx.Module):
