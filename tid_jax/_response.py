@@ -45,8 +45,9 @@ class FrequencyResponse(eqx.Module):
     - `stick_fraction`: share of the period with |y'| below two friction widths (stuck,
       with exact friction).
     - `transitions`: changes per period of the terminal's state (stuck, slipping forwards,
-      slipping backwards), counted at the samples of the period as `stick_fraction` is:
-      2 for a terminal that slips throughout, more with sticking, 0 stuck throughout.
+      slipping backwards): 2 for a terminal that slips throughout, more with sticking, 0
+      stuck throughout. Exact with exact friction (every transition is located); with
+      smoothed friction, counted at the samples of the period as `stick_fraction` is.
     """
 
     omegas: Float[Array, "*freqs"]
@@ -137,7 +138,11 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     )
     # (exact friction: width 0, and the samples of a stuck terminal's velocity are 0)
     stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) <= 2 * width[:, None]
-    phase = jnp.where(stuck, 0, jnp.sign(samples.ws).astype(int))
+    if settings.exact_friction:  # counted by the period map, each one located
+        transitions = jnp.round(samples.transitions).astype(int)
+    else:
+        phase = jnp.where(stuck, 0, jnp.sign(samples.ws).astype(int))
+        transitions = jnp.sum(phase != jnp.roll(phase, 1, axis=-1), axis=-1)
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
     return dict(
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
@@ -151,7 +156,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         floquet_multipliers=multipliers,
         monodromy=shots.monodromy,
         stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
-        transitions=jnp.sum(phase != jnp.roll(phase, 1, axis=-1), axis=-1),
+        transitions=transitions,
     )
 
 

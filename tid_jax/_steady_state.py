@@ -146,18 +146,21 @@ def _phases(settings: SolverSettings, dtype):
 
 
 def _period_samples(z0, p, settings: SolverSettings):
-    """x, y and y' sampled over one period from `z0`, the state after the period, and
-    the largest |y| at a stick-slip transition (exact friction; else 0)."""
+    """x, y and y' sampled over one period from `z0`, the state after the period, the
+    largest |y| at a stick-slip transition and the number of transitions (exact friction;
+    else 0)."""
     if settings.exact_friction:
-        states, z_end, _, y_events = _coulomb.period(z0, p, settings.samples)
-        return states[:, 0], states[:, 2], states[:, 3], z_end, y_events
+        states, z_end, transitions, y_events = _coulomb.period(z0, p, settings.samples)
+        return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
+                transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
     sol = _integrate(
         vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
         settings.max_steps,
     )
     ys = sol.ys
-    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1], jnp.zeros((), z0.dtype)
+    zero = jnp.zeros((), z0.dtype)
+    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1], zero, zero
 
 
 def _field_and_tangents(theta, y, p):
@@ -286,7 +289,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
 
     def body(carry):
         z, best, best_residual, best_xs, _, steps = carry
-        xs, _, _, z_end, _ = _period_samples(z, p, settings)
+        xs, _, _, z_end, _, _ = _period_samples(z, p, settings)
         r = z_end - z
         ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
         residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
@@ -427,6 +430,7 @@ class Samples(eqx.Module):
     ws: Float[Array, " samples"]
     z_end: Float[Array, " 4"]
     y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction)
+    transitions: Float[Array, ""]  # their number (exact friction; else 0, not counted)
 
 
 class _Periodic(eqx.Module):
