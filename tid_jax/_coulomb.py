@@ -27,6 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Complex, Float, Int
 
+from ._dynamics import linear_part
+
 MAX_SEGMENTS = 24  # segments per period; an orbit that needs more is reported as failed
 _ROOT_ITERATIONS = 60  # safeguarded Newton iterations allowed per event
 _STICK = 0
@@ -66,17 +68,9 @@ def _quantities(p):
 
 
 def _slip_matrix(p):
-    mass, stiffness, damping, inertance, k, c, omega, _ = _quantities(p)
-    w2 = omega**2
-    zero = jnp.zeros_like(mass)
-    return jnp.stack([
-        jnp.stack([zero, zero + 1, zero, zero]),
-        jnp.stack([-(stiffness + k) / (mass * w2), -(damping + c) / (mass * omega),
-                   k / (mass * w2), c / (mass * omega)]),
-        jnp.stack([zero, zero, zero, zero + 1]),
-        jnp.stack([k / (inertance * w2), c / (inertance * omega), -k / (inertance * w2),
-                   -c / (inertance * omega)]),
-    ])
+    """The matrix of the scaled field's linear part (`_dynamics.linear_part`), column j
+    the field of the unit state j."""
+    return jnp.stack(linear_part(jnp.eye(4, dtype=p.dtype), p))
 
 
 def _forcing(p):
@@ -96,12 +90,11 @@ def _eig(matrix):
     return eigenvalues, vectors
 
 
-def _modes(p, samples: int) -> tuple[_Mode, _Mode]:
+def _modes(p, grid) -> tuple[_Mode, _Mode]:
     """The slipping mode (both signs share it) and the stuck mode, whose homogeneous part
-    moves only the host (the terminal's rows are zero), for a grid of `samples` phases
-    per period."""
-    steps = jnp.arange(samples + 1) * (2 * np.pi / samples)
-    powers = lambda eigenvalues: jnp.exp(eigenvalues[None, :] * steps[:, None])
+    moves only the host (the terminal's rows are zero), with their powers over the
+    uniform phase `grid` (from 0)."""
+    powers = lambda eigenvalues: jnp.exp(eigenvalues[None, :] * grid[:, None])
     matrix = _slip_matrix(p)
     forcing = _forcing(p).astype(complex)
     eye = jnp.eye(4, dtype=complex)
@@ -169,7 +162,7 @@ def _state(segment: _Segment, mode: _Mode, theta):
 
 
 def _on_grid(segment: _Segment, mode: _Mode, grid, phasors):
-    """`_state` at every phase of the grid (`phasors` = e^{i grid}) from the segment's
+    """The states at every phase of the grid (`phasors` = e^{i grid}) from the segment's
     start on (rows before it are not meaningful), with the exponentials of the grid's
     steps computed once (`_Mode.powers`)."""
     step = grid[1]
@@ -178,19 +171,22 @@ def _on_grid(segment: _Segment, mode: _Mode, grid, phasors):
     index = jnp.clip(jnp.arange(grid.shape[0]) - first.astype(int), 0, grid.shape[0] - 1)
     growth = segment.coefficients * offset * mode.powers[index]
     harmonic = phasors[:, None] * mode.harmonic
-    z = jnp.real(harmonic + growth @ mode.vectors.T) + segment.constant
-    dz = jnp.real(1j * harmonic + (mode.eigenvalues * growth) @ mode.vectors.T)
-    return z, dz
+    return jnp.real(harmonic + growth @ mode.vectors.T) + segment.constant
+
+
+def _event_value(segment: _Segment, z, p):
+    """The event function at the state `z`: positive while the mode holds."""
+    friction = _quantities(p)[-1]
+    stuck = segment.sign == _STICK
+    return jnp.where(stuck, friction - jnp.abs(_spring_force(z, p)), segment.sign * z[3])
 
 
 def _event(segment: _Segment, z, dz, p):
-    """The event function (positive while the mode holds) and its phase derivative."""
-    friction = _quantities(p)[-1]
+    """The event function and its phase derivative (`dz` that of the state)."""
     force, dforce = _spring_force(z, p), _spring_force(dz, p)
     stuck = segment.sign == _STICK
-    g = jnp.where(stuck, friction - jnp.abs(force), segment.sign * z[3])
     dg = jnp.where(stuck, -jnp.sign(force) * dforce, segment.sign * dz[3])
-    return g, dg
+    return _event_value(segment, z, p), dg
 
 
 def _root(segment, mode, p, low, high, active):
@@ -236,18 +232,21 @@ def _transition(segment: _Segment, z, p):
     """The mode after an event of `segment` in state `z`: a stuck terminal slips with the
     sign of the force on it; a slipping one sticks where the force is within ff, else
     slips back."""
+    slip_sign, held = _held_by_friction(z, p)
+    return jnp.where(segment.sign == _STICK, slip_sign, jnp.where(held, _STICK, slip_sign))
+
+
+def _held_by_friction(z, p):
+    """For a terminal at rest in state `z`: the sign it slips with (that of the force on
+    it) and whether the friction holds it (the force within ff)."""
     force = _spring_force(z, p)
-    friction = _quantities(p)[-1]
-    slip_sign = jnp.where(force >= 0, 1, -1)
-    sticks = jnp.abs(force) <= friction
-    return jnp.where(segment.sign == _STICK, slip_sign, jnp.where(sticks, _STICK, slip_sign))
+    return jnp.where(force >= 0, 1, -1), jnp.abs(force) <= _quantities(p)[-1]
 
 
 def _initial_sign(z, p):
-    friction = _quantities(p)[-1]
-    force = _spring_force(z, p)
-    from_force = jnp.where(jnp.abs(force) <= friction, _STICK, jnp.where(force >= 0, 1, -1))
-    return jnp.where(z[3] > 0, 1, jnp.where(z[3] < 0, -1, from_force))
+    slip_sign, held = _held_by_friction(z, p)
+    at_rest = jnp.where(held, _STICK, slip_sign)
+    return jnp.where(z[3] > 0, 1, jnp.where(z[3] < 0, -1, at_rest))
 
 
 def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
@@ -260,9 +259,9 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
     The state after the period is NaN where the orbit needed more than `MAX_SEGMENTS`
     segments. Without `keep_samples`, the samples (zeros) are not formed and only find
     the transitions, and derivatives reach the state after the period alone."""
-    modes = _modes(p, samples)
     dtype = z0.dtype
     grid = jnp.arange(samples + 1, dtype=dtype) * (2 * np.pi / samples)
+    modes = _modes(p, grid)
     phasors = jnp.exp(1j * grid)
     guard = 1e-9 * (2 * np.pi / samples)
 
@@ -270,8 +269,8 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
         segment = state.segment
         mode = _mode_of(segment, modes)
         on_grid = segment if keep_samples else jax.lax.stop_gradient(segment)
-        zs, dzs = _on_grid(on_grid, mode, grid, phasors)
-        g = jax.vmap(lambda z, dz: _event(segment, z, dz, p)[0])(zs, dzs)
+        zs = _on_grid(on_grid, mode, grid, phasors)
+        g = jax.vmap(lambda z: _event_value(segment, z, p))(zs)
         crossing = (grid > segment.start + guard) & (g < 0)
         ends = jnp.any(crossing)
         j = jnp.argmax(crossing)

@@ -80,12 +80,12 @@ def point_response(
     """Single (omega, amplitude) point: the orbit (shooting from the scaled state `z_init`
     if given, with chord iterations first if `monodromy_init` is given; see `solve_orbit`)
     and its peaks |x|, |y| in metres."""
+    settings = settings.for_system(system)
     p = parameters(system, amplitude, omega)
-    orbit = solve_orbit(p, settings.for_system(system), z_init, monodromy_init, directions)
+    orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
     scale = amplitude / system.host_stiffness
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
-    peaks = (refined_peak(orbit.x_samples),
-             y_peak(orbit.y_samples, orbit.y_events, settings.for_system(system)))
+    peaks = (refined_peak(orbit.x_samples), y_peak(orbit.y_samples, orbit.y_events, settings))
     x_max, y_max = (_finite_or_inf(peak * scale) for peak in peaks)
     return orbit, x_max, y_max
 

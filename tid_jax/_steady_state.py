@@ -247,23 +247,27 @@ def _transient(z, p, settings: SolverSettings, periods=None):
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 
 
-def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
-    """`I - monodromy`, the Jacobian of the periodicity residual, with every zero row
-    replaced by its unit row: a coordinate that the period returns unchanged whatever the
-    start (the position of an inerter terminal stuck for the whole period, exact friction)
-    is a family of periodic orbits, of which the one through the current value is kept."""
+def _held(monodromy: Float[Array, "4 4"]) -> Bool[Array, "4 1"]:
+    """The coordinates that the period returns unchanged whatever the start (rows of
+    `monodromy` that are unit rows): the position of an inerter terminal stuck for the
+    whole period (exact friction), along which the periodic orbits form a family."""
     eye = jnp.eye(monodromy.shape[-1], dtype=monodromy.dtype)
-    matrix = eye - monodromy
-    held = jnp.all(matrix == 0, axis=-1, keepdims=True)
-    return jnp.where(held, eye, matrix)
+    return jnp.all(eye - monodromy == 0, axis=-1, keepdims=True)
+
+
+def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
+    """`I - monodromy`, the Jacobian of the periodicity residual, with the rows of held
+    coordinates (`_held`) replaced by unit rows: of the family of periodic orbits, the
+    one through the current value is kept."""
+    eye = jnp.eye(monodromy.shape[-1], dtype=monodromy.dtype)
+    return jnp.where(_held(monodromy), eye, eye - monodromy)
 
 
 def moving_part(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
-    """`monodromy` with the rows of held coordinates (see `fixed_point_matrix`) zeroed:
-    their multiplier 1 becomes 0 and the others are unchanged, so that its multipliers
-    judge the stability of the motion about the family of orbits."""
-    held = jnp.all(jnp.eye(4, dtype=monodromy.dtype) - monodromy == 0, axis=-1)
-    return jnp.where(held[:, None], 0.0, monodromy)
+    """`monodromy` with the rows of held coordinates (`_held`) zeroed: their multiplier 1
+    becomes 0 and the others are unchanged, so that its multipliers judge the stability
+    of the motion about the family of orbits."""
+    return jnp.where(_held(monodromy), 0.0, monodromy)
 
 
 def _limited(z, update):
