@@ -6,7 +6,8 @@ With `ff sgn(y')` exact, eq. (12) is linear in each of three modes: slipping for
 `ff`). In each mode the motion under the forcing `A sin(theta)` is known in closed form
 (constant and harmonic particular solutions plus the modal homogeneous part), so a
 period is a short sequence of segments; each segment ends at the first of its mode's
-events, located on the sample grid and refined by safeguarded Newton steps:
+events, located on the sample grid (an event function that dips below 0 and back
+between two samples is not seen) and refined by safeguarded Newton steps:
 
 - slipping with sign `s`: `s y'` reaches 0; the terminal sticks there if `|F| <= ff`, else
   it slips back (sign `-s`);
@@ -208,7 +209,8 @@ def _root(segment, mode, p, low, high, active):
         g, dg = g_of(theta)
         low, high = jnp.where(g >= 0, theta, low), jnp.where(g >= 0, high, theta)
         newton = theta - g / jnp.where(dg == 0, 1.0, dg)
-        inside = (newton > low) & (newton < high) & (dg != 0)
+        # (a step below theta's rounding leaves newton == theta, on the bracket's end)
+        inside = (newton >= low) & (newton <= high) & (dg != 0)
         new = jnp.where(inside, newton, 0.5 * (low + high))
         return low, high, new, new - theta, i + 1
 
