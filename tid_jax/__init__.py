@@ -44,6 +44,17 @@ from ._sensitivity import (
     Sensitivities as Sensitivities,
     sensitivities as sensitivities,
 )
+from ._device import (
+    ForceSettings as ForceSettings,
+    InerterDevice as InerterDevice,
+)
+from ._identify import (
+    IdentifySettings as IdentifySettings,
+    InerterFit as InerterFit,
+    InerterRecord as InerterRecord,
+    ModelComparison as ModelComparison,
+    identify_inerter as identify_inerter,
+)
 from ._steady_state import SolverSettings as SolverSettings
 from ._substructuring import (
     Substructuring as Substructuring,

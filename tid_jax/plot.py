@@ -438,3 +438,29 @@ def plot_robust_comparison(amplitudes, designs, *, stroke_limit=None, title=None
     if title:
         fig.suptitle(title)
     return fig
+
+
+def plot_identification(records, *, title=None):
+    """Measured and fitted force of inerter test records (the paper's Figures 2-3):
+    against time, against displacement and against velocity, one row per record.
+    `records` holds dicts with `name`, `time` (s), `displacement` (m), `velocity` (m/s),
+    `force` and `fitted` (N)."""
+    fig, axes = plt.subplots(len(records), 3, figsize=(12, 3.0 * len(records)),
+                             squeeze=False)
+    for row, record in zip(axes, records, strict=True):
+        for ax, key, label in zip(row, ("time", "displacement", "velocity"),
+                                  ("time [s]", "displacement [mm]", "velocity [mm/s]"),
+                                  strict=True):
+            scale = 1.0 if key == "time" else 1e3
+            ax.plot(scale * np.asarray(record[key]), record["force"], color="0.6",
+                    linewidth=0.8, label="measured")
+            ax.plot(scale * np.asarray(record[key]), record["fitted"], color="C3",
+                    linewidth=1.2, label="fitted")
+            ax.set_xlabel(label)
+            ax.grid(True, alpha=0.3)
+        row[0].set_ylabel(f"force [N]\n{record['name']}")
+    axes[0, 0].legend(loc="best")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -22,6 +22,7 @@ from .frf import FRF_COLUMNS as FRF_COLUMNS
 from .frf import _add_frf_parser, _run_frf
 from .retune import RETUNE_COLUMNS as RETUNE_COLUMNS
 from .retune import _add_retune_parser, _run_retune
+from .identify import _add_identify_parser, _run_identify
 from .robust import _add_robust_parser, _run_robust
 from .rtds import RTDS_COLUMNS as RTDS_COLUMNS
 from .rtds import _add_rtds_parser, _run_rtds
@@ -33,6 +34,7 @@ _COMMANDS = {
     "rtds": (_add_rtds_parser, _run_rtds),
     "sensitivity": (_add_sensitivity_parser, _run_sensitivity),
     "robust": (_add_robust_parser, _run_robust),
+    "identify": (_add_identify_parser, _run_identify),
 }
 
 

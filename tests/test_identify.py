@@ -1,0 +1,181 @@
+"""The inerter device identified from synthetic test records with known parameters (the
+independent event-driven reference `tests/reference/inerter.py`, 1% force noise), and
+`tid-jax identify` on a records file."""
+
+import contextlib
+import csv
+import io
+import json
+import tomllib
+
+import jax
+import numpy as np
+import pytest
+
+import tid_jax as tj
+from tid_jax.cli import main
+from tid_jax.cli._common import _inputs, _system
+
+try:
+    from reference.inerter import synthetic_records
+except ImportError:  # tests/ imported as a package
+    from tests.reference.inerter import synthetic_records
+
+jax.config.update("jax_enable_x64", True)
+
+NOISE = 0.01  # force noise, relative to each record's peak force
+PAPER_DEVICE = dict(inertance=75.0, friction_force=20.0)
+# a compliant device: the mechanism resonates on its mounts at 10 Hz, 3% damped
+COMPLIANT_DEVICE = dict(inertance=75.0, friction_force=20.0, parasitic_damping=300.0,
+                        series_stiffness=3e5)
+
+
+def _records(device, seed=0):
+    return [tj.InerterRecord(r["time"], r["displacement"], r["force"], name=f"test {i}")
+            for i, r in enumerate(synthetic_records(noise=NOISE, seed=seed, loaded=True,
+                                                    **device))]
+
+
+def _noise_levels(device, seed=0):
+    """The standard deviation of each record's force noise."""
+    clean = synthetic_records(noise=0.0, loaded=True, **device)
+    return np.array([NOISE * np.max(np.abs(r["force"])) for r in clean])
+
+
+def _assert_recovered(fit, device, sigmas=3.0):
+    for name, value, error in zip(fit.parameters, np.asarray(fit.estimates),
+                                  np.asarray(fit.standard_errors), strict=True):
+        assert 0 < error < 0.05 * device[name], (name, error)
+        assert abs(value - device[name]) < sigmas * error, (name, value, error)
+
+
+def test_paper_device_is_recovered():
+    fit = tj.identify_inerter(_records(PAPER_DEVICE), model="ideal")
+    assert bool(fit.converged)
+    assert fit.parameters == ("inertance", "friction_force")
+    _assert_recovered(fit, PAPER_DEVICE)
+    b, ff = np.asarray(fit.estimates)
+    assert abs(b / 75.0 - 1) < 0.01 and abs(ff / 20.0 - 1) < 0.03
+    # what is left is the noise
+    np.testing.assert_allclose(np.asarray(fit.rms), _noise_levels(PAPER_DEVICE), rtol=0.1)
+    assert fit.device.inertance == pytest.approx(b) and fit.device.rigid
+    assert abs(float(fit.correlations[0, 1])) < 1 and float(fit.correlations[0, 0]) == \
+        pytest.approx(1.0)
+
+
+def test_parasitic_damping_is_recovered_and_supported():
+    device = dict(PAPER_DEVICE, parasitic_damping=300.0)
+    fit = tj.identify_inerter(_records(device), model="damped")
+    assert bool(fit.converged)
+    _assert_recovered(fit, device)
+    assert fit.comparison.models == ("ideal", "damped")
+    assert bool(fit.comparison.supported[1]) and float(fit.comparison.delta_bic[1]) < -10
+
+
+def test_compliance_leaves_a_residual_that_the_compliant_model_removes():
+    fit = tj.identify_inerter(_records(COMPLIANT_DEVICE), model="compliant")
+    assert bool(fit.converged)
+    _assert_recovered(fit, COMPLIANT_DEVICE)
+    noise = float(np.sqrt(np.mean(_noise_levels(COMPLIANT_DEVICE) ** 2)))
+    rms = np.asarray(fit.comparison.rms)
+    # the rigid models leave a systematic residual many times the noise ...
+    assert rms[0] > 5 * noise and rms[1] > 5 * noise
+    # ... which the compliant model removes, down to the noise
+    assert rms[2] < 1.1 * noise
+    assert np.all(np.asarray(fit.comparison.supported))
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda t, u, f: (t[:10], u[:10], f[:10]), "too short"),
+        (lambda t, u, f: (t[::-1], u, f), "time must increase"),
+        (lambda t, u, f: (t, u, np.where(np.arange(t.size) == 7, np.nan, f)),
+         "force is not finite at sample 7"),
+        (lambda t, u, f: (t, u[:-1], f), "columns of different lengths"),
+        (lambda t, u, f: (t, 0 * u, f), "does not move"),
+    ],
+)
+def test_bad_records_are_rejected(change, message):
+    t = np.linspace(0, 1, 200)
+    u, f = 1e-3 * np.sin(2 * np.pi * 3 * t), np.cos(2 * np.pi * 3 * t)
+    with pytest.raises(ValueError, match=message):
+        tj.InerterRecord(*change(t, u, f))
+
+
+def test_bad_model_is_rejected():
+    with pytest.raises(ValueError, match="model must be one of"):
+        tj.identify_inerter(_records(PAPER_DEVICE), model="stiff")
+
+
+def _write_records(path, records, names=True):
+    with open(path, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["record", "time", "displacement", "force"] if names
+                        else ["time", "displacement", "force"])
+        for i, record in enumerate(records):
+            for row in zip(record["time"], record["displacement"], record["force"],
+                           strict=True):
+                writer.writerow([f"test {i}", *row] if names else row)
+
+
+def _run(argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main([str(arg) for arg in argv])
+    return status, out.getvalue(), err.getvalue()
+
+
+def test_cli_identifies_and_writes_files_retune_accepts(tmp_path):
+    records = synthetic_records(noise=NOISE, seed=0, **PAPER_DEVICE)
+    path = tmp_path / "records.csv"
+    _write_records(path, records)
+    status, stdout, stderr = _run(["identify", path, "--out", tmp_path / "out", "--quiet"])
+    assert status == 0, stderr
+    assert "inertance" in stdout and "friction_force" in stdout
+    data = json.loads((tmp_path / "out" / "identify.json").read_text())
+    assert set(data["parameters"]) == {"inertance", "friction_force"}
+    assert set(data["standard_errors"]) == set(data["parameters"])
+    assert data["parameters"]["inertance"] == pytest.approx(75.0, rel=0.01)
+    assert data["parameters"]["friction_force"] == pytest.approx(20.0, rel=0.03)
+    assert [r["name"] for r in data["records"]] == ["test 0", "test 1", "test 2"]
+    with open(tmp_path / "out" / "identify.csv", newline="") as file:
+        rows = list(csv.reader(file))
+    assert len(rows) == 1 + sum(r["time"].size for r in records)
+    assert (tmp_path / "out" / "identify.png").read_bytes().startswith(b"\x89PNG")
+    # the saved device is what retune's --config reads
+    config = tmp_path / "out" / "identify_config.toml"
+    with open(config, "rb") as file:
+        saved = tomllib.load(file)
+    args = type("Args", (), {key: None for key in
+                             ("host_mass", "host_frequency_hz", "host_stiffness",
+                              "host_damping_ratio", "host_damping", "inertance",
+                              "friction_force", "friction_width", "tid_stiffness",
+                              "tid_damping", "stroke_limit", "amplitudes", "band_hz",
+                              "n_frequencies")})()
+    args.config = str(config)
+    system = _system(_inputs(args))
+    assert float(system.inertance) == pytest.approx(saved["inertance"])
+    assert float(system.friction_force) == pytest.approx(saved["friction_force"])
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("time,displacement\n0,0\n", "no 'force' column"),
+        ("time,displacment,force\n0,0,0\n", "unknown column 'displacment'"),
+        ("time,displacement,force\n0,0,0\n0.1,abc,0\n", "row 3, column 'displacement'"),
+        ("time,displacement,force\n0,0,0\n0.1,0,nan\n", "row 3, column 'force'"),
+        ("time,displacement,force\n0,0,0\n0,1,0\n", "row 3, column 'time'"),
+        ("time,displacement,force\n0,0,0\n0.1,0\n", "row 3 has 2 values"),
+        ("time,displacement,force\n0,0,0\n0.1,0.001,0\n", "too short"),
+        ("", "empty"),
+    ],
+)
+def test_cli_bad_records_file_is_one_line(tmp_path, text, message):
+    path = tmp_path / "records.csv"
+    path.write_text(text)
+    status, _, stderr = _run(["identify", path, "--out", tmp_path / "out"])
+    assert status == 2
+    assert message in stderr and len(stderr.strip().splitlines()) == 1, stderr
+    assert not (tmp_path / "out" / "identify.json").exists()

@@ -1,0 +1,359 @@
+"""The inerter device identified from test records by nonlinear least squares on its force.
+
+A record is a test in which a rig imposes a displacement across the device and measures
+the force (the paper's Figures 2-3). The models are nested, each adding one term of
+`InerterDevice` to the one before:
+
+- `ideal`: inertance and friction force (the paper's model);
+- `damped`: + parasitic damping;
+- `compliant`: + series stiffness;
+- `backlash`: + backlash.
+
+Each model is fitted by Levenberg-Marquardt (optimistix) on the residual force of all
+records together, from the model before it (the first two are linear in their
+parameters and start from their linear least-squares solution). The standard errors are
+those of the linearised problem, `s^2 (J^T J)^-1` with `s^2` the residual variance; the
+comparison says which terms the data support by the Bayesian information criterion.
+"""
+
+import math
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from ._checks import choice, integer
+from ._device import ForceSettings, InerterDevice, Motion, device_force
+
+MODELS = ("ideal", "damped", "compliant", "backlash")
+MODEL_PARAMETERS = {
+    "ideal": ("inertance", "friction_force"),
+    "damped": ("inertance", "friction_force", "parasitic_damping"),
+    "compliant": ("inertance", "friction_force", "parasitic_damping", "series_stiffness"),
+    "backlash": ("inertance", "friction_force", "parasitic_damping", "series_stiffness",
+                 "backlash"),
+}
+MIN_SAMPLES = 32
+SUPPORT_BIC = 10.0  # a term is supported where it lowers the BIC by more than this
+
+
+class InerterRecord(eqx.Module):
+    """One test record (SI units): sample times (s, strictly increasing), the imposed
+    displacement across the device (m) and the measured force (N)."""
+
+    time: Float[Array, " samples"]
+    displacement: Float[Array, " samples"]
+    force: Float[Array, " samples"]
+    name: str = eqx.field(static=True, default="")
+
+    def __check_init__(self):
+        where = f"record {self.name!r}" if self.name else "record"
+        columns = {"time": self.time, "displacement": self.displacement, "force": self.force}
+        arrays = {}
+        for column, values in columns.items():
+            array = np.asarray(values, dtype=float)
+            if array.ndim != 1:
+                raise ValueError(f"{where}: {column} must be 1-d, got shape {array.shape}")
+            bad = ~np.isfinite(array)
+            if np.any(bad):
+                raise ValueError(f"{where}: {column} is not finite at sample "
+                                 f"{int(np.argmax(bad))} ({array[np.argmax(bad)]!r})")
+            arrays[column] = array
+        lengths = {column: array.size for column, array in arrays.items()}
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"{where}: columns of different lengths {lengths}")
+        if lengths["time"] < MIN_SAMPLES:
+            raise ValueError(f"{where} is too short: {lengths['time']} samples, at least "
+                             f"{MIN_SAMPLES} needed")
+        steps = np.diff(arrays["time"])
+        if np.any(steps <= 0):
+            i = int(np.argmax(steps <= 0)) + 1
+            raise ValueError(f"{where}: time must increase strictly; sample {i} "
+                             f"({arrays['time'][i]!r} s) does not")
+        if np.ptp(arrays["displacement"]) == 0:
+            raise ValueError(f"{where}: the displacement does not move")
+
+
+class ModelComparison(eqx.Module):
+    """The nested models fitted, in order: their parameter counts, the residual RMS over
+    all records (N), the Bayesian information criterion `n ln(RSS / n) + p ln n` and its
+    change from the model before, and whether that change supports the model's added term
+    (a fall of more than `SUPPORT_BIC`; the first model is supported by definition)."""
+
+    models: tuple[str, ...] = eqx.field(static=True)
+    parameter_counts: tuple[int, ...] = eqx.field(static=True)
+    rms: Float[Array, " models"]
+    bic: Float[Array, " models"]
+    delta_bic: Float[Array, " models"]
+    supported: Bool[Array, " models"]
+    converged: Bool[Array, " models"]
+
+
+class InerterFit(eqx.Module):
+    """A device identified from records: `model`, the fitted `parameters` (names of
+    `InerterDevice` fields) with their `estimates`, `standard_errors` and `correlations`
+    (SI units), the `device` (the estimates, other fields at their defaults), the
+    residual RMS per record (N), the fitted force of each record (N), whether the least
+    squares converged (and every integration succeeded), its steps, and the comparison of
+    the nested models up to this one."""
+
+    model: str = eqx.field(static=True)
+    parameters: tuple[str, ...] = eqx.field(static=True)
+    device: InerterDevice
+    estimates: Float[Array, " parameters"]
+    standard_errors: Float[Array, " parameters"]
+    correlations: Float[Array, "parameters parameters"]
+    rms: Float[Array, " records"]
+    fitted_force: tuple[Float[Array, " samples"], ...]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    comparison: ModelComparison
+
+
+class IdentifySettings(eqx.Module):
+    """Least-squares tolerances (optimistix, on the scaled parameters and the force
+    relative to the records' peak) and steps, and the device's `ForceSettings`."""
+
+    rtol: float = 1e-9
+    atol: float = 1e-9
+    max_steps: int = 200
+    force: ForceSettings = ForceSettings()
+
+
+class _Scales(eqx.Module):
+    """The map between the least-squares unknowns and the device's parameters: linear
+    for inertance, friction and damping, logarithmic for the series stiffness, the
+    magnitude for the backlash."""
+
+    parameters: tuple[str, ...] = eqx.field(static=True)
+    scales: Float[Array, " parameters"]
+
+    def device(self, x) -> InerterDevice:
+        values = {}
+        for i, name in enumerate(self.parameters):
+            if name == "series_stiffness":
+                values[name] = self.scales[i] * jnp.exp(x[i])
+            elif name == "backlash":
+                values[name] = self.scales[i] * jnp.abs(x[i])
+            else:
+                values[name] = self.scales[i] * x[i]
+        return InerterDevice(**values)
+
+    def values(self, x) -> Float[Array, " parameters"]:
+        device = self.device(x)
+        return jnp.stack([getattr(device, name) for name in self.parameters])
+
+    def unknowns(self, values) -> Float[Array, " parameters"]:
+        out = []
+        for i, name in enumerate(self.parameters):
+            ratio = values[i] / self.scales[i]
+            out.append(jnp.log(ratio) if name == "series_stiffness" else ratio)
+        return jnp.stack(out)
+
+
+def _records(records) -> tuple[InerterRecord, ...]:
+    if isinstance(records, InerterRecord):
+        records = (records,)
+    if not isinstance(records, list | tuple) or not records:
+        raise ValueError("records must be an InerterRecord or a non-empty list of them")
+    for i, record in enumerate(records):
+        if not isinstance(record, InerterRecord):
+            raise ValueError(f"records[{i}] must be an InerterRecord, got "
+                             f"{type(record).__name__}")
+    return tuple(records)
+
+
+def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: ForceSettings):
+    """The force residuals of every record, over `force_scale`, and whether every
+    integration succeeded."""
+    device = scales.device(x)
+    out, ok = [], jnp.asarray(True)
+    for motion, force in zip(motions, forces, strict=True):
+        model, success = device_force(device, motion, settings)
+        out.append((model - force) / force_scale)
+        ok = ok & success
+    return jnp.concatenate(out), ok
+
+
+@eqx.filter_jit
+def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings):
+    fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings.force)
+    solver = optx.LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol)
+    sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=settings.max_steps,
+                             throw=False)
+    x = sol.value
+    residual, ok = fn(x, None)
+    # the Jacobian in the parameters' own units, for their covariance
+    values = scales.values(x)
+    jacobian = jax.jacfwd(
+        lambda v: fn(scales.unknowns(v), None)[0] * force_scale)(values)
+    return x, residual * force_scale, jacobian, ok & (sol.result == optx.RESULTS.successful), \
+        sol.stats["num_steps"]
+
+
+def _linear_start(parameters, motions, forces, width):
+    """Least-squares inertance, friction and damping of the rigid device (linear in
+    them), for the first models' start."""
+    columns = {
+        "inertance": lambda m: m.acceleration,
+        "friction_force": lambda m: np.tanh(np.asarray(m.velocity) / width(m)),
+        "parasitic_damping": lambda m: m.velocity,
+    }
+    matrix = np.concatenate(
+        [np.stack([np.asarray(columns[name](m)) for name in parameters], axis=1)
+         for m in motions])
+    solution, *_ = np.linalg.lstsq(matrix, np.concatenate(forces), rcond=None)
+    return solution
+
+
+@eqx.filter_jit
+def _sum_of_squares(x, scales, motions, forces, force_scale, settings: ForceSettings):
+    residual, ok = _residuals(x, scales, motions, forces, force_scale, settings)
+    return jnp.where(ok, jnp.sum(residual**2), jnp.inf)
+
+
+# Starting values tried for a term fitted afresh, times its typical size: the force of a
+# compliant device rings after each reversal at a frequency set by the series stiffness,
+# so that the least squares in it have many local minima.
+_SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspace(0.1, 30, 7)}
+
+
+def _scanned_start(parameters, values, fresh, motions, forces, force_scale,
+                   settings: IdentifySettings, typical):
+    """`values` with the term `fresh` (if it has a scan) at the best of its scanned
+    starting values, the others held."""
+    if fresh not in _SCAN:
+        return values
+    i = parameters.index(fresh)
+    scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]))
+    best, best_value = np.inf, values[i]
+    for factor in _SCAN[fresh]:
+        trial = values.copy()
+        trial[i] = factor * typical[fresh]
+        cost = float(_sum_of_squares(scales.unknowns(jnp.asarray(trial)), scales, motions,
+                                     forces, force_scale, settings.force))
+        if cost < best:
+            best, best_value = cost, trial[i]
+    values = values.copy()
+    values[i] = best_value
+    return values
+
+
+def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical):
+    """Least squares for `model` from the parameter values `start` (a dict; a term
+    missing from it starts at the best of its scanned values)."""
+    parameters = MODEL_PARAMETERS[model]
+    values = np.array([start.get(name, typical[name]) for name in parameters])
+    for name in parameters:
+        if name not in start:
+            values = _scanned_start(parameters, values, name, motions, forces, force_scale,
+                                    settings, typical)
+    scales = np.array([abs(v) if v != 0 else typical[name] for name, v in
+                       zip(parameters, values, strict=True)])
+    scales = _Scales(parameters, jnp.asarray(scales))
+    x0 = scales.unknowns(jnp.asarray(values))
+    x, residual, jacobian, ok, steps = _solve(x0, scales, motions, forces, force_scale,
+                                              settings)
+    return scales, x, np.asarray(residual), np.asarray(jacobian), bool(ok), int(steps)
+
+
+def _covariance(jacobian, pieces, p):
+    """The covariance of the least-squares estimates with the noise variance estimated
+    per record (tests of different forces are measured with different noise):
+    `(J^T J)^-1 J^T diag(s_r^2) J (J^T J)^-1`, `s_r^2` the mean square residual of
+    record `r` times `n / (n - p)`."""
+    n = jacobian.shape[0]
+    variance = np.concatenate([np.full(piece.size, np.mean(piece**2)) for piece in pieces])
+    variance = variance * n / max(n - p, 1)
+    inverse = np.linalg.pinv(jacobian.T @ jacobian)
+    return inverse @ (jacobian.T @ (variance[:, None] * jacobian)) @ inverse
+
+
+def identify_inerter(records, *, model: str = "ideal",
+                     settings: IdentifySettings = IdentifySettings(),
+                     progress: Callable[[str], None] | None = None) -> InerterFit:
+    """Identify the inerter device from `records` (an `InerterRecord` or a list of them)
+    with `model` (one of `MODELS`); the nested models before it are fitted first and
+    compared with it. `progress`, if given, gets a line as each model is fitted. Returns
+    an `InerterFit` (SI units)."""
+    choice("model", model, MODELS)
+    integer("settings.max_steps", settings.max_steps, 1)
+    records = _records(records)
+    motions = [Motion.from_samples(r.time, r.displacement) for r in records]
+    forces = [jnp.asarray(r.force, float) for r in records]
+    force_scale = max(float(np.max(np.abs(f))) for f in forces)
+    if force_scale == 0:
+        raise ValueError("records: the force is zero throughout")
+    width = lambda m: settings.force.relative_width * float(np.max(np.abs(m.velocity)))
+    # typical sizes: the starting values of terms fitted afresh, and the scales of terms
+    # whose start is zero
+    omega_max = max(math.sqrt(float(np.max(np.abs(m.acceleration)))
+                              / float(np.max(np.abs(m.displacement)))) for m in motions)
+    b0, ff0 = _linear_start(MODEL_PARAMETERS["ideal"], motions, forces, width)
+    b0 = abs(b0) if b0 != 0 else force_scale / float(np.max(np.abs(motions[0].acceleration)))
+    typical = {
+        "inertance": b0,
+        "friction_force": max(abs(ff0), 1e-3 * force_scale),
+        "parasitic_damping": force_scale / max(float(np.max(np.abs(m.velocity)))
+                                               for m in motions),
+        "series_stiffness": 100 * b0 * omega_max**2,  # a resonance 10x the fastest test's
+        "backlash": 1e-2 * min(float(np.max(np.abs(m.displacement))) for m in motions),
+    }
+    n = sum(f.shape[0] for f in forces)
+    sizes = [f.shape[0] for f in forces]
+    start, fits, summary = {}, [], []
+    for name in MODELS[: MODELS.index(model) + 1]:
+        parameters = MODEL_PARAMETERS[name]
+        if name in ("ideal", "damped"):
+            start = dict(zip(parameters, _linear_start(parameters, motions, forces, width),
+                             strict=True))
+        scales, x, residual, jacobian, ok, steps = _fit(
+            name, start, motions, forces, force_scale, settings, typical)
+        values = np.asarray(scales.values(x))
+        start = dict(zip(parameters, values, strict=True))
+        rss = float(np.sum(residual**2))
+        p = len(parameters)
+        pieces = np.split(residual, np.cumsum(sizes)[:-1])
+        covariance = _covariance(jacobian, pieces, p)
+        errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            correlations = covariance / np.outer(errors, errors)
+        fits.append(dict(scales=scales, x=x, values=values, errors=errors,
+                         correlations=correlations, pieces=pieces, ok=ok, steps=steps))
+        if progress is not None:
+            progress(f"model {name!r} fitted: residual RMS {math.sqrt(rss / n):.4g} N"
+                     f"{'' if ok else ' (not converged)'}")
+        summary.append((name, p, math.sqrt(rss / n),
+                        n * math.log(max(rss, 1e-300) / n) + p * math.log(n), ok))
+    bic = np.array([row[3] for row in summary])
+    delta = np.concatenate([[0.0], np.diff(bic)])
+    comparison = ModelComparison(
+        models=tuple(row[0] for row in summary),
+        parameter_counts=tuple(row[1] for row in summary),
+        rms=jnp.asarray([row[2] for row in summary]),
+        bic=jnp.asarray(bic),
+        delta_bic=jnp.asarray(delta),
+        supported=jnp.asarray([True] + [bool(d < -SUPPORT_BIC) for d in delta[1:]]),
+        converged=jnp.asarray([row[4] for row in summary]),
+    )
+    last = fits[-1]
+    fitted = tuple(jnp.asarray(f) + jnp.asarray(piece)
+                   for f, piece in zip(forces, last["pieces"], strict=True))
+    return InerterFit(
+        model=model,
+        parameters=MODEL_PARAMETERS[model],
+        device=InerterDevice(**dict(zip(MODEL_PARAMETERS[model],
+                                        (float(v) for v in last["values"]), strict=True))),
+        estimates=jnp.asarray(last["values"]),
+        standard_errors=jnp.asarray(last["errors"]),
+        correlations=jnp.asarray(last["correlations"]),
+        rms=jnp.asarray([math.sqrt(float(np.mean(piece**2))) for piece in last["pieces"]]),
+        fitted_force=fitted,
+        converged=jnp.asarray(last["ok"]),
+        steps=jnp.asarray(last["steps"]),
+        comparison=comparison,
+    )
