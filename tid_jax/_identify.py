@@ -16,6 +16,7 @@ those of the linearised problem, `s^2 (J^T J)^-1` with `s^2` the residual varian
 comparison says which terms the data support by the Bayesian information criterion.
 """
 
+import itertools
 import math
 from collections.abc import Callable
 
@@ -187,12 +188,12 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
                              throw=False)
     x = sol.value
     residual, ok = fn(x, None)
-    # the Jacobian in the parameters' own units, for their covariance
-    values = scales.values(x)
-    jacobian = jax.jacfwd(
-        lambda v: fn(scales.unknowns(v), None)[0] * force_scale)(values)
-    return x, residual * force_scale, jacobian, ok & (sol.result == optx.RESULTS.successful), \
-        sol.stats["num_steps"]
+    # the Jacobian in the parameters' own units, for their covariance: that in the scaled
+    # unknowns (well conditioned) and the derivatives of the parameters in them
+    jacobian = jax.jacfwd(lambda x: fn(x, None)[0] * force_scale)(x)
+    chain = jnp.diag(jax.jacfwd(scales.values)(x))
+    return x, residual * force_scale, jacobian, chain, \
+        ok & (sol.result == optx.RESULTS.successful), sol.stats["num_steps"]
 
 
 def _linear_start(parameters, motions, forces, width):
@@ -216,53 +217,57 @@ def _sum_of_squares(x, scales, motions, forces, force_scale, settings: ForceSett
     return jnp.where(ok, jnp.sum(residual**2), jnp.inf)
 
 
-# Starting values tried for a term fitted afresh, times its typical size: the force of a
-# compliant device rings after each reversal at a frequency set by the series stiffness,
-# so that the least squares in it have many local minima.
+# Starting values tried for the nonlinear terms, times their typical sizes: the force of
+# a compliant device rings after each reversal at a frequency set by the series
+# stiffness, and rattles through a backlash, so that the least squares in them have many
+# local minima.
 _SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspace(0.1, 30, 7)}
 
 
-def _scanned_start(parameters, values, fresh, motions, forces, force_scale,
+def _scanned_start(parameters, values, motions, forces, force_scale,
                    settings: IdentifySettings, typical):
-    """`values` with the term `fresh` (if it has a scan) at the best of its scanned
-    starting values, the others held."""
-    if fresh not in _SCAN:
+    """`values` with the scanned terms (`_SCAN`) of the model at the best of their
+    scanned starting values, tried together (a term fitted before also keeps its value
+    as a candidate), the others held."""
+    scanned = [name for name in parameters if name in _SCAN]
+    if not scanned:
         return values
-    i = parameters.index(fresh)
+    index = [parameters.index(name) for name in scanned]
+    candidates = [np.unique(np.append(_SCAN[name] * typical[name], values[i]))
+                  for name, i in zip(scanned, index, strict=True)]
     scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]))
-    best, best_value = np.inf, values[i]
-    for factor in _SCAN[fresh]:
+    best, best_values = np.inf, values
+    for point in itertools.product(*candidates):
         trial = values.copy()
-        trial[i] = factor * typical[fresh]
+        trial[index] = point
         cost = float(_sum_of_squares(scales.unknowns(jnp.asarray(trial)), scales, motions,
                                      forces, force_scale, settings.force))
         if cost < best:
-            best, best_value = cost, trial[i]
-    values = values.copy()
-    values[i] = best_value
-    return values
+            best, best_values = cost, trial
+    return best_values
 
 
 def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical):
-    """Least squares for `model` from the parameter values `start` (a dict; a term
-    missing from it starts at the best of its scanned values)."""
+    """Least squares for `model` from the parameter values `start` (a dict; where a
+    term is missing from it, the scanned terms start from a scan)."""
     parameters = MODEL_PARAMETERS[model]
     values = np.array([start.get(name, typical[name]) for name in parameters])
-    for name in parameters:
-        if name not in start:
-            values = _scanned_start(parameters, values, name, motions, forces, force_scale,
-                                    settings, typical)
+    if any(name not in start for name in parameters):
+        values = _scanned_start(parameters, values, motions, forces, force_scale, settings,
+                                typical)
     scales = np.array([abs(v) if v != 0 else typical[name] for name, v in
                        zip(parameters, values, strict=True)])
     scales = _Scales(parameters, jnp.asarray(scales))
     x0 = scales.unknowns(jnp.asarray(values))
-    x, residual, jacobian, ok, steps = _solve(x0, scales, motions, forces, force_scale,
-                                              settings)
-    return scales, x, np.asarray(residual), np.asarray(jacobian), bool(ok), int(steps)
+    x, residual, jacobian, chain, ok, steps = _solve(x0, scales, motions, forces,
+                                                     force_scale, settings)
+    return (scales, x, np.asarray(residual), np.asarray(jacobian), np.asarray(chain),
+            bool(ok), int(steps))
 
 
 def _covariance(jacobian, pieces, p):
-    """The covariance of the least-squares estimates with the noise variance estimated
+    """The covariance of the least-squares estimates (of the unknowns that `jacobian`
+    differentiates: the residual's Jacobian) with the noise variance estimated
     per record (tests of different forces are measured with different noise):
     `(J^T J)^-1 J^T diag(s_r^2) J (J^T J)^-1`, `s_r^2` the mean square residual of
     record `r` times `n / (n - p)`."""
@@ -311,14 +316,14 @@ def identify_inerter(records, *, model: str = "ideal",
         if name in ("ideal", "damped"):
             start = dict(zip(parameters, _linear_start(parameters, motions, forces, width),
                              strict=True))
-        scales, x, residual, jacobian, ok, steps = _fit(
+        scales, x, residual, jacobian, chain, ok, steps = _fit(
             name, start, motions, forces, force_scale, settings, typical)
         values = np.asarray(scales.values(x))
         start = dict(zip(parameters, values, strict=True))
         rss = float(np.sum(residual**2))
         p = len(parameters)
         pieces = np.split(residual, np.cumsum(sizes)[:-1])
-        covariance = _covariance(jacobian, pieces, p)
+        covariance = chain[:, None] * _covariance(jacobian, pieces, p) * chain[None, :]
         errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
             correlations = covariance / np.outer(errors, errors)
