@@ -27,6 +27,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from ._cache import compiled
 from ._checks import choice, integer
 from ._device import ForceSettings, InerterDevice, Motion, device_force
 
@@ -180,7 +181,7 @@ def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: Force
     return jnp.concatenate(out), ok
 
 
-@eqx.filter_jit
+@compiled
 def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings):
     fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings.force)
     solver = optx.LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol)
@@ -211,7 +212,7 @@ def _linear_start(parameters, motions, forces, width):
     return solution
 
 
-@eqx.filter_jit
+@compiled
 def _sum_of_squares(x, scales, motions, forces, force_scale, settings: ForceSettings):
     residual, ok = _residuals(x, scales, motions, forces, force_scale, settings)
     return jnp.where(ok, jnp.sum(residual**2), jnp.inf)
@@ -235,6 +236,9 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     index = [parameters.index(name) for name in scanned]
     candidates = [np.unique(np.append(_SCAN[name] * typical[name], values[i]))
                   for name, i in zip(scanned, index, strict=True)]
+    # a series stiffness whose resonance the records cannot resolve is not tried
+    candidates = [c[c <= typical["largest_stiffness"]] if name == "series_stiffness" else c
+                  for name, c in zip(scanned, candidates, strict=True)]
     scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]))
     best, best_values = np.inf, values
     for point in itertools.product(*candidates):
@@ -290,22 +294,26 @@ def identify_inerter(records, *, model: str = "ideal",
     records = _records(records)
     motions = [Motion.from_samples(r.time, r.displacement) for r in records]
     forces = [jnp.asarray(r.force, float) for r in records]
-    force_scale = max(float(np.max(np.abs(f))) for f in forces)
-    if force_scale == 0:
+    peak_force = max(float(np.max(np.abs(f))) for f in forces)
+    if peak_force == 0:
         raise ValueError("records: the force is zero throughout")
+    force_scale = jnp.asarray(peak_force)  # an argument of the compiled programs, not a key
     width = lambda m: settings.force.relative_width * float(np.max(np.abs(m.velocity)))
     # typical sizes: the starting values of terms fitted afresh, and the scales of terms
     # whose start is zero
     omega_max = max(math.sqrt(float(np.max(np.abs(m.acceleration)))
                               / float(np.max(np.abs(m.displacement)))) for m in motions)
     b0, ff0 = _linear_start(MODEL_PARAMETERS["ideal"], motions, forces, width)
-    b0 = abs(b0) if b0 != 0 else force_scale / float(np.max(np.abs(motions[0].acceleration)))
+    b0 = abs(b0) if b0 != 0 else peak_force / float(np.max(np.abs(motions[0].acceleration)))
     typical = {
         "inertance": b0,
-        "friction_force": max(abs(ff0), 1e-3 * force_scale),
-        "parasitic_damping": force_scale / max(float(np.max(np.abs(m.velocity)))
+        "friction_force": max(abs(ff0), 1e-3 * peak_force),
+        "parasitic_damping": peak_force / max(float(np.max(np.abs(m.velocity)))
                                                for m in motions),
         "series_stiffness": 100 * b0 * omega_max**2,  # a resonance 10x the fastest test's
+        # a resonance at an eighth of the sampling rate
+        "largest_stiffness": b0 * (2 * math.pi / (8 * max(float(np.median(np.diff(m.time)))
+                                                          for m in motions))) ** 2,
         "backlash": 1e-2 * min(float(np.max(np.abs(m.displacement))) for m in motions),
     }
     n = sum(f.shape[0] for f in forces)
