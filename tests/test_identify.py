@@ -2,9 +2,7 @@
 independent event-driven reference `tests/reference/inerter.py`, 1% force noise), and
 `tid-jax identify` on a records file."""
 
-import contextlib
 import csv
-import io
 import json
 import tomllib
 
@@ -13,13 +11,14 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax.cli import main
 from tid_jax.cli._common import _inputs, _system
 
 try:
     from reference.inerter import synthetic_records
+    from test_cli import run
 except ImportError:  # tests/ imported as a package
     from tests.reference.inerter import synthetic_records
+    from tests.test_cli import run
 
 jax.config.update("jax_enable_x64", True)
 
@@ -119,18 +118,11 @@ def _write_records(path, records, names=True):
                 writer.writerow([f"test {i}", *row] if names else row)
 
 
-def _run(argv):
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        status = main([str(arg) for arg in argv])
-    return status, out.getvalue(), err.getvalue()
-
-
 def test_cli_identifies_and_writes_files_retune_accepts(tmp_path):
     records = synthetic_records(noise=NOISE, seed=0, **PAPER_DEVICE)
     path = tmp_path / "records.csv"
     _write_records(path, records)
-    status, stdout, stderr = _run(["identify", path, "--out", tmp_path / "out", "--quiet"])
+    status, stdout, stderr = run(["identify", path, "--out", tmp_path / "out", "--quiet"])
     assert status == 0, stderr
     assert "inertance" in stdout and "friction_force" in stdout
     data = json.loads((tmp_path / "out" / "identify.json").read_text())
@@ -175,7 +167,7 @@ def test_cli_identifies_and_writes_files_retune_accepts(tmp_path):
 def test_cli_bad_records_file_is_one_line(tmp_path, text, message):
     path = tmp_path / "records.csv"
     path.write_text(text)
-    status, _, stderr = _run(["identify", path, "--out", tmp_path / "out"])
+    status, _, stderr = run(["identify", path, "--out", tmp_path / "out"])
     assert status == 2
     assert message in stderr and len(stderr.strip().splitlines()) == 1, stderr
     assert not (tmp_path / "out" / "identify.json").exists()
