@@ -23,6 +23,7 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
@@ -184,7 +185,10 @@ def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: Force
 @compiled
 def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings):
     fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings.force)
-    solver = optx.LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol)
+    # the damped steps by Cholesky on the normal equations (few, well-scaled unknowns),
+    # whose LAPACK call, unlike QR's, can be kept in the program cache
+    solver = optx.LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol,
+                                     linear_solver=lx.Normal(lx.Cholesky()))
     sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=settings.max_steps,
                              throw=False)
     x = sol.value
