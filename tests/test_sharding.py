@@ -22,15 +22,14 @@ jax.config.update("jax_enable_x64", True)
 import jax
 import numpy as np
 import tid_jax as tj
-import tid_jax._response
 from tid_jax._sharding import batch_sharding, sharded_batch
 
-tid_jax._response.CHUNK = 2
+settings = tj.SolverSettings(chunk=2)
 system = tj.paper_system()
 omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
-response = tj.frequency_response(system, omegas, [100.0, 400.0])
+response = tj.frequency_response(system, omegas, [100.0, 400.0], settings=settings)
 retuned = tj.retune(system, [200.0, 600.0], omegas=np.linspace(0.8, 1.2, 9) * float(
-    system.host_frequency), tol=1e-5)
+    system.host_frequency), tol=1e-5, settings=settings)
 seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
 # The solve itself, on the same (already compiled) padded batch: where did its outputs live?
 from tid_jax._response import _points, batched
@@ -38,7 +37,7 @@ flat_w, flat_a = (g.reshape(-1) for g in np.meshgrid(omegas, [100.0, 400.0]))
 solved = []
 sharded_batch(
     lambda w, a: solved.append(_points(
-        batched(system, w.shape[0]), w, a, tj.SolverSettings(), jax.numpy.zeros(w.shape + (4,)),
+        batched(system, w.shape[0]), w, a, settings, jax.numpy.zeros(w.shape + (4,)),
         jax.numpy.ones(w.shape, bool), jax.numpy.zeros(w.shape, bool))) or solved[-1],
     jax.numpy.asarray(flat_w), jax.numpy.asarray(flat_a),
 )

@@ -99,17 +99,11 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (stiffness, damping))
 
 
-# Points solved together as one vmapped batch; larger batches are solved chunk after chunk,
-# so that each chunk's adaptive integrations and Newton iterations wait only for its own
-# slowest point (neighbouring points, of similar stiffness, share a chunk).
-CHUNK = 64
-
-
 @compiled
 def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
     (one per point, its fields batched): Newton shooting on a work queue (`shoot_queue`,
-    `CHUNK` lanes per device), from the linear steady state after
+    `settings.chunk` lanes per device), from the linear steady state after
     `settings.transient_periods` periods or, where `use_warm`, from the scaled states
     `warm`; then one integration per orbit samples it and verifies its periodicity.
     Points where `valid` is False (padding, after the valid ones) are skipped by the
@@ -121,10 +115,11 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         z = jnp.where(warm_start, z, linear_initial_state(q))
         return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
 
-    z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), CHUNK, valid)
-    shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, CHUNK, v), z0, p, valid)
+    chunk = settings.chunk
+    z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), chunk, valid)
+    shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, chunk, v), z0, p, valid)
     samples, residual = map_batch(
-        lambda batch: verified_samples(*batch, settings), (shots.state, p), CHUNK, valid
+        lambda batch: verified_samples(*batch, settings), (shots.state, p), chunk, valid
     )
     static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * 2, axis=-1)
@@ -168,13 +163,13 @@ def batched(system: TIDSystem, count: int) -> TIDSystem:
 
 
 # Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
-# least CHUNK points (SMALL_BLOCK points for the smallest batches, which would mostly
+# least `SolverSettings.chunk` points (SMALL_BLOCK points for the smallest batches, which would mostly
 # integrate padding), so that batches of every size share a few compiled programs.
 BLOCK = 512
 SMALL_BLOCK = 8
 
 
-def _block_sizes(count: int):
+def _block_sizes(count: int, chunk: int):
     """(start, stop, padded size) of the blocks of a batch of `count` points: as few as
     hold `BLOCK` points each, of equal sizes."""
     blocks = -(-count // BLOCK)
@@ -182,7 +177,7 @@ def _block_sizes(count: int):
         start, stop = i * count // blocks, (i + 1) * count // blocks
         size = stop - start
         yield start, stop, SMALL_BLOCK if size <= SMALL_BLOCK else max(
-            CHUNK, 1 << (size - 1).bit_length())
+            chunk, 1 << (size - 1).bit_length())
 
 
 def _solve_blocks(settings, batch, warm=None) -> dict:
@@ -195,7 +190,7 @@ def _solve_blocks(settings, batch, warm=None) -> dict:
     if warm is None:
         warm = jnp.zeros((count, 4), omegas.dtype)
     outs = []
-    for start, stop, size in _block_sizes(count):
+    for start, stop, size in _block_sizes(count, settings.chunk):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = jnp.asarray(np.arange(start, start + size) < stop)
         part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))

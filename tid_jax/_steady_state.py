@@ -39,6 +39,10 @@ class SolverSettings(eqx.Module):
       has no integration error: Newton's iterations reach it in about one more step,
       and it keeps the stroke of a terminal that sticks for most of the period (a small
       difference of positions) accurate.
+    - `chunk`: points solved together as one vmapped batch (per device); larger batches
+      are solved chunk after chunk, so that each chunk's adaptive integrations and
+      Newton iterations wait only for its own slowest point (neighbouring points, of
+      similar stiffness, share a chunk).
     """
 
     rtol: float = 1e-8
@@ -51,6 +55,7 @@ class SolverSettings(eqx.Module):
     samples: int = 128
     implicit: bool = False
     exact_friction: bool = False
+    chunk: int = 64
 
     def __check_init__(self):
         for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol"):
@@ -58,7 +63,7 @@ class SolverSettings(eqx.Module):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
         for name, low in (("max_steps", 16), ("transient_periods", 0), ("max_newton_steps", 1),
-                          ("samples", 8)):
+                          ("samples", 8), ("chunk", 1)):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= low):
                 raise ValueError(f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
