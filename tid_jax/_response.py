@@ -163,8 +163,9 @@ def batched(system: TIDSystem, count: int) -> TIDSystem:
 
 
 # Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
-# least `SolverSettings.chunk` points (SMALL_BLOCK points for the smallest batches, which would mostly
-# integrate padding), so that batches of every size share a few compiled programs.
+# least `SolverSettings.chunk` points (SMALL_BLOCK points for the smallest batches, which
+# would mostly integrate padding), so that batches of every size share a few compiled
+# programs.
 BLOCK = 512
 SMALL_BLOCK = 8
 
