@@ -67,9 +67,6 @@ class InerterDevice(eqx.Module):
         stiffness = self.series_stiffness
         return not isinstance(stiffness, jax.core.Tracer) and math.isinf(float(stiffness))
 
-    def to_dict(self) -> dict:
-        return {name: float(getattr(self, name)) for name in DEVICE_FIELDS}
-
 
 class Motion(eqx.Module):
     """An imposed motion sampled at `time` (s): displacement (m), velocity (m/s) and
@@ -121,6 +118,17 @@ class ForceSettings(eqx.Module):
     max_steps: int = 200_000
 
 
+def friction_width(motion: Motion, settings: ForceSettings):
+    """The velocity scale (m/s) of the smoothed friction sign along `motion`."""
+    return settings.relative_width * jnp.max(jnp.abs(motion.velocity))
+
+
+def _mechanism_force(device: InerterDevice, acceleration, velocity, width):
+    """The force (N) that moves the mechanism (inertance, damping, friction)."""
+    return (device.inertance * acceleration + device.parasitic_damping * velocity
+            + device.friction_force * jnp.tanh(velocity / width))
+
+
 def _dead_zone(d, gap):
     return jnp.sign(d) * jnp.maximum(jnp.abs(d) - 0.5 * gap, 0.0)
 
@@ -131,26 +139,27 @@ def device_force(device: InerterDevice, motion: Motion,
     whether the mechanism's integration succeeded (always, for a rigid device).
     Traceable in the device's fields; rigid or compliant is decided by whether
     `series_stiffness` is infinite, which must be concrete."""
-    b, ff, cp = device.inertance, device.friction_force, device.parasitic_damping
-    peak_velocity = jnp.max(jnp.abs(motion.velocity))
-    width = settings.relative_width * peak_velocity
+    width = friction_width(motion, settings)
+    terminal = device.terminal_mass * motion.acceleration
     if device.rigid:
-        force = ((b + device.terminal_mass) * motion.acceleration + cp * motion.velocity
-                 + ff * jnp.tanh(motion.velocity / width))
+        force = terminal + _mechanism_force(device, motion.acceleration, motion.velocity,
+                                            width)
         return force, jnp.asarray(True)
     ks, gap = device.series_stiffness, device.backlash
-    scale = jnp.stack([jnp.max(jnp.abs(motion.displacement)), peak_velocity])
+    scale = jnp.stack([jnp.max(jnp.abs(motion.displacement)),
+                       jnp.max(jnp.abs(motion.velocity))])
 
     def field(t, z, args):
         q, w = z * scale
         u, _ = motion.at(t)
         spring = ks * _dead_zone(u - q, gap)
-        return jnp.stack([w, (spring - cp * w - ff * jnp.tanh(w / width)) / b]) / scale
+        # the mechanism's acceleration, where its force (linear in it) equals the spring's
+        rest = _mechanism_force(device, 0.0, w, width)
+        return jnp.stack([w, (spring - rest) / device.inertance]) / scale
 
     # start on the quasi-static path: the spring already carries the rigid mechanism's
     # force, which keeps a lightly damped device from ringing at the record's start
-    held = (b * motion.acceleration[0] + cp * motion.velocity[0]
-            + ff * jnp.tanh(motion.velocity[0] / width))
+    held = _mechanism_force(device, motion.acceleration[0], motion.velocity[0], width)
     stretch = held / ks + jnp.sign(held) * 0.5 * gap
     z0 = jnp.stack([motion.displacement[0] - stretch, motion.velocity[0]]) / scale
     sol = dfx.diffeqsolve(
@@ -160,6 +169,5 @@ def device_force(device: InerterDevice, motion: Motion,
         max_steps=settings.max_steps, adjoint=dfx.ForwardMode(), throw=False,
     )
     q = sol.ys[:, 0] * scale[0]
-    force = device.terminal_mass * motion.acceleration + ks * _dead_zone(
-        motion.displacement - q, gap)
+    force = terminal + ks * _dead_zone(motion.displacement - q, gap)
     return force, sol.result == dfx.RESULTS.successful

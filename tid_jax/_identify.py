@@ -12,8 +12,9 @@ the force (the paper's Figures 2-3). The models are nested, each adding one term
 Each model is fitted by Levenberg-Marquardt (optimistix) on the residual force of all
 records together, from the model before it (the first two are linear in their
 parameters and start from their linear least-squares solution). The standard errors are
-those of the linearised problem, `s^2 (J^T J)^-1` with `s^2` the residual variance; the
-comparison says which terms the data support by the Bayesian information criterion.
+those of the linearised problem with the noise variance of each record estimated from
+its residual; the comparison says which terms the data support by the Bayesian
+information criterion.
 """
 
 import itertools
@@ -30,16 +31,12 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ._cache import compiled
 from ._checks import choice, integer
-from ._device import ForceSettings, InerterDevice, Motion, device_force
+from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
-MODEL_PARAMETERS = {
-    "ideal": ("inertance", "friction_force"),
-    "damped": ("inertance", "friction_force", "parasitic_damping"),
-    "compliant": ("inertance", "friction_force", "parasitic_damping", "series_stiffness"),
-    "backlash": ("inertance", "friction_force", "parasitic_damping", "series_stiffness",
-                 "backlash"),
-}
+# each model the one before and one more term of `InerterDevice`
+_TERMS = ("inertance", "friction_force", "parasitic_damping", "series_stiffness", "backlash")
+MODEL_PARAMETERS = {model: _TERMS[: i + 2] for i, model in enumerate(MODELS)}
 MIN_SAMPLES = 32
 SUPPORT_BIC = 10.0  # a term is supported where it lowers the BIC by more than this
 
@@ -230,10 +227,10 @@ _SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspa
 
 
 def _scanned_start(parameters, values, motions, forces, force_scale,
-                   settings: IdentifySettings, typical):
+                   settings: IdentifySettings, typical, stiffness_limit):
     """`values` with the scanned terms (`_SCAN`) of the model at the best of their
     scanned starting values, tried together (a term fitted before also keeps its value
-    as a candidate), the others held."""
+    as a candidate; no series stiffness above `stiffness_limit`), the others held."""
     scanned = [name for name in parameters if name in _SCAN]
     if not scanned:
         return values
@@ -241,7 +238,7 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     candidates = [np.unique(np.append(_SCAN[name] * typical[name], values[i]))
                   for name, i in zip(scanned, index, strict=True)]
     # a series stiffness whose resonance the records cannot resolve is not tried
-    candidates = [c[c <= typical["largest_stiffness"]] if name == "series_stiffness" else c
+    candidates = [c[c <= stiffness_limit] if name == "series_stiffness" else c
                   for name, c in zip(scanned, candidates, strict=True)]
     scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]))
     best, best_values = np.inf, values
@@ -255,14 +252,15 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     return best_values
 
 
-def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical):
+def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical,
+         stiffness_limit):
     """Least squares for `model` from the parameter values `start` (a dict; where a
     term is missing from it, the scanned terms start from a scan)."""
     parameters = MODEL_PARAMETERS[model]
     values = np.array([start.get(name, typical[name]) for name in parameters])
     if any(name not in start for name in parameters):
         values = _scanned_start(parameters, values, motions, forces, force_scale, settings,
-                                typical)
+                                typical, stiffness_limit)
     scales = np.array([abs(v) if v != 0 else typical[name] for name, v in
                        zip(parameters, values, strict=True)])
     scales = _Scales(parameters, jnp.asarray(scales))
@@ -302,7 +300,7 @@ def identify_inerter(records, *, model: str = "ideal",
     if peak_force == 0:
         raise ValueError("records: the force is zero throughout")
     force_scale = jnp.asarray(peak_force)  # an argument of the compiled programs, not a key
-    width = lambda m: settings.force.relative_width * float(np.max(np.abs(m.velocity)))
+    width = lambda m: float(friction_width(m, settings.force))
     # typical sizes: the starting values of terms fitted afresh, and the scales of terms
     # whose start is zero
     omega_max = max(math.sqrt(float(np.max(np.abs(m.acceleration)))
@@ -315,21 +313,21 @@ def identify_inerter(records, *, model: str = "ideal",
         "parasitic_damping": peak_force / max(float(np.max(np.abs(m.velocity)))
                                                for m in motions),
         "series_stiffness": 100 * b0 * omega_max**2,  # a resonance 10x the fastest test's
-        # a resonance at an eighth of the sampling rate
-        "largest_stiffness": b0 * (2 * math.pi / (8 * max(float(np.median(np.diff(m.time)))
-                                                          for m in motions))) ** 2,
         "backlash": 1e-2 * min(float(np.max(np.abs(m.displacement))) for m in motions),
     }
+    # the series stiffness of a resonance at an eighth of the sampling rate
+    stiffness_limit = b0 * (2 * math.pi / (8 * max(float(np.median(np.diff(m.time)))
+                                                   for m in motions))) ** 2
     n = sum(f.shape[0] for f in forces)
     sizes = [f.shape[0] for f in forces]
-    start, fits, summary = {}, [], []
+    start, summary = {}, []
     for name in MODELS[: MODELS.index(model) + 1]:
         parameters = MODEL_PARAMETERS[name]
         if name in ("ideal", "damped"):
             start = dict(zip(parameters, _linear_start(parameters, motions, forces, width),
                              strict=True))
         scales, x, residual, jacobian, chain, ok, steps = _fit(
-            name, start, motions, forces, force_scale, settings, typical)
+            name, start, motions, forces, force_scale, settings, typical, stiffness_limit)
         values = np.asarray(scales.values(x))
         start = dict(zip(parameters, values, strict=True))
         rss = float(np.sum(residual**2))
@@ -339,8 +337,8 @@ def identify_inerter(records, *, model: str = "ideal",
         errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
             correlations = covariance / np.outer(errors, errors)
-        fits.append(dict(scales=scales, x=x, values=values, errors=errors,
-                         correlations=correlations, pieces=pieces, ok=ok, steps=steps))
+        last = dict(values=values, errors=errors, correlations=correlations, pieces=pieces,
+                    ok=ok, steps=steps)
         if progress is not None:
             progress(f"model {name!r} fitted: residual RMS {math.sqrt(rss / n):.4g} N"
                      f"{'' if ok else ' (not converged)'}")
@@ -357,7 +355,6 @@ def identify_inerter(records, *, model: str = "ideal",
         supported=jnp.asarray([True] + [bool(d < -SUPPORT_BIC) for d in delta[1:]]),
         converged=jnp.asarray([row[4] for row in summary]),
     )
-    last = fits[-1]
     fitted = tuple(jnp.asarray(f) + jnp.asarray(piece)
                    for f, piece in zip(forces, last["pieces"], strict=True))
     return InerterFit(

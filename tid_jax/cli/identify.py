@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from .. import __version__, plot
+from .._device import Motion
 from .._identify import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
 from .._io import write_csv, write_json, write_toml
 from ._common import PROG, CLIError, _add_output_arguments, _format_table, _Output
@@ -117,8 +118,9 @@ def _run_identify(args) -> int:
     labels = [r.name or f"record {i + 1}" for i, r in enumerate(records)]
     csv_rows, figure_records = [], []
     for label, record, fitted in zip(labels, records, fit.fitted_force, strict=True):
-        time, displacement = np.asarray(record.time), np.asarray(record.displacement)
-        velocity = np.gradient(displacement, time, edge_order=2)
+        motion = Motion.from_samples(record.time, record.displacement)
+        time, displacement = np.asarray(motion.time), np.asarray(motion.displacement)
+        velocity = np.asarray(motion.velocity)
         force, fitted = np.asarray(record.force), np.asarray(fitted)
         csv_rows += [[label, *row] for row in zip(time.tolist(), displacement.tolist(),
                                                   velocity.tolist(), force.tolist(),
