@@ -172,3 +172,38 @@ def test_retuned_design_is_optimal_on_the_reference():
     assert optimum == pytest.approx(float(result.x_peak[0]), rel=1e-4)
     for detuned in ((1.02 * k, c), (0.98 * k, c), (k, 1.2 * c), (k, 0.8 * c)):
         assert band_peak(*detuned) > optimum, detuned
+
+
+def test_sensitivities_and_robust_design_take_exact_friction():
+    """`sensitivities` and `robust_tune` with exact friction: the peaks they report at
+    their tunings are the event-driven reference's largest over the band, and the
+    sensitivity to k matches central differences of the peak."""
+    omegas = 2 * math.pi * np.linspace(3.0, 5.0, 201)
+
+    def band_peak(system, amplitude):
+        # on the grid, then on a grid 40 times finer about its largest value
+        peaks = [_reference(system, omega, amplitude)["x_max"] for omega in omegas]
+        j, step = int(np.argmax(peaks)), omegas[1] - omegas[0]
+        fine = omegas[j] + step * np.linspace(-1, 1, 81)
+        return max(_reference(system, omega, amplitude)["x_max"] for omega in fine)
+
+    sens = tj.sensitivities(PAPER, 400.0, optimum=False)
+    assert bool(sens.converged)
+    assert float(sens.host_peak) == pytest.approx(band_peak(PAPER, 400.0), rel=1e-4)
+    k, h = float(PAPER.tid_stiffness), 1e-3
+    i = sens.parameters.index("tid_stiffness")
+    shifted = [float(tj.sensitivities(PAPER.replace(tid_stiffness=k * (1 + s * h)), 400.0,
+                                      optimum=False).host_peak) for s in (1, -1)]
+    assert float(sens.host_derivative[i]) == pytest.approx(
+        (shifted[0] - shifted[1]) / (2 * h * k), rel=2e-3)
+
+    robust = tj.robust_tune(PAPER, [200.0, 600.0], stroke_limit=None)
+    assert bool(robust.converged)
+    tuned = PAPER.replace(tid_stiffness=float(robust.tid_stiffness),
+                          tid_damping=float(robust.tid_damping))
+    # the robust design judges peaks on its 61-frequency grid refined by parabolas
+    # (`tuning_performance`): as accurate as that refinement, about 1e-4
+    for j, amplitude in enumerate((200.0, 600.0)):
+        assert float(robust.performance.host_peak[0, j]) == pytest.approx(
+            band_peak(tuned, amplitude), rel=1e-3)
+    assert float(robust.worst_ratio) >= 1.0
