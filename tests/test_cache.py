@@ -10,6 +10,7 @@ import time
 SCRIPT = textwrap.dedent(
     """
     import json, sys
+    import equinox as eqx
     import jax
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
@@ -18,10 +19,15 @@ SCRIPT = textwrap.dedent(
 
     traces = {"plain": 0, "callback": 0}
 
+    class Extremes(eqx.Module):
+        low: jax.Array
+        high: jax.Array
+
     @compiled
     def plain(x, power, *, shift):
         traces["plain"] += 1
-        return {"y": jnp.sin(x) ** power + shift, "n": (x.shape[0], jnp.sum(x > 0))}
+        return {"y": jnp.sin(x) ** power + shift, "n": (x.shape[0], jnp.sum(x > 0)),
+                "m": Extremes(jnp.min(x) * power, jnp.max(x))}
 
     @compiled
     def callback(x):
@@ -36,6 +42,7 @@ SCRIPT = textwrap.dedent(
         "traces": traces,
         "y": [[float(v) for v in o["y"]] for o in out[:3]],
         "n": [[int(v) for v in o["n"]] for o in out[:3]],
+        "m": [[type(o["m"]).__name__, float(o["m"].low), float(o["m"].high)] for o in out[:3]],
         "callback": [float(v) for v in out[3]],
     }))
     """
@@ -64,6 +71,7 @@ def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
     assert second["traces"] == {"plain": 0, "callback": 1}
     for run in (first, second):
         assert run["y"] == off["y"] and run["n"] == off["n"]
+        assert run["m"] == off["m"]  # a Module in the output is restored as that Module
         assert run["callback"] == off["callback"]
     # A kept program of other sources or library versions is never loaded: the key holds
     # a fingerprint of both, so a changed file name means a changed program.

@@ -308,6 +308,11 @@ BAD_TOML = 'host_mass = 1500\nfriction_force = "twenty\n'
         (["frf"], "host_frequency_hz = 4.0\nhost_stiffness = 1e6\n", "not both"),
         (["frf"], "[solver]\nrtoll = 1e-6\n", "unknown key 'rtoll' in [solver]"),
         (["frf"], "[solver]\nrtol = -1.0\n", "SolverSettings.rtol must be a positive number"),
+        (["frf", "--series-stiffness", "3e5"], None, "needs a rigid inerter"),
+        (["retune"], "series_stiffness = 3e5\n", "tid-jax retune needs a rigid inerter"),
+        (["frf", "--series-stiffness", "0"], None, "series_stiffness must be finite and positive"),
+        (["frf", "--backlash", "1e-4"], None, "backlash needs a finite series_stiffness"),
+        (["frf", "--parasitic-damping", "-3"], None, "parasitic_damping must be finite and"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):

@@ -23,7 +23,7 @@ FREQUENCIES_HZ = np.array([3.0, 3.5, 3.8, 4.0, 4.2, 4.5, 5.0])
 
 def _reference(system: tj.TIDSystem, omega: float, amplitude: float) -> dict:
     fields = {name: float(value) for name, value in system.to_dict().items()
-              if name != "friction_width"}
+              if name not in ("friction_width", "series_stiffness", "backlash")}
     return coulomb_steady_state(**fields, omega=omega, amplitude=amplitude)
 
 

@@ -66,8 +66,63 @@ def test_stuck_receptance_is_sdof():
 @pytest.mark.parametrize("field", FIELD_NAMES)
 @pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
 def test_system_rejects_bad_values(field, bad):
+    if field == "series_stiffness" and bad == float("inf"):
+        assert tj.paper_system().replace(series_stiffness=bad).rigid  # inf: rigid
+        return
     with pytest.raises(ValueError, match=field):
         tj.paper_system().replace(**{field: bad})
+
+
+def test_device_terms_default_to_the_ideal_inerter():
+    system = tj.paper_system()
+    assert float(system.parasitic_damping) == 0.0
+    assert float(system.terminal_mass) == 0.0
+    assert float(system.backlash) == 0.0
+    assert system.rigid and float(system.series_stiffness) == math.inf
+    assert system.to_dict()["series_stiffness"] is None  # rigid: JSON/TOML leave it out
+    assert tj.TIDSystem(**system.to_dict()).rigid
+    assert not system.replace(series_stiffness=3e5).rigid
+    with pytest.raises(ValueError, match="backlash needs a finite series_stiffness"):
+        system.replace(backlash=1e-4)
+    with pytest.raises(ValueError, match="series_stiffness must be positive"):
+        system.replace(series_stiffness=0.0)
+
+
+def _direct_device_receptance(system, omega):
+    """Independent: the 3 x 3 dynamic stiffness of host x, terminal y (mass mt) and
+    mechanism q (inertance b, damping cp to ground) joined by the spring ks, solved for a
+    unit force on the host; the rigid device as the 2 x 2 of y = q."""
+    M, K, C, b, k, c, cp, mt, ks = (float(getattr(system, n)) for n in (
+        "host_mass", "host_stiffness", "host_damping", "inertance", "tid_stiffness",
+        "tid_damping", "parasitic_damping", "terminal_mass", "series_stiffness"))
+    jw = 1j * omega
+    s = k + jw * c
+    if math.isinf(ks):
+        D = np.array([[K - M * omega**2 + jw * C + s, -s],
+                      [-s, s - (b + mt) * omega**2 + jw * cp]])
+        return np.linalg.solve(D, np.array([1.0, 0.0]))
+    D = np.array([[K - M * omega**2 + jw * C + s, -s, 0.0],
+                  [-s, s + ks - mt * omega**2, -ks],
+                  [0.0, -ks, ks - b * omega**2 + jw * cp]])
+    return np.linalg.solve(D, np.array([1.0, 0.0, 0.0]))[:2]
+
+
+@pytest.mark.parametrize("device", [
+    dict(parasitic_damping=300.0),
+    dict(terminal_mass=2.0),
+    dict(series_stiffness=3e5),
+    dict(parasitic_damping=300.0, terminal_mass=2.0, series_stiffness=3e5, backlash=1e-4),
+])
+@pytest.mark.parametrize("ratio", [0.5, 0.9, 1.0, 1.07, 2.0, 6.0])
+def test_device_receptance_matches_matrix_solution(device, ratio):
+    system = tj.paper_system().replace(**device)
+    omega = ratio * float(system.host_frequency)
+    host, inerter = tj.linear_receptance(system, omega)
+    expected = _direct_device_receptance(system, omega)
+    assert complex(host) == pytest.approx(expected[0], rel=1e-11)
+    assert complex(inerter) == pytest.approx(expected[1], rel=1e-11)
+    ideal = tj.linear_receptance(tj.paper_system(), omega).inerter
+    assert abs(complex(inerter) / complex(ideal) - 1) > 1e-3  # the device term shows
 
 
 @pytest.mark.parametrize("field", ["host_mass", "host_stiffness", "inertance", "tid_stiffness"])

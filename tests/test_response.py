@@ -1,7 +1,9 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings as hypothesis_settings, strategies as st
+from hypothesis import given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
 
 import tid_jax as tj
 from tests.reference.coulomb import coulomb_steady_state
@@ -176,10 +178,10 @@ def test_unconverged_point_is_flagged_and_retried(system):
     settings = tj.SolverSettings(transient_periods=0, max_newton_steps=1)
     omega = jnp.array([0.95 * float(system.host_frequency)])
     first = _solve_blocks(settings, (omega, jnp.array([100.0]), batched(system, 1)))
-    assert not bool(first["converged"][0])
-    assert float(first["residual"][0]) > settings.periodicity_tol
+    assert not bool(first.converged[0])
+    assert float(first.residual[0]) > settings.periodicity_tol
     # The peaks of an orbit that was not found are not reported as numbers.
-    assert np.isnan(float(first["x_max"][0])) and np.isnan(float(first["y_max"][0]))
+    assert np.isnan(float(first.x_max[0])) and np.isnan(float(first.y_max[0]))
     result = tj.frequency_response(system, omega[0], 100.0, settings=settings)
     assert bool(result.converged)
 

@@ -124,6 +124,31 @@ def test_robust_tune_rejects_bad_input(system, best):
         tj.tuning_performance(system.replace(host_mass=1000.0), best)
 
 
+def test_robust_settings_set_the_stages(system, best, robust_free):
+    settings = tj.RobustSettings(sharpness=(1000.0,))
+    messages = []
+    design = tj.robust_tune(system, ROBUST_AMPLITUDES, best=best, stroke_limit=None,
+                            robust_settings=settings, progress=messages.append)
+    assert any("stage 1/1 (smooth-max sharpness 1000)" in m for m in messages)
+    assert not any("stage 2/" in m for m in messages)
+    assert bool(design.converged)
+    # the last stage's sharpness is the default's: the same optimum
+    assert float(design.worst_ratio) == pytest.approx(float(robust_free.worst_ratio), rel=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("changes", "name"),
+    [(dict(sharpness=()), "sharpness"), (dict(stroke_margin=1.0), "stroke_margin"),
+     (dict(check_refinement=0), "check_refinement"), (dict(stroke_rounds=-1), "stroke_rounds"),
+     (dict(max_step=float("nan")), "max_step")],
+)
+def test_bad_robust_settings(system, best, changes, name):
+    with pytest.raises(ValueError, match=f"RobustSettings.{name}"):
+        tj.RobustSettings(**changes)
+    with pytest.raises(ValueError, match="robust_settings must be a RobustSettings"):
+        tj.robust_tune(system, ROBUST_AMPLITUDES, best=best, robust_settings=tj.RetuneSettings())
+
+
 # --- command line ----------------------------------------------------------------------
 
 

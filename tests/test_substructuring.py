@@ -216,29 +216,53 @@ def test_linear_delayed_loop_matches_theory(delay, prediction, lag):
         assert np.max(relative(result.x_max, np.abs(x_ideal))) > 0.05
 
 
-def test_parasitic_compliance_matches_theory():
-    # Inerter behind a spring k_p: terminal dynamic stiffness -b w^2 k_p / (k_p - b w^2).
-    # With the paper's harmonic guess -b_g w^2 y*, e cancels b_g y'' in steady state.
-    stiffness = 1e6
+def test_compliant_device_matches_theory():
+    # The physical substructure is the whole device: a mechanism (b, cp) behind a spring
+    # ks, with a terminal mass mt; terminal dynamic stiffness Dm / (1 + Dm / ks) - mt w^2,
+    # Dm = -b w^2 + i w cp. With the paper's harmonic guess -b_g w^2 y* (b_g = b + mt by
+    # default), e cancels b_g y'' in steady state.
+    stiffness, damping, mass = 1e6, 300.0, 2.0
+    device = FRICTIONLESS.replace(series_stiffness=stiffness, parasitic_damping=damping,
+                                  terminal_mass=mass)
     result = tj.simulate_substructuring(
-        FRICTIONLESS,
+        device,
         OMEGAS,
         A,
         delay=0.0,
         guessed_force="harmonic",
         prediction=None,
-        parasitic_stiffness=stiffness,
         sample_rate=8000.0,
         periods=30,
         reference=False,
     )
-    inertial = -B * OMEGAS**2
-    x, y = closed_form(FRICTIONLESS, OMEGAS, inertial * stiffness / (stiffness + inertial))
+    mechanism = -B * OMEGAS**2 + 1j * OMEGAS * damping
+    x, y = closed_form(FRICTIONLESS, OMEGAS, mechanism / (1 + mechanism / stiffness)
+                       - mass * OMEGAS**2)
     assert bool(np.all(result.stable))
     assert np.max(relative(result.x_max, np.abs(x))) < 2e-3
     assert np.max(relative(result.y_max, np.abs(y))) < 2e-3
-    rigid, _ = closed_form(FRICTIONLESS, OMEGAS, inertial)
-    assert np.max(relative(np.abs(x), np.abs(rigid))) > 0.01  # the compliance shows
+    host, inerter = tj.linear_receptance(device, OMEGAS)
+    assert np.max(relative(np.abs(A * np.asarray(host)), np.abs(x))) < 1e-12
+    assert np.max(relative(np.abs(A * np.asarray(inerter)), np.abs(y))) < 1e-12
+    rigid, _ = closed_form(FRICTIONLESS, OMEGAS, -B * OMEGAS**2)
+    assert np.max(relative(np.abs(x), np.abs(rigid))) > 0.01  # the device shows
+
+
+def test_backlash_is_compared_with_the_rigid_device():
+    # The whole-system reference of a test with a compliant device is its rigid
+    # counterpart, the design under test; free play worsens the agreement.
+    compliant = SYSTEM.replace(series_stiffness=1e6)
+    options = dict(delay=0.0, guessed_force="harmonic", prediction=None, sample_rate=8000.0,
+                   periods=30)
+    tight = tj.simulate_substructuring(compliant, OMEGAS[1], A, **options)
+    loose = tj.simulate_substructuring(compliant.replace(backlash=5e-4), OMEGAS[1], A,
+                                       **options)
+    whole = tj.frequency_response(SYSTEM, OMEGAS[1], A)
+    for result in (tight, loose):
+        assert bool(result.stable)
+        assert float(result.reference_x_max) == pytest.approx(float(whole.x_max),
+                                                             rel=1e-9)
+    assert abs(float(loose.x_amplitude_error)) > abs(float(tight.x_amplitude_error))
 
 
 def test_stability_follows_neutral_condition():
@@ -304,7 +328,6 @@ def test_polynomial_prediction_amplifies_the_inertia_loop():
         (dict(prediction_order=7), "prediction_order"),
         (dict(prediction_horizon=-1.0), "prediction_horizon"),
         (dict(actuator_lag=-1.0), "actuator_lag"),
-        (dict(parasitic_stiffness=0.0), "parasitic_stiffness"),
         (dict(substeps=0), "substeps"),
         (dict(periods=3), "periods"),
         (dict(divergence_factor=1.0), "divergence_factor"),
@@ -377,6 +400,26 @@ def test_cli_rtds_table_and_files(tmp_path, whole):
     data = json.loads((tmp_path / "rtds.json").read_text())
     assert data["test"]["guessed_inertance_kg"] == pytest.approx(0.8 * B)
     assert (tmp_path / "rtds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cli_rtds_takes_the_whole_device(tmp_path):
+    device = dict(series_stiffness=1e6, backlash=1e-4, parasitic_damping=300.0,
+                  terminal_mass=2.0)
+    flags = [item for name, value in device.items()
+             for item in (f"--{name.replace('_', '-')}", value)]
+    options = dict(delay=0.0, guessed_force="harmonic", prediction=None, sample_rate=8000.0)
+    status, stdout, stderr = run_cli(["rtds", "--frequency-hz", "4.0", "--amplitude", A,
+                                      "--delay-ms", 0, "--guessed-force", "harmonic",
+                                      "--prediction", "none", "--sample-rate", 8000, *flags,
+                                      "--out", tmp_path, "--quiet"])
+    assert status == 0, stderr
+    data = json.loads((tmp_path / "rtds.json").read_text())
+    assert {name: data["system"][name] for name in device} == device
+    assert data["test"]["guessed_inertance_kg"] == pytest.approx(B + 2.0)
+    expected = tj.simulate_substructuring(SYSTEM.replace(**device), 2 * math.pi * 4.0, A,
+                                          **options)
+    assert bool(expected.stable)
+    assert data["x_test_m"][0] == pytest.approx(float(expected.x_max), rel=1e-9)
 
 
 @pytest.mark.parametrize(

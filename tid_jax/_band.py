@@ -32,7 +32,7 @@ from ._response import (
     point_response,
     scaled_states,
 )
-from ._steady_state import SolverSettings
+from ._settings import SolverSettings
 from ._system import TIDSystem
 
 # Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
@@ -41,7 +41,15 @@ BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
 
 def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Array, " freqs"]:
-    """`n` circular frequencies (rad/s) spanning 0.65-1.4 times the host frequency."""
+    """The default frequency band: 0.65-1.4 times the host frequency.
+
+    **Arguments:**
+
+    - `system`: a `TIDSystem` (its host frequency sqrt(K / M)).
+    - `n`: the number of frequencies, an integer >= 5.
+
+    **Returns:** `n` evenly spaced circular frequencies, rad/s.
+    """
     if not (isinstance(n, int) and n >= 5):
         raise ValueError(f"n must be an integer >= 5, got {n!r}")
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))

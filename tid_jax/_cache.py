@@ -36,9 +36,14 @@ STALE_DAYS = 30
 
 
 def default_cache_dir() -> Path | None:
-    """The folder of the compilation cache: `$TID_JAX_CACHE_DIR` if set (`off`, `0`
-    or empty turn the cache off: `None`), else `tid_jax/` in the user's cache folder
-    (`$XDG_CACHE_HOME`, default `~/.cache`)."""
+    """The folder of the compilation cache.
+
+    **Arguments:** none; `$TID_JAX_CACHE_DIR` and `$XDG_CACHE_HOME` are read.
+
+    **Returns:** `$TID_JAX_CACHE_DIR` if set (`off`, `0` or empty turn the cache off:
+    `None`), else `tid_jax/` in the user's cache folder (`$XDG_CACHE_HOME`, default
+    `~/.cache`).
+    """
     value = os.environ.get(CACHE_ENVIRONMENT_VARIABLE)
     if value is not None:
         return None if value.strip().lower() in _OFF else Path(value).expanduser()
@@ -47,12 +52,18 @@ def default_cache_dir() -> Path | None:
 
 
 def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path | None:
-    """Keep compiled programs in `directory` (default `default_cache_dir()`): JAX's
-    persistent compilation cache for every program, however quickly it compiles (the
-    small ones of the array operations between the solves add up to seconds), and the
-    traced programs of this package's entry points in its `programs/`.
-    Call it before the first computation. Returns the folder, or `None` (and changes
-    nothing) when the cache is turned off or its folder cannot be created."""
+    """Keep compiled programs on disk: JAX's persistent compilation cache for every
+    program, however quickly it compiles (the small ones of the array operations between
+    the solves add up to seconds), and the traced programs of this package's entry points
+    in its `programs/`. Call it before the first computation.
+
+    **Arguments:**
+
+    - `directory`: the cache folder (default `default_cache_dir()`).
+
+    **Returns:** the folder, or `None` (and nothing changes) when the cache is turned off
+    or its folder cannot be created.
+    """
     global _programs_folder
     folder = default_cache_dir() if directory is None else Path(directory).expanduser()
     if folder is None:
@@ -161,9 +172,9 @@ class _Program:
             os.replace(file.name, path)
         # A new program runs as later runs will load it, so that they find it compiled.
         try:
-            exported, out_structure = pickle.loads(path.read_bytes())
+            exported, skeleton = pickle.loads(path.read_bytes())
             _used(path)
-            return jax.jit(jax.export.deserialize(exported).call), out_structure
+            return jax.jit(jax.export.deserialize(exported).call), jax.tree.structure(skeleton)
         except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
             return None, None
 
@@ -176,9 +187,11 @@ class _Program:
         def flat(*dynamic_leaves):
             dynamic = jax.tree.unflatten(structure, dynamic_leaves)
             args, kwargs = eqx.combine(dynamic, static)
-            out_leaves, out_structure = jax.tree.flatten(self.function(*args, **kwargs))
-            boxes.append(out_structure)
-            return out_leaves
+            out = self.function(*args, **kwargs)
+            # The output's structure is kept as the output with its leaves replaced by 0:
+            # the treedef of an equinox Module does not survive pickling, the Module does.
+            boxes.append(jax.tree.map(lambda _: 0, out))
+            return jax.tree.leaves(out)
 
         try:
             exported = jax.export.export(jax.jit(flat))(*leaves)

@@ -1,5 +1,7 @@
 """Checks of user input: each raises `ValueError` with a message that names the input."""
 
+import math
+
 import jax
 import numpy as np
 from jaxtyping import ArrayLike
@@ -7,9 +9,25 @@ from jaxtyping import ArrayLike
 from ._system import FIELD_NAMES, TIDSystem
 
 
+def is_positive(value) -> bool:
+    """Whether `value` is a finite positive Python number (not a bool)."""
+    return (isinstance(value, int | float) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0)
+
+
 def check_system(system) -> None:
     if not isinstance(system, TIDSystem):
         raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+
+
+def check_rigid(system: TIDSystem, purpose: str) -> None:
+    """`ValueError` unless the system's inerter is rigid (no series stiffness, so no
+    backlash): the model of the steady-state solvers and of `purpose`."""
+    if not system.rigid:
+        raise ValueError(
+            f"{purpose} needs a rigid inerter (series_stiffness inf and backlash 0); "
+            "only linear_receptance and the substructuring test take a compliant one"
+        )
 
 
 def check_concrete_system(system) -> None:

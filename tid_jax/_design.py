@@ -14,7 +14,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band, sweep
 from ._cache import compiled
-from ._checks import check_grid, check_system
+from ._checks import check_grid, check_rigid, check_system
 from ._linear import den_hartog_tuning
 from ._peaks import (
     PEAK_NEWTON_STEPS,
@@ -26,13 +26,14 @@ from ._peaks import (
     true_peaks,
 )
 from ._response import batched, frequency_response, scaled_states
-from ._retune import RetuneSettings, check_retune_options, optimal_tunings
-from ._steady_state import SolverSettings
+from ._retune import RETUNE_OUTCOMES, RetuneSettings, check_retune_options, optimal_tunings
+from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
-# `TIDSystem` (not the numerical `friction_width`) and the forcing amplitude.
-PARAMETERS = FIELD_NAMES[:7] + ("amplitude",)
+# `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
+# forcing amplitude.
+PARAMETERS = FIELD_NAMES[:7] + ("parasitic_damping", "terminal_mass", "amplitude")
 PARAMETER_UNITS = {
     "host_mass": "kg",
     "host_stiffness": "N/m",
@@ -41,6 +42,8 @@ PARAMETER_UNITS = {
     "friction_force": "N",
     "tid_stiffness": "N/m",
     "tid_damping": "N s/m",
+    "parasitic_damping": "N s/m",
+    "terminal_mass": "kg",
     "amplitude": "N",
 }
 _K, _C = PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping")
@@ -62,10 +65,10 @@ MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
 # NOISE_FACTOR * tol (1e-6 of the log peak by default) the optimum counts as converged.
 NOISE_FACTOR = 1000.0
 
-# Sharpness of the smooth worst case over the scenarios of the robust design, in stages:
-# its ratios need not balance as finely as the peaks of one optimum
-# (`RetuneSettings.sharpness`).
-ROBUST_SHARPNESS = (50.0, 1000.0)
+# Sharpness of the smooth log peak over a scenario's band (`BestTunings.objective`), the
+# reference of the robust design's ratios: that of its last stage by default
+# (`RobustSettings.sharpness`).
+OBJECTIVE_SHARPNESS = 1000.0
 
 # --- the kernel: refined peaks and their derivatives at a few designs ---------------------
 
@@ -95,7 +98,7 @@ def _log_candidates(values, omegas, true):
 def _changed_system(system, theta, scale):
     """`system` with the parameters `theta` (order `PARAMETERS`, amplitude last and unused)
     and its host stiffness multiplied by `scale**2`."""
-    mass, stiffness, damping, inertance, friction, k, c, _ = theta
+    mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, _ = theta
     return eqx.tree_at(
         lambda s: (
             s.host_mass,
@@ -105,9 +108,11 @@ def _changed_system(system, theta, scale):
             s.friction_force,
             s.tid_stiffness,
             s.tid_damping,
+            s.parasitic_damping,
+            s.terminal_mass,
         ),
         system,
-        (mass, stiffness * scale**2, damping, inertance, friction, k, c),
+        (mass, stiffness * scale**2, damping, inertance, friction, k, c, parasitic, terminal),
     )
 
 
@@ -447,7 +452,7 @@ class BestTunings(eqx.Module):
       robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
       `retune` (`RetuneSettings.check_refinement` times finer than the band).
     - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, sharpness
-      `ROBUST_SHARPNESS[-1]`, ln m), the reference of the worst-case ratio of
+      `OBJECTIVE_SHARPNESS`, ln m), the reference of the worst-case ratio of
       `robust_tune`.
     - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
       `converged`: `retune`'s status is ok (stationary, every steady state converged, the
@@ -486,7 +491,7 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
 
 def _smooth_objective(values, omegas) -> np.ndarray:
     """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
-    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, ROBUST_SHARPNESS[-1]))
+    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, OBJECTIVE_SHARPNESS))
     return np.asarray(smooth(jnp.asarray(values), jnp.asarray(omegas)))
 
 
@@ -502,15 +507,25 @@ def best_tunings(
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
 ) -> BestTunings:
-    """The best achievable peak host displacement for each forcing amplitude (N) and host
-    frequency scale (host stiffness times scale**2), over the band `omegas` (rad/s, for
-    the nominal system; default `default_omegas(system)`) scaled with the host frequency.
+    """The best achievable peak host displacement for each scenario (forcing amplitude and
+    host frequency scale) over the band scaled with the host frequency. Every scenario
+    is retuned by `retune`'s optimiser, all of them in one batch, from the system's tuning
+    (k times scale**2, c times scale).
 
-    Every scenario is retuned by `retune`'s optimiser (`max_steps`, `tol`,
-    `retune_settings` as there), all of them in one batch, from the system's tuning (k
-    times scale**2, c times scale). `progress`, if given, gets a line as each step of the
-    retune ends."""
+    **Arguments:**
+
+    - `system`: the nominal `TIDSystem` (rigid device).
+    - `amplitudes`: forcing amplitudes, N.
+    - `host_frequency_scales`: host frequency scales s (the host stiffness times s**2).
+    - `omegas`: the band for the nominal system, rad/s (default `default_omegas(system)`).
+    - `settings`: `SolverSettings` of every steady state.
+    - `max_steps`, `tol`, `retune_settings`: the optimiser's, as in `retune`.
+    - `progress`: if given, called with a line as each step of the retune ends.
+
+    **Returns:** a `BestTunings` (arrays `[scales, amps]`).
+    """
     check_system(system)
+    check_rigid(system, "best_tunings")
     amps = check_amplitudes(amplitudes)
     scales = check_scales(host_frequency_scales)
     band = _band(system, omegas)
@@ -539,7 +554,7 @@ def best_tunings(
         stroke_peak=grid(result.y_peak),
         objective=grid(_smooth_objective(on_band, bands)),
         iterations=grid(result.iterations),
-        stationary=grid(np.asarray(result.status) != 1),
+        stationary=grid(np.asarray(result.status) != RETUNE_OUTCOMES.not_stationary),
         converged=grid(result.converged),
         damping_at_bound=grid(result.damping_at_bound),
     )

@@ -129,7 +129,9 @@ def _mechanism_force(device: InerterDevice, acceleration, velocity, width):
             + device.friction_force * jnp.tanh(velocity / width))
 
 
-def _dead_zone(d, gap):
+def dead_zone(d, gap):
+    """The stretch of a spring with total free play `gap` at relative displacement `d`:
+    `sgn(d) max(|d| - gap / 2, 0)`."""
     return jnp.sign(d) * jnp.maximum(jnp.abs(d) - 0.5 * gap, 0.0)
 
 
@@ -152,7 +154,7 @@ def device_force(device: InerterDevice, motion: Motion,
     def field(t, z, args):
         q, w = z * scale
         u, _ = motion.at(t)
-        spring = ks * _dead_zone(u - q, gap)
+        spring = ks * dead_zone(u - q, gap)
         # the mechanism's acceleration, where its force (linear in it) equals the spring's
         rest = _mechanism_force(device, 0.0, w, width)
         return jnp.stack([w, (spring - rest) / device.inertance]) / scale
@@ -169,5 +171,5 @@ def device_force(device: InerterDevice, motion: Motion,
         max_steps=settings.max_steps, adjoint=dfx.ForwardMode(), throw=False,
     )
     q = sol.ys[:, 0] * scale[0]
-    force = terminal + ks * _dead_zone(motion.displacement - q, gap)
+    force = terminal + ks * dead_zone(motion.displacement - q, gap)
     return force, sol.result == dfx.RESULTS.successful

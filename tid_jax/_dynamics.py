@@ -12,6 +12,8 @@ PARAMETERS = (
     "friction_force",
     "tid_stiffness",
     "tid_damping",
+    "parasitic_damping",
+    "terminal_mass",
     "friction_width",
     "amplitude",
     "omega",
@@ -36,7 +38,7 @@ def parameters(system, amplitude, omega) -> list[Float[Array, ""]]:
     return [value.astype(dtype) for value in values]
 
 
-def parameter_vector(system, amplitude, omega) -> Float[Array, " 10"]:
+def parameter_vector(system, amplitude, omega) -> Float[Array, " 12"]:
     """Stack a `TIDSystem`'s fields, the forcing amplitude (N) and frequency (rad/s) into
     the flat vector `p` (order `PARAMETERS`)."""
     return jnp.stack(parameters(system, amplitude, omega))
@@ -49,27 +51,28 @@ def parameter_vector(system, amplitude, omega) -> Float[Array, " 10"]:
 # the linear part.
 
 
-def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 10"]) -> tuple[Array, ...]:
+def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 12"]) -> tuple[Array, ...]:
     """The rows of the linear part `L z` of the scaled vector field, for a state `z` or
     for columns of states (`z[i]` arrays of one shape), written out elementwise."""
-    mass, stiffness, damping, inertance, _, k, c, _, _, omega = p
+    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, _, _, omega = p
     x, v, y, w = z
     spring = k * (x - y) + c * omega * (v - w)  # on the inerter terminal, per unit A/K
     host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
-    return v, host, w, spring / (inertance * omega**2)
+    return v, host, w, (spring - parasitic * omega * w) / ((inertance + terminal) * omega**2)
 
 
-def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 10"]) -> Float[Array, ""]:
+def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 12"]) -> Float[Array, ""]:
     """The friction's contribution to the scaled acceleration of the inerter terminal
     at the scaled terminal velocity `w`."""
-    _, stiffness, _, inertance, friction, _, _, width, amplitude, omega = p
+    _, stiffness, _, inertance, friction, _, _, _, terminal, width, amplitude, omega = p
     scale = amplitude / stiffness
-    return -friction * smooth_sign(omega * scale * w, width) / (scale * inertance * omega**2)
+    return -friction * smooth_sign(omega * scale * w, width) / (
+        scale * (inertance + terminal) * omega**2)
 
 
-def vector_field(theta: Float[Array, ""], z: Float[Array, " 4"], p: Float[Array, " 10"]):
+def vector_field(theta: Float[Array, ""], z: Float[Array, " 4"], p: Float[Array, " 12"]):
     """Eq. (12) in scaled form (see above)."""
-    mass, stiffness, omega = p[0], p[1], p[9]
+    mass, stiffness, omega = p[0], p[1], p[-1]
     force = stiffness * jnp.sin(theta) / (mass * omega**2)  # A sin(theta) in units of A/K
     dx, dv, dy, dw = linear_part(z, p)
     return jnp.stack([dx, dv + force, dy, dw + friction_acceleration(z[3], p)])

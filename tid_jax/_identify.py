@@ -287,10 +287,20 @@ def _covariance(jacobian, pieces, p):
 def identify_inerter(records, *, model: str = "ideal",
                      settings: IdentifySettings = IdentifySettings(),
                      progress: Callable[[str], None] | None = None) -> InerterFit:
-    """Identify the inerter device from `records` (an `InerterRecord` or a list of them)
-    with `model` (one of `MODELS`); the nested models before it are fitted first and
-    compared with it. `progress`, if given, gets a line as each model is fitted. Returns
-    an `InerterFit` (SI units)."""
+    """Identify the inerter device from test records; the nested models before `model`
+    are fitted first and compared with it.
+
+    **Arguments:**
+
+    - `records`: an `InerterRecord` or a list of them (time s, imposed displacement m,
+      measured force N).
+    - `model`: one of `MODELS`: "ideal" (b, ff), "damped" (+ parasitic damping),
+      "compliant" (+ series stiffness), "backlash" (+ free play).
+    - `settings`: `IdentifySettings`.
+    - `progress`: if given, called with a line as each model is fitted.
+
+    **Returns:** an `InerterFit` (SI units).
+    """
     choice("model", model, MODELS)
     integer("settings.max_steps", settings.max_steps, 1)
     records = _records(records)

@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._checks import check_grid, check_system
+from ._checks import check_grid, check_rigid, check_system
 from ._system import (
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -17,8 +17,15 @@ from ._system import (
 
 
 def den_hartog(mass_ratio: ArrayLike) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
-    """Den Hartog tuning, eq. (10): returns `(alpha, xi)`, the squared TID-to-host frequency
-    ratio `alpha = 1 / (1 + mu)^2` and damping ratio `xi = sqrt(3 mu / (8 (1 + mu)))`."""
+    """Den Hartog tuning, eq. (10).
+
+    **Arguments:**
+
+    - `mass_ratio`: mu = b / M, positive (any shape).
+
+    **Returns:** `(alpha, xi)`: the squared TID-to-host frequency ratio
+    `alpha = 1 / (1 + mu)^2` and the damping ratio `xi = sqrt(3 mu / (8 (1 + mu)))`.
+    """
     check_values("mass_ratio", mass_ratio, "positive")
     mu = jnp.asarray(mass_ratio)
     alpha = 1 / (1 + mu) ** 2
@@ -29,8 +36,17 @@ def den_hartog(mass_ratio: ArrayLike) -> tuple[Float[Array, "..."], Float[Array,
 def den_hartog_tuning(
     host_mass: ArrayLike, host_stiffness: ArrayLike, inertance: ArrayLike
 ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
-    """Den Hartog TID stiffness (N/m) and damping (N s/m), eq. (11):
-    `k = mu alpha K`, `c = 2 xi sqrt(k b)` with `mu = b / M`."""
+    """Den Hartog TID stiffness and damping, eq. (11): `k = mu alpha K`,
+    `c = 2 xi sqrt(k b)` with `mu = b / M`.
+
+    **Arguments:**
+
+    - `host_mass`: M, kg.
+    - `host_stiffness`: K, N/m.
+    - `inertance`: b, kg.
+
+    **Returns:** `(k, c)`, N/m and N s/m (the arguments' broadcast shape).
+    """
     check_values("host_mass", host_mass, "positive")
     check_values("host_stiffness", host_stiffness, "positive")
     check_values("inertance", inertance, "positive")
@@ -48,8 +64,16 @@ def paper_system(
 ) -> TIDSystem:
     """The paper's system (section 4.1): M = 1500 kg, 4 Hz host, 2% host damping,
     b = 75 kg (mu = 0.05), ff = 20 N, with Den Hartog `tid_stiffness`/`tid_damping`
-    (42.97 kN/m and 0.479 kN s/m), eqs. (10)-(11); `friction_width` None takes the
-    relative width (`TIDSystem`)."""
+    (42.97 kN/m and 0.479 kN s/m), eqs. (10)-(11), and the ideal inerter.
+
+    **Arguments:**
+
+    - `friction_force`: ff, N (default the paper's 20 N).
+    - `friction_width`: velocity scale of the smoothed friction sign, m/s; None (default)
+      takes the relative width, 0 exact Coulomb friction (`TIDSystem`).
+
+    **Returns:** a `TIDSystem`.
+    """
     host_mass = PAPER_HOST_MASS
     host_stiffness = host_mass * (2 * math.pi * PAPER_HOST_FREQUENCY_HZ) ** 2
     host_damping = 2 * PAPER_HOST_DAMPING_RATIO * math.sqrt(host_stiffness * host_mass)
@@ -78,11 +102,28 @@ class LinearReceptance(eqx.Module):
 
 def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
     """Receptances X/Fe (host, eq. (3) with host damping) and Y/Fe (inerter terminal) of the
-    linear TID at circular frequency `omega` (rad/s); friction is ignored."""
+    linear TID, with the real device's parasitic damping, terminal mass and series
+    stiffness; friction and backlash (nonlinear) are left out.
+
+    The mechanism (inertance b, parasitic damping cp) has the dynamic stiffness
+    `Dm = -b w^2 + i w cp`; in series with the stiffness ks it becomes
+    `Dm / (1 + Dm / ks)` (exactly `Dm` when ks is infinite), and the terminal mass adds
+    `-mt w^2`.
+
+    **Arguments:**
+
+    - `system`: a `TIDSystem` (rigid or compliant).
+    - `omega`: circular frequency, rad/s (any shape).
+
+    **Returns:** a `LinearReceptance` (`host`, `inerter`: complex, m/N, the shape of
+    `omega`).
+    """
     w = jnp.asarray(omega)
     jw = 1j * w
     spring = system.tid_stiffness + jw * system.tid_damping
-    inerter_terminal = spring / (spring - system.inertance * w**2)  # Y/X
+    mechanism = jw * system.parasitic_damping - system.inertance * w**2
+    device = mechanism / (1 + mechanism / system.series_stiffness) - system.terminal_mass * w**2
+    inerter_terminal = spring / (spring + device)  # Y/X
     dynamic_stiffness = (
         system.host_stiffness
         - system.host_mass * w**2
@@ -94,8 +135,16 @@ def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
 
 
 def stuck_receptance(system: TIDSystem, omega: ArrayLike) -> Complex[Array, "..."]:
-    """Host receptance X/Fe (m/N) with the inerter terminal held still (friction never
-    overcome): a single-degree-of-freedom host with stiffness K + k and damping C + c."""
+    """Host receptance X/Fe with the inerter terminal held still (friction never
+    overcome): a single-degree-of-freedom host with stiffness K + k and damping C + c.
+
+    **Arguments:**
+
+    - `system`: a `TIDSystem`.
+    - `omega`: circular frequency, rad/s (any shape).
+
+    **Returns:** the complex receptance, m/N, the shape of `omega`.
+    """
     w = jnp.asarray(omega)
     return 1 / (
         system.host_stiffness
@@ -140,6 +189,7 @@ def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     **Returns:** a `Breakaway`.
     """
     check_system(system)
+    check_rigid(system, "breakaway_amplitude")
     w = jnp.atleast_1d(jnp.asarray(check_grid("omegas", omegas)))
     mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
     stiffness = system.host_stiffness + k

@@ -30,6 +30,15 @@ def stencil_points(step: int) -> int:
 REFINED_PEAKS = 3
 
 
+def parabola_top(left, mid, right):
+    """The vertex of the parabola through three equally spaced samples where `mid` is a
+    local maximum of them and they are concave, else `mid` (elementwise)."""
+    curvature = left - 2 * mid + right
+    is_top = (mid >= left) & (mid >= right) & (curvature < 0)
+    safe = jnp.where(is_top, curvature, -1.0)
+    return jnp.where(is_top, mid - (right - left) ** 2 / (8 * safe), mid)
+
+
 def parabola_vertices(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
     """At every interior sample of `values` on the (possibly non-uniform) grid `omegas`
     where the samples are concave, the vertex of the parabola through it and its

@@ -7,13 +7,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._cache import compiled
-from ._checks import check_grid, check_system
+from ._checks import check_grid, check_rigid, check_system
 from ._dynamics import parameters
+from ._period import linear_initial_state, transient
+from ._settings import SolverSettings
 from ._sharding import map_batch, map_parts, sharded_batch
 from ._steady_state import (
-    SolverSettings,
-    _transient,
-    linear_initial_state,
     moving_part,
     refined_peak,
     shoot_queue,
@@ -68,6 +67,26 @@ class FrequencyResponse(eqx.Module):
 _GRID_FIELDS = tuple(f.name for f in dataclasses.fields(FrequencyResponse))[2:]
 
 
+class _Solutions(eqx.Module):
+    """The steady states at a flat list of points: `FrequencyResponse`'s per-point
+    fields, each with a leading axis of points."""
+
+    x_max: Float[Array, " points"]
+    y_max: Float[Array, " points"]
+    converged: Bool[Array, " points"]
+    stable: Bool[Array, " points"]
+    state: Float[Array, "points 4"]
+    residual: Float[Array, " points"]
+    newton_steps: Int[Array, " points"]
+    floquet_multipliers: Complex[Array, "points 4"]
+    monodromy: Float[Array, "points 4 4"]
+    stick_fraction: Float[Array, " points"]
+    transitions: Int[Array, " points"]
+
+    def fields(self) -> dict:
+        return {name: getattr(self, name) for name in _GRID_FIELDS}
+
+
 def point_response(
     system: TIDSystem,
     omega,
@@ -113,7 +132,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
 
     def start(q, z, warm_start):
         z = jnp.where(warm_start, z, linear_initial_state(q))
-        return _transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
+        return transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
 
     chunk = settings.chunk
     z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), chunk, valid)
@@ -139,7 +158,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         phase = jnp.where(stuck, 0, jnp.sign(samples.ws).astype(int))
         transitions = jnp.sum(phase != jnp.roll(phase, 1, axis=-1), axis=-1)
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
-    return dict(
+    return _Solutions(
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
         y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
@@ -181,7 +200,7 @@ def _block_sizes(count: int, chunk: int):
             chunk, 1 << (size - 1).bit_length())
 
 
-def _solve_blocks(settings, batch, warm=None) -> dict:
+def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     """`_points` on the flat `batch = (omegas, amplitudes, systems)`, block by block: every
     block is shot from the states `warm` if given (else from the linear state after a
     transient), so that one compiled program serves every kind of call."""
@@ -198,12 +217,12 @@ def _solve_blocks(settings, batch, warm=None) -> dict:
         out = sharded_batch(
             lambda b, w, u, v: _points(b[2], b[0], b[1], settings, w, v, u), *part, valid
         )
-        outs.append({key: value[: stop - start] for key, value in out.items()})
-    return {key: jnp.concatenate([out[key] for out in outs]) for key in outs[0]}
+        outs.append(jax.tree.map(lambda value, n=stop - start: value[:n], out))
+    return jax.tree.map(lambda *values: jnp.concatenate(values), *outs)
 
 
 def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSettings,
-                 warm=None) -> dict:
+                 warm=None) -> _Solutions:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`) of the
     systems `systems` (one per point: its fields are arrays, entry i for point i; see
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
@@ -214,7 +233,7 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     batch = (omegas, amplitudes, systems)
     out = _solve_blocks(settings, batch, warm)
     for fallback in settings.fallbacks():
-        failed = np.flatnonzero(~np.asarray(out["converged"]))
+        failed = np.flatnonzero(~np.asarray(out.converged))
         if not failed.size:
             break
         retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
@@ -222,13 +241,13 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     return out
 
 
-def _keep_better(out: dict, retry: dict, points) -> dict:
+def _keep_better(out: _Solutions, retry: _Solutions, points) -> _Solutions:
     """`out` with the results `retry` at its `points` where they converged and `out`'s did
     not, or where their residual is smaller."""
-    better = np.asarray(retry["converged"]) & ~np.asarray(out["converged"])[points]
-    better |= np.asarray(retry["residual"]) < np.asarray(out["residual"])[points]
+    better = np.asarray(retry.converged) & ~np.asarray(out.converged)[points]
+    better |= np.asarray(retry.residual) < np.asarray(out.residual)[points]
     chosen = points[better]
-    return {key: value.at[chosen].set(retry[key][better]) for key, value in out.items()}
+    return jax.tree.map(lambda value, new: value.at[chosen].set(new[better]), out, retry)
 
 
 def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
@@ -245,8 +264,8 @@ def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
     if warm is not None:
         warm = warm.reshape((-1,) + warm.shape[2:])
     out = solve_points(lanes, flat(omegas), flat(amplitudes[:, None]), settings, warm)
-    out = {key: value.reshape(shape + value.shape[1:]) for key, value in out.items()}
-    return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out)
+    out = jax.tree.map(lambda value: value.reshape(shape + value.shape[1:]), out)
+    return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out.fields())
 
 
 def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "amps freqs 4"]:
@@ -280,6 +299,7 @@ def frequency_response(
     axis of a scalar input dropped. Points that fail to converge are flagged in `converged`.
     """
     check_system(system)
+    check_rigid(system, "frequency_response")
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)

@@ -1,6 +1,5 @@
 import dataclasses
 import functools as ft
-import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -12,7 +11,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import Peaks, _band, response_peaks
 from ._cache import compiled
-from ._checks import check_grid, check_optimiser_options, check_system
+from ._checks import check_grid, check_optimiser_options, check_rigid, check_system, is_positive
 from ._dynamics import PARAMETERS, parameters
 from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._peaks import (
@@ -35,8 +34,10 @@ from ._response import (
     scaled_states,
     with_tuning,
 )
+from ._settings import SolverSettings
 from ._sharding import map_batch, sharded_batch
-from ._steady_state import SolverSettings, refined_peak, settled_state
+from ._status import Outcomes
+from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
 
 
@@ -70,13 +71,13 @@ class RetuneSettings(eqx.Module):
 
     def __check_init__(self):
         sharpness = self.sharpness
-        if not (isinstance(sharpness, tuple) and sharpness and all(
-                isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in sharpness)):
+        if not (isinstance(sharpness, tuple) and sharpness
+                and all(is_positive(v) for v in sharpness)):
             raise ValueError("RetuneSettings.sharpness must be a non-empty tuple of positive "
                              f"numbers, got {sharpness!r}")
         for name in ("continuation_tol", "max_design_step"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if not is_positive(value):
                 raise ValueError(f"RetuneSettings.{name} must be a positive number, "
                                  f"got {value!r}")
         for name in ("check_refinement", "design_newton_steps", "max_rejected_steps"):
@@ -91,15 +92,16 @@ class RetuneSettings(eqx.Module):
         return len(self.sharpness) + 2
 
 
-STATUS_MESSAGES = {
-    0: "ok",
-    1: "optimiser did not converge",
-    2: "some steady states did not converge",
-    3: "peak at the edge of the frequency band",
-    4: "the retuned peak was above the initial tuning's on the check grid: initial tuning kept",
-    5: "below the breakaway amplitude: the inerter never slips and the TID is a spring and "
-       "damper to ground, which retuning would only stiffen; initial tuning kept",
-}
+RETUNE_OUTCOMES = Outcomes(
+    ok="ok",
+    not_stationary="optimiser did not converge",
+    steady_states_failed="some steady states did not converge",
+    peak_at_band_edge="peak at the edge of the frequency band",
+    initial_kept="the retuned peak was above the initial tuning's on the check grid: "
+    "initial tuning kept",
+    stuck="below the breakaway amplitude: the inerter never slips and the TID is a spring "
+    "and damper to ground, which retuning would only stiffen; initial tuning kept",
+)
 
 
 
@@ -108,8 +110,8 @@ class RetuneResult(eqx.Module):
     `y_peak_initial` are the peak host and inerter displacements over the band after and
     before retuning, confirmed on a frequency grid `RetuneSettings.check_refinement` times
     finer than the design grid, `check_omegas`, on which `x_response`/`x_response_initial`
-    hold the peak host displacement over a period at every frequency. `status` codes are
-    explained by `status_messages()`."""
+    hold the peak host displacement over a period at every frequency. `status` holds codes
+    of `RETUNE_OUTCOMES`, explained by `status_messages()`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -132,7 +134,7 @@ class RetuneResult(eqx.Module):
     def status_messages(self) -> list[str]:
         messages = []
         for code, at_bound in zip(np.asarray(self.status), np.asarray(self.damping_at_bound)):
-            text = STATUS_MESSAGES[int(code)]
+            text = RETUNE_OUTCOMES.message(code)
             messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
         return messages
 
@@ -207,108 +209,116 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
     )
     solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step))
-    options = dict(autodiff_mode="fwd")
-    tags = frozenset()
-
-    def design_sweep(system, omegas, u, amplitude, warm):
-        """Host peaks (m) at every frequency, the true maxima over frequency of the highest
-        of them, and the orbits of the design `u`, from the orbits `warm` of a nearby
-        design (its tuning, then per frequency the scaled state, monodromy matrix and state
-        derivatives with respect to the tuning): every steady state is predicted to first
-        order at `u` and settled by chord iterations without tangents; each of the
-        `REFINED_PEAKS` highest local maxima is then located in continuous frequency by
-        Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
-        shot from the grid's orbits (interpolated) with the monodromy matrix of the
-        peak's grid point and settled by chord iterations; the peak, the response at the
-        last iterate, is solved with tangents, which give its derivatives and renew the
-        monodromy matrices at those grid points.
-        Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
-        k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
-                                         system.inertance)
-        k, c = _design_to_tuning(u, k_ref, c_ref)
-        tuned = with_tuning(system, k, c)
-        warm_tuning, states, monodromies, derivatives = warm
-        change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
-        scale = amplitude / system.host_stiffness
-
-        def settle(omega, z0, monodromy):
-            p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
-            z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
-            return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
-
-        states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)
-        index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
-        lower, upper, interior = bracket(index, omegas)
-
-        def on_stencil(f, at):
-            nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + (4, 4))
-            return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
-
-        for step in range(PEAK_NEWTON_STEPS):
-            at = stencil(centre, interior, stencil_points(step))
-            _, values = on_stencil(settle, at)
-            estimate, centre = newton_peak(values, at, lower, upper, interior)
-
-        def full(omega, z0, monodromy):
-            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
-                                              DESIGN_PARAMETERS)
-            return x_max, (orbit.monodromy, orbit.state_derivatives)
-
-        values, (m_new, d_new) = on_stencil(full, centre[:, None])
-        peak = located_peak(estimate, values[:, 0])
-        orbits = (states, monodromies.at[index].set(m_new[:, 0]),
-                  derivatives.at[index].set(d_new[:, 0]))
-        return (jax.lax.stop_gradient(xs), (index, peak)), (
-            jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
-
-    def one(system, amplitude, omegas, u_start, z_start, h_start):
-        def traced_objective(u, warm):
-            (xs, (index, peak)), orbits = design_sweep(system, omegas, u, amplitude, warm)
-            static = amplitude / system.host_stiffness
-            objective = smooth_log_peak(xs / static, omegas, sharpness, (index, peak / static))
-            return objective, jax.lax.stop_gradient(orbits)
-
-        # Traced once: the optimiser's steps replay this trace rather than tracing the
-        # steady-state solves again.
-        objective = eqx.filter_closure_convert(traced_objective, u_start, z_start)
-        # Every shooting solve starts from the orbits of the last accepted design, so that
-        # the Newton iterations of the steady states follow the optimiser.
-        f_struct, aux_struct = objective.out_struct
-        state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
-        # A stage starts from the curvature that the last one learnt, not from the identity:
-        # from a gradient step (about 0.1 long on the paper's system), the line search
-        # would halve its way down to the small moves that a sharper maximum asks for
-        # (1e-3 to 1e-4), one evaluation of the objective per halving.
-        state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
-
-        def cond(carry):
-            u, state, z, steps, rejected = carry
-            done, _ = solver.terminate(objective, u, z, options, state, tags)
-            return ~done & (steps < max_steps) & (rejected < max_rejected_steps)
-
-        def body(carry):
-            u, state, z, steps, rejected = carry
-            accepted = state.num_accepted_steps
-            u, state, _ = solver.step(objective, u, z, options, state, tags)
-            z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
-                             state.aux, z)
-            rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
-            return u, state, z, steps + 1, rejected
-
-        u, state, z, steps, rejected = jax.lax.while_loop(
-            cond, body, (u_start, state, z_start, 0, 0)
-        )
-        done, result = solver.terminate(objective, u, z, options, state, tags)
-        # A line search that finds no decrease in `max_rejected_steps` halvings has reached
-        # the noise of the objective (steady states converged to the periodicity tolerance).
-        stalled = rejected >= max_rejected_steps
-        return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
-                state.f_info.hessian_inv.pytree)
+    lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
+                      max_steps=max_steps, max_rejected_steps=max_rejected_steps)
 
     # One amplitude after another (each vmapped over its frequencies; with several devices,
     # one sequence per device): an amplitude's optimiser stops when it converges, and its
     # integrations wait only for its own stiffest steady state, not for every amplitude's.
-    return map_batch(lambda args: one(*args), (systems, amplitudes, omegas, u0, z0, h0), 1)
+    return map_batch(lambda args: lane(*args), (systems, amplitudes, omegas, u0, z0, h0), 1)
+
+
+def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
+    """Host peaks (m) at every frequency, the true maxima over frequency of the highest
+    of them, and the orbits of the design `u`, from the orbits `warm` of a nearby
+    design (its tuning, then per frequency the scaled state, monodromy matrix and state
+    derivatives with respect to the tuning): every steady state is predicted to first
+    order at `u` and settled by chord iterations without tangents; each of the
+    `REFINED_PEAKS` highest local maxima is then located in continuous frequency by
+    Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
+    shot from the grid's orbits (interpolated) with the monodromy matrix of the
+    peak's grid point and settled by chord iterations; the peak, the response at the
+    last iterate, is solved with tangents, which give its derivatives and renew the
+    monodromy matrices at those grid points.
+    Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
+    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
+                                     system.inertance)
+    k, c = _design_to_tuning(u, k_ref, c_ref)
+    tuned = with_tuning(system, k, c)
+    warm_tuning, states, monodromies, derivatives = warm
+    change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
+    scale = amplitude / system.host_stiffness
+
+    def settle(omega, z0, monodromy):
+        p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
+        z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
+        return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
+
+    states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)
+    index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
+    lower, upper, interior = bracket(index, omegas)
+
+    def on_stencil(f, at):
+        nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + (4, 4))
+        return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
+
+    for step in range(PEAK_NEWTON_STEPS):
+        at = stencil(centre, interior, stencil_points(step))
+        _, values = on_stencil(settle, at)
+        estimate, centre = newton_peak(values, at, lower, upper, interior)
+
+    def full(omega, z0, monodromy):
+        orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
+                                          DESIGN_PARAMETERS)
+        return x_max, (orbit.monodromy, orbit.state_derivatives)
+
+    values, (m_new, d_new) = on_stencil(full, centre[:, None])
+    peak = located_peak(estimate, values[:, 0])
+    orbits = (states, monodromies.at[index].set(m_new[:, 0]),
+              derivatives.at[index].set(d_new[:, 0]))
+    return (jax.lax.stop_gradient(xs), (index, peak)), (
+        jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
+
+
+def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solver,
+                   sharpness, settings: SolverSettings, max_steps, max_rejected_steps):
+    """BFGS on one lane of `_optimise_stage`: `(u, steps, converged, orbits, inverse
+    Hessian)`."""
+    options = dict(autodiff_mode="fwd")
+    tags = frozenset()
+
+    def traced_objective(u, warm):
+        (xs, (index, peak)), orbits = _design_sweep(system, omegas, u, amplitude, warm, settings)
+        static = amplitude / system.host_stiffness
+        objective = smooth_log_peak(xs / static, omegas, sharpness, (index, peak / static))
+        return objective, jax.lax.stop_gradient(orbits)
+
+    # Traced once: the optimiser's steps replay this trace rather than tracing the
+    # steady-state solves again.
+    objective = eqx.filter_closure_convert(traced_objective, u_start, z_start)
+    # Every shooting solve starts from the orbits of the last accepted design, so that
+    # the Newton iterations of the steady states follow the optimiser.
+    f_struct, aux_struct = objective.out_struct
+    state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
+    # A stage starts from the curvature that the last one learnt, not from the identity:
+    # from a gradient step (about 0.1 long on the paper's system), the line search
+    # would halve its way down to the small moves that a sharper maximum asks for
+    # (1e-3 to 1e-4), one evaluation of the objective per halving.
+    state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
+
+    def cond(carry):
+        u, state, z, steps, rejected = carry
+        done, _ = solver.terminate(objective, u, z, options, state, tags)
+        return ~done & (steps < max_steps) & (rejected < max_rejected_steps)
+
+    def body(carry):
+        u, state, z, steps, rejected = carry
+        accepted = state.num_accepted_steps
+        u, state, _ = solver.step(objective, u, z, options, state, tags)
+        z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
+                         state.aux, z)
+        rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
+        return u, state, z, steps + 1, rejected
+
+    u, state, z, steps, rejected = jax.lax.while_loop(
+        cond, body, (u_start, state, z_start, 0, 0)
+    )
+    done, result = solver.terminate(objective, u, z, options, state, tags)
+    # A line search that finds no decrease in `max_rejected_steps` halvings has reached
+    # the noise of the objective (steady states converged to the periodicity tolerance).
+    stalled = rejected >= max_rejected_steps
+    return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
+            state.f_info.hessian_inv.pytree)
 
 
 def _on_check_grid(values, refinement: int):
@@ -363,10 +373,10 @@ def retune(
     the true peaks and renew the monodromy matrices at their grid points. The initial and
     retuned designs are then solved afresh (each steady state starting from the design's
     orbits) on a grid `retune_settings.check_refinement` times finer; a design whose peak
-    there is above the initial tuning's is replaced by the initial tuning (status 4), as
-    is the design at an amplitude below the initial tuning's breakaway amplitude
-    (`breakaway_amplitude`; status 5): there the inerter never slips, and the smoothed
-    model's optimum would be an ever stiffer spring and damper to ground.
+    there is above the initial tuning's is replaced by the initial tuning (status
+    `initial_kept`), as is the design at an amplitude below the initial tuning's breakaway
+    amplitude (`breakaway_amplitude`; status `stuck`): there the inerter never slips, and
+    the smoothed model's optimum would be an ever stiffer spring and damper to ground.
 
     **Arguments:**
 
@@ -390,6 +400,7 @@ def retune(
     **Returns:** a `RetuneResult`.
     """
     check_system(system)
+    check_rigid(system, "retune")
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
     check_retune_options(max_steps, tol, retune_settings)
@@ -496,16 +507,17 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
     before = jax.tree.map(lambda a: a[:n], found)
     after = jax.tree.map(lambda a: a[n:], found)
-    status = jnp.where(
-        ~ok, 1, jnp.where(~(after.converged & before.converged), 2, jnp.where(after.at_edge, 3, 0))
-    )
+    outcome = RETUNE_OUTCOMES
+    status = jnp.where(after.at_edge, outcome.peak_at_band_edge, outcome.ok)
+    status = jnp.where(after.converged & before.converged, status, outcome.steady_states_failed)
+    status = jnp.where(ok, status, outcome.not_stationary)
     # A design that the check finds worse than the tuning it started from (the design grid
     # misled the optimiser) is not returned: the initial tuning is kept and flagged.
     worse = after.x_peak > before.x_peak
-    status = jnp.where(worse, 4, status)
+    status = jnp.where(worse, outcome.initial_kept, status)
     # Below the breakaway amplitude the smoothed model's optimum is a stiffer and stiffer
     # spring-damper to ground (the inerter stays stuck): not a TID design, so not returned.
-    status = jnp.where(stuck, 5, status)
+    status = jnp.where(stuck, outcome.stuck, status)
     kept = worse | stuck
     k, c = jnp.where(kept, k0, k), jnp.where(kept, c0, c)
     after = jax.tree.map(lambda b, a: jnp.where(kept, b, a), before, after)
@@ -525,7 +537,7 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
         x_response=x_response,
         x_response_initial=initial.x_max,
         iterations=iterations,
-        converged=status == 0,
+        converged=status == outcome.ok,
         damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,
         status=status,
     )

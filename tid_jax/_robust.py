@@ -11,11 +11,10 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_system
+from ._checks import check_rigid, check_system, is_positive
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
-    ROBUST_SHARPNESS,
     BestTunings,
     Context,
     Evaluation,
@@ -33,28 +32,66 @@ from ._peaks import (
 )
 from ._response import frequency_response
 from ._retune import RetuneSettings, check_retune_options
+from ._settings import SolverSettings
 from ._sqp import Model, minimise_stage, stationary
-from ._steady_state import SolverSettings
+from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
-_MIN_STEP = 1e-8  # trust radius at which a stage gives up
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
-
 _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
-# The limit is aimed at this fraction below the stated one on the design grid, then checked
-# on a grid CHECK_REFINEMENT times finer; if it is exceeded there the design-grid target is
-# lowered by the excess and the design polished again (at most _STROKE_ROUNDS times).
-STROKE_MARGIN = 0.005
 
-CHECK_REFINEMENT = 4
-_STROKE_ROUNDS = 3
 
-ROBUST_STATUS_MESSAGES = {
-    0: "ok",
-    1: "optimiser did not converge",
-    2: "some steady states did not converge",
-    3: "stroke over the limit on the check grid",
-}
+class RobustSettings(eqx.Module):
+    """Settings of the robust design's optimiser (`robust_tune`). Defaults live here only.
+
+    **Fields:**
+
+    - `sharpness`: sharpness of the smooth worst case of the scenarios' log peak ratios
+      at each stage; its ratios need not balance as finely as the peaks of one optimum
+      (`RetuneSettings.sharpness`).
+    - `stroke_margin`: the stroke limit is aimed this fraction below the stated one on
+      the design grid.
+    - `check_refinement`: the stroke is then checked on a grid this many times finer
+      than the design band; where it is over the limit there, the design-grid target is
+      lowered by the excess and the design polished again,
+    - `stroke_rounds`: at most this many times.
+    - `max_step`: longest trust-region step in the design variables (0.25 is about 28%
+      in k).
+    - `min_step`: trust radius at which a stage gives up.
+    """
+
+    sharpness: tuple[float, ...] = (50.0, 1000.0)
+    stroke_margin: float = 0.005
+    check_refinement: int = 4
+    stroke_rounds: int = 3
+    max_step: float = MAX_STEP
+    min_step: float = 1e-8
+
+    def __check_init__(self):
+        if not (isinstance(self.sharpness, tuple) and self.sharpness
+                and all(is_positive(v) for v in self.sharpness)):
+            raise ValueError("RobustSettings.sharpness must be a non-empty tuple of positive "
+                             f"numbers, got {self.sharpness!r}")
+        for name in ("max_step", "min_step"):
+            if not is_positive(getattr(self, name)):
+                raise ValueError(f"RobustSettings.{name} must be a positive number, "
+                                 f"got {getattr(self, name)!r}")
+        if not (is_positive(self.stroke_margin) and self.stroke_margin < 1):
+            raise ValueError("RobustSettings.stroke_margin must be in (0, 1), "
+                             f"got {self.stroke_margin!r}")
+        for name, low in (("check_refinement", 1), ("stroke_rounds", 0)):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= low):
+                raise ValueError(f"RobustSettings.{name} must be an integer >= {low}, "
+                                 f"got {value!r}")
+
+
+ROBUST_OUTCOMES = Outcomes(
+    ok="ok",
+    not_stationary="optimiser did not converge",
+    steady_states_failed="some steady states did not converge",
+    stroke_over_limit="stroke over the limit on the check grid",
+)
 
 
 
@@ -83,7 +120,8 @@ def _minimise(
     *,
     stroke_log_limit=None,
     z_inits=None,
-    stages=ROBUST_SHARPNESS,
+    stages,
+    robust_settings: RobustSettings,
     max_steps,
     tol,
     say=None,
@@ -108,7 +146,8 @@ def _minimise(
             return trial, t_f, t_c, trial.converged()
 
         current, f, c, stage_steps = minimise_stage(
-            evaluate, current, f, c, max_step=MAX_STEP, min_step=_MIN_STEP,
+            evaluate, current, f, c, max_step=robust_settings.max_step,
+            min_step=robust_settings.min_step,
             feasibility=_FEASIBILITY, max_steps=max_steps, tol=tol)
         steps += stage_steps
         converged = stationary(f, c, NOISE_FACTOR * tol, _FEASIBILITY)
@@ -176,8 +215,18 @@ def tuning_performance(
 ) -> TuningPerformance:
     """The system's tuning over the scenarios of `best` (same band, amplitudes and host
     frequency scales): its host and inerter peaks (by `peaks`) and the ratio of its host
-    peak to the best achievable, with the worst case and where it occurs."""
+    peak to the best achievable, with the worst case and where it occurs.
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem` of `best` (rigid device), at the tuning to judge.
+    - `best`: a `BestTunings` (the scenarios, the band and the best peaks).
+    - `settings`: `SolverSettings` of every steady state.
+
+    **Returns:** a `TuningPerformance`.
+    """
     check_system(system)
+    check_rigid(system, "tuning_performance")
     check_best(best, system)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     amps = np.asarray(best.amplitudes)
@@ -210,13 +259,14 @@ class RobustDesign(eqx.Module):
     - `worst_ratio`: its largest peak ratio over the scenarios, at `worst_amplitude` (N) and
       `worst_host_frequency_scale`.
     - `stroke_limit`, `max_stroke` (m): the limit and the largest inerter peak, the latter
-      on a grid `CHECK_REFINEMENT` times finer than the design band;
+      on a grid `RobustSettings.check_refinement` times finer than the design band;
       `stroke_margin = 1 - max_stroke / stroke_limit`.
     - `performance`: the robust tuning's `TuningPerformance` on the design band (its
       `ratio` per scenario); `check_stroke_peak`: inerter peaks `[scales, amps]` on the
       fine grid, `check_converged`: whether every steady state there converged; `best`:
       the `BestTunings` it was measured against.
-    - `iterations`: Newton steps; `converged`; `status`: see `status_messages()`.
+    - `iterations`: Newton steps; `converged`; `status`: a code of `ROBUST_OUTCOMES`,
+      see `status_messages()`.
     """
 
     tid_stiffness: Float[Array, ""]
@@ -238,7 +288,7 @@ class RobustDesign(eqx.Module):
     def status_messages(self) -> list[str]:
         """The meaning of `status`, one message per entry (one here), as
         `RetuneResult.status_messages`."""
-        return [ROBUST_STATUS_MESSAGES[int(code)] for code in np.atleast_1d(self.status)]
+        return [ROBUST_OUTCOMES.message(code) for code in np.atleast_1d(self.status)]
 
 
 def _check_stroke_limit(stroke_limit) -> float:
@@ -285,111 +335,102 @@ def robust_tune(
     max_steps: int = 40,
     tol: float = 1e-9,
     retune_settings: RetuneSettings = RetuneSettings(),
+    robust_settings: RobustSettings = RobustSettings(),
     progress: Callable[[str], None] | None = None,
 ) -> RobustDesign:
-    """One TID stiffness k and damping c for every forcing amplitude in `amplitudes` (N;
-    default the paper's, 100-3000 N) and host frequency scale in `host_frequency_scales`
-    (e.g. (0.95, 1, 1.05) for +-5% host frequency; a scale s multiplies the host stiffness
-    by s**2): the minimiser of the worst case, over these scenarios, of the peak host
-    displacement over the band (`omegas`, rad/s, default `default_omegas(system)`, scaled
-    with the host frequency) divided by the best achievable in that scenario, subject to
-    the inerter stroke |y| <= `stroke_limit` (m).
+    """One TID stiffness k and damping c for every scenario (forcing amplitude and host
+    frequency scale): the minimiser of the worst case, over the scenarios, of the peak
+    host displacement over the band divided by the best achievable in that scenario,
+    subject to the inerter stroke |y| <= `stroke_limit`.
 
-    The best achievable peaks come from `best` if given (a `BestTunings` for the same
-    system, amplitudes and scales), else from `best_tunings` (with `retune_settings`).
-    The worst case is a smooth
-    maximum, with sharpness rising over `ROBUST_SHARPNESS`, of the scenarios' log peak
-    ratios. It is minimised by sequential quadratic programming with the smooth maximum of
-    the log inerter peaks held below the limit (aimed `STROKE_MARGIN` below it): trust-region
-    Newton steps, aiming at a decrement along the constraint below `tol` (converged within
-    `NOISE_FACTOR * tol`), at most `max_steps` steps per stage, from the system's tuning
-    or the best tuning of a nominal scenario, whichever has the smaller worst case within
-    the limit. The stroke is then checked on a grid `CHECK_REFINEMENT` times finer; if it
-    is over the limit there, the target is lowered by the excess and the design polished
-    again. `stroke_limit=None` leaves the stroke free (reported with an infinite limit).
-    `progress`, if given, gets one-line messages.
+    The best achievable peaks come from `best` if given, else from `best_tunings`. The
+    worst case is a smooth maximum, with sharpness rising over `robust_settings.sharpness`,
+    of the scenarios' log peak ratios. It is minimised by sequential quadratic programming
+    with the smooth maximum of the log inerter peaks held below the limit (aimed
+    `robust_settings.stroke_margin` below it): trust-region Newton steps, aiming at a
+    decrement along the constraint below `tol` (converged within `NOISE_FACTOR * tol`),
+    from the system's tuning or the best tuning of a nominal scenario, whichever has the
+    smaller worst case within the limit. The stroke is then checked on a grid
+    `robust_settings.check_refinement` times finer; if it is over the limit there, the
+    target is lowered by the excess and the design polished again.
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem` (rigid device); its tuning is one starting point.
+    - `amplitudes`: forcing amplitudes, N (default the paper's, 100-3000 N).
+    - `host_frequency_scales`: host frequency scales s (the host stiffness times s**2),
+      e.g. (0.95, 1, 1.05) for +-5% host frequency.
+    - `stroke_limit`: the inerter stroke limit, m; None leaves the stroke free (reported
+      with an infinite limit).
+    - `best`: a `BestTunings` of the same system, amplitudes and scales (default: found
+      by `best_tunings` with `retune_settings`).
+    - `omegas`: the band, rad/s, for the nominal system (default
+      `default_omegas(system)`), scaled with the host frequency.
+    - `settings`: `SolverSettings` of every steady state.
+    - `max_steps`: optimiser steps per stage.
+    - `tol`: the Newton decrement aimed at.
+    - `retune_settings`: `RetuneSettings` of the best tunings.
+    - `robust_settings`: `RobustSettings` of this optimiser.
+    - `progress`: if given, called with one-line messages.
+
+    **Returns:** a `RobustDesign`.
     """
     check_system(system)
+    check_rigid(system, "robust_tune")
     amps = check_amplitudes(amplitudes)
     scales = check_scales(host_frequency_scales)
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
     check_retune_options(max_steps, tol, retune_settings)
+    if not isinstance(robust_settings, RobustSettings):
+        raise ValueError("robust_settings must be a RobustSettings, got "
+                         f"{type(robust_settings).__name__}")
     say = progress if progress is not None else (lambda message: None)
-    if best is None:
-        best = best_tunings(
-            system,
-            amps,
-            host_frequency_scales=scales,
-            omegas=omegas,
-            settings=settings,
-            retune_settings=retune_settings,
-            progress=progress,
-        )
-    else:
-        check_best(best, system)
-        for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
-            stored = np.asarray(getattr(best, name))
-            if stored.shape != given.shape or not np.allclose(stored, given, rtol=1e-12):
-                raise ValueError(f"{name} {given.tolist()} differ from best's {stored.tolist()}")
-        if omegas is not None:
-            band = _band(system, omegas)
-            if band.shape != best.omegas.shape or not np.allclose(band, best.omegas):
-                raise ValueError("omegas differ from the band best was computed on")
+    best = _checked_best(system, amps, scales, best, omegas, settings, retune_settings,
+                         progress)
     band = np.asarray(best.omegas)
     # The worst case over scenarios is of the peaks on the band's grid (refined by
-    # parabolas), as its reference `best.objective` is: the stroke limit is then checked
-    # on a grid CHECK_REFINEMENT times finer.
+    # parabolas), as its reference `best.objective` is; the stroke limit is then checked
+    # on a finer grid.
     ctx = Context(system, band, settings, locate=False)
     scenarios = [
         Scenario(float(amplitude), float(scale), float(best.objective[i, j]))
         for i, scale in enumerate(scales)
         for j, amplitude in enumerate(amps)
     ]
-    target = np.log(limit * (1 - STROKE_MARGIN)) if np.isfinite(limit) else None
+    margin = robust_settings.stroke_margin
+    target = np.log(limit * (1 - margin)) if np.isfinite(limit) else None
     say(f"robust tuning over {len(scenarios)} scenarios, stroke limit {limit:g} m")
     k, c = _robust_start(system, best, target, settings)
     say(f"starting from k = {k:.6g} N/m, c = {c:.5g} N s/m")
-    minimum = _minimise(
-        ctx,
-        scenarios,
-        ctx.design(k, c, floor=_MIN_DAMPING_START),
-        stroke_log_limit=target,
-        max_steps=max_steps,
-        tol=tol,
-        say=say,
-    )
+    options = dict(max_steps=max_steps, tol=tol, say=say, robust_settings=robust_settings)
+    minimum = _minimise(ctx, scenarios, ctx.design(k, c, floor=_MIN_DAMPING_START),
+                        stroke_log_limit=target, stages=robust_settings.sharpness, **options)
     steps = minimum.steps
-    fine = np.linspace(band[0], band[-1], CHECK_REFINEMENT * (band.size - 1) + 1)
-    for round_ in range(_STROKE_ROUNDS + 1):
+    fine = np.linspace(band[0], band[-1], robust_settings.check_refinement * (band.size - 1) + 1)
+    for round_ in range(robust_settings.stroke_rounds + 1):
         k, c = ctx.tuning(minimum.evaluation.u)
         _, check_y, check_ok = _peaks_per_scale(system, k, c, amps, scales, fine, settings)
         max_stroke = float(np.max(check_y))
-        if max_stroke <= limit or round_ == _STROKE_ROUNDS:
+        if max_stroke <= limit or round_ == robust_settings.stroke_rounds:
             break
-        target -= np.log(max_stroke / limit) + STROKE_MARGIN
+        target -= np.log(max_stroke / limit) + margin
         say(f"stroke {max_stroke:.5g} m over the limit on the check grid: aiming lower")
         states = [curves.states for curves in minimum.evaluation.centres()]
-        minimum = _minimise(
-            ctx,
-            scenarios,
-            minimum.evaluation.u,
-            stroke_log_limit=target,
-            z_inits=states,
-            stages=ROBUST_SHARPNESS[-1:],
-            max_steps=max_steps,
-            tol=tol,
-            say=say,
-        )
+        minimum = _minimise(ctx, scenarios, minimum.evaluation.u, stroke_log_limit=target,
+                            z_inits=states, stages=robust_settings.sharpness[-1:], **options)
         steps += minimum.steps
     performance = tuning_performance(
         system.replace(tid_stiffness=k, tid_damping=c), best, settings=settings
     )
     steady = bool(np.all(performance.converged) and np.all(check_ok))
-    status = 1 if not minimum.converged else 2 if not steady else 3 if max_stroke > limit else 0
+    outcome = ROBUST_OUTCOMES
+    status = (outcome.not_stationary if not minimum.converged
+              else outcome.steady_states_failed if not steady
+              else outcome.stroke_over_limit if max_stroke > limit else outcome.ok)
     say(
         f"robust tuning: k = {k:.6g} N/m, c = {c:.5g} N s/m, worst ratio "
         f"{float(performance.worst_ratio):.4f} at {float(performance.worst_amplitude):g} N; "
-        f"{ROBUST_STATUS_MESSAGES[status]}"
+        f"{outcome.message(status)}"
     )
     return RobustDesign(
         tid_stiffness=jnp.asarray(k),
@@ -405,7 +446,25 @@ def robust_tune(
         check_converged=jnp.asarray(check_ok),
         best=best,
         iterations=jnp.asarray(steps),
-        converged=jnp.asarray(status == 0),
+        converged=jnp.asarray(status == outcome.ok),
         status=jnp.asarray(status),
     )
 
+
+def _checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress):
+    """`best` after checking that it was computed for this system, these scenarios and
+    this band, or, if None, the best tunings found afresh."""
+    if best is None:
+        return best_tunings(system, amps, host_frequency_scales=scales, omegas=omegas,
+                            settings=settings, retune_settings=retune_settings,
+                            progress=progress)
+    check_best(best, system)
+    for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
+        stored = np.asarray(getattr(best, name))
+        if stored.shape != given.shape or not np.allclose(stored, given, rtol=1e-12):
+            raise ValueError(f"{name} {given.tolist()} differ from best's {stored.tolist()}")
+    if omegas is not None:
+        band = _band(system, omegas)
+        if band.shape != best.omegas.shape or not np.allclose(band, best.omegas):
+            raise ValueError("omegas differ from the band best was computed on")
+    return best

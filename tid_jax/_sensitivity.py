@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_system
+from ._checks import check_rigid, check_system
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
@@ -24,8 +24,8 @@ from ._design import (
     smooth_max,
 )
 from ._retune import RetuneSettings, check_retune_options
+from ._settings import SolverSettings
 from ._sqp import Model, decrement, trust_step
-from ._steady_state import SolverSettings
 from ._system import TIDSystem
 
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
@@ -251,8 +251,23 @@ def sensitivities(
     below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem` (rigid device) at its given tuning.
+    - `amplitude`: forcing amplitude A, N.
+    - `omegas`: the band, rad/s (default `default_omegas(system)`).
+    - `optimum`: also the sensitivities at the retuned optimum.
+    - `best`: a `BestTunings` of this system and band holding `amplitude` (default: found
+      afresh when `optimum` is True).
+    - `settings`: `SolverSettings` of every steady state.
+    - `max_steps`, `tol`, `retune_settings`: of the optimiser that finds the optimum (as
+      in `retune`).
+
+    **Returns:** a `Sensitivities` (parameters in the order `PARAMETERS`).
     """
     check_system(system)
+    check_rigid(system, "sensitivities")
     amplitude = check_amplitude(amplitude)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):

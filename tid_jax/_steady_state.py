@@ -1,105 +1,21 @@
 import functools as ft
-import math
 from collections.abc import Sequence
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
-import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
-from . import _coulomb
-from ._dynamics import tangent_field, vector_field
-
-
-class SolverSettings(eqx.Module):
-    """Numerical settings of the steady-state (shooting) solver. Defaults live here only.
-
-    - `rtol`, `atol`: tolerances of the adaptive integration, on the state scaled by the
-      static displacement A / K.
-    - `implicit`: integrate with the implicit Kvaerno5 instead of the explicit Tsit5, for
-      stiff problems (a narrow friction width against slow forcing).
-    - `max_steps`: integration steps allowed per forcing period.
-    - `transient_periods`: periods integrated from the initial guess before shooting.
-    - `max_newton_steps`: Newton iterations allowed.
-    - `periodicity_tol`: a point counts as converged only if |Phi_T(z0) - z0| is below this
-      (scaled), checked by a separate integration of the final orbit (smoothed friction;
-      exact friction takes `exact_periodicity_tol`).
-    - `samples`: points per period at which x and y are sampled; each peak is refined by a
-      parabola through the three samples around it.
-    - `exact_friction`: the exact Coulomb friction of a system with `friction_width=0`
-      (the stick-slip flow of `_coulomb`, in closed form between transitions; `rtol`,
-      `atol`, `max_steps` and `implicit` then play no part, and the samples also serve
-      to find the transitions). The entry points set it from the system
-      (`for_system`).
-    - `exact_periodicity_tol`: the `periodicity_tol` of exact friction, whose period map
-      has no integration error: Newton's iterations reach it in about one more step,
-      and it keeps the stroke of a terminal that sticks for most of the period (a small
-      difference of positions) accurate.
-    - `chunk`: points solved together as one vmapped batch (per device); larger batches
-      are solved chunk after chunk, so that each chunk's adaptive integrations and
-      Newton iterations wait only for its own slowest point (neighbouring points, of
-      similar stiffness, share a chunk).
-    """
-
-    rtol: float = 1e-8
-    atol: float = 1e-8
-    max_steps: int = 4096
-    transient_periods: int = 2
-    max_newton_steps: int = 10
-    periodicity_tol: float = 1e-6
-    exact_periodicity_tol: float = 1e-10
-    samples: int = 128
-    implicit: bool = False
-    exact_friction: bool = False
-    chunk: int = 64
-
-    def __check_init__(self):
-        for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
-        for name, low in (("max_steps", 16), ("transient_periods", 0), ("max_newton_steps", 1),
-                          ("samples", 8), ("chunk", 1)):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and value >= low):
-                raise ValueError(f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
-
-    def fallbacks(self) -> tuple["SolverSettings", ...]:
-        """Settings for further attempts, in turn, at points that did not converge: a
-        long transient towards the attracting orbit, then more Newton iterations, first on
-        integrations 100 times more accurate (Newton stalls where the integration error of
-        the period map exceeds `periodicity_tol`), then with the implicit Kvaerno5 (stiff
-        friction makes an explicit integration run out of steps)."""
-        persistent = eqx.tree_at(
-            lambda s: (s.transient_periods, s.max_newton_steps),
-            self,
-            (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
-        )
-        accurate = eqx.tree_at(lambda s: (s.rtol, s.atol), persistent,
-                               (self.rtol / 100, self.atol / 100))
-        stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
-                            (self.rtol / 10, self.atol / 10, True))
-        return accurate, stiff
-
-    def to_dict(self) -> dict:
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
-
-    def for_system(self, system) -> "SolverSettings":
-        """These settings with the friction model of `system` (a `TIDSystem`): exact
-        Coulomb friction where its `friction_width` is 0."""
-        if self.exact_friction == system.exact_friction:
-            return self
-        if not system.exact_friction:
-            raise ValueError(
-                "SolverSettings.exact_friction follows the system (friction_width=0); got "
-                "exact_friction=True with a smoothed-friction system"
-            )
-        return eqx.tree_at(lambda s: (s.exact_friction, s.periodicity_tol), self,
-                           (True, self.exact_periodicity_tol))
+from ._peaks import parabola_top
+from ._period import (
+    linear_initial_state,
+    period_samples,
+    period_tangents,
+    samples_and_jacobian,
+    transient,
+)
+from ._settings import SolverSettings
 
 
 class Orbit(eqx.Module):
@@ -118,135 +34,6 @@ class Orbit(eqx.Module):
     residual: Float[Array, ""]  # max |Phi_T(z0) - z0|, scaled
     newton_steps: Int[Array, ""]
     converged: Bool[Array, ""]
-
-
-def _solver(settings: SolverSettings):
-    return dfx.Kvaerno5() if settings.implicit else dfx.Tsit5()
-
-
-def _integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
-    """Integrate `field(theta, y, p)` from phase 0 to `t1` from `y0`, a state `z` or a
-    pair `(z, tangents)`; the step size follows the error of `z` alone."""
-    state_norm = lambda error: optx.rms_norm(error[0] if isinstance(error, tuple) else error)
-    return dfx.diffeqsolve(
-        dfx.ODETerm(field),
-        _solver(settings),
-        t0=0.0,
-        t1=t1,
-        dt0=None,
-        y0=y0,
-        args=p,
-        saveat=saveat,
-        stepsize_controller=dfx.PIDController(
-            rtol=settings.rtol, atol=settings.atol, norm=state_norm
-        ),
-        adjoint=dfx.ForwardMode(),
-        max_steps=max_steps,
-        throw=False,
-    )
-
-
-def _phases(settings: SolverSettings, dtype):
-    return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
-
-
-def _period_samples(z0, p, settings: SolverSettings):
-    """x, y and y' sampled over one period from `z0`, the state after the period, the
-    largest |y| at a stick-slip transition and the number of transitions (exact friction;
-    else 0)."""
-    if settings.exact_friction:
-        states, z_end, transitions, y_events = _coulomb.period(z0, p, settings.samples)
-        return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
-                transitions.astype(z0.dtype))
-    phases = _phases(settings, z0.dtype)
-    sol = _integrate(
-        vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
-        settings.max_steps,
-    )
-    ys = sol.ys
-    zero = jnp.zeros((), z0.dtype)
-    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1], zero, zero
-
-
-def _field_and_tangents(theta, y, p):
-    """The vector field with its variational equations: `y = (z, tangents)`, where the
-    tangents (4 x 4) are d z / d z0."""
-    z, tangents = y
-    return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
-
-
-def _period_tangents(z, p, settings: SolverSettings):
-    """The state after one period from `z` and its Jacobian with respect to `z` (the
-    monodromy matrix), by the variational equations (their step sizes follow the error of
-    the state alone: accurate enough for Newton's iterations, whose answer does not depend
-    on them). With exact friction, the forward derivatives of the hybrid period map."""
-    if settings.exact_friction:
-        end = lambda z0: _coulomb.period(z0, p, settings.samples, keep_samples=False)[1]
-        return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
-            jnp.eye(4, dtype=z.dtype))
-    sol = _integrate(
-        _field_and_tangents, (z, jnp.eye(4, dtype=z.dtype)), p, 2 * jnp.pi, settings,
-        dfx.SaveAt(t1=True), settings.max_steps,
-    )
-    z_end, monodromy = (y[-1] for y in sol.ys)
-    return z_end, monodromy
-
-
-def _samples_and_jacobian(z, p, settings, directions=()):
-    """One integration of a period from `z` with tangents along the four state directions
-    and the parameters `p[i]`, `i` in `directions`, differentiating the integration itself
-    (so that the derivatives are those of the computed samples, to rounding): `(xs, ys,
-    ws, z_end)`, their Jacobians with respect to `z` (that of `z_end` is the monodromy
-    matrix) and with respect to those parameters (last axis of size `len(directions)`)."""
-    index = jnp.asarray(directions, dtype=int)
-    fn = lambda z0, q: _period_samples(z0, p.at[index].set(q), settings)
-    basis = jnp.eye(4 + len(directions), dtype=z.dtype)
-    primal, tangents = jax.vmap(
-        lambda t: jax.jvp(fn, (z, p[index]), (t[:4], t[4:])), out_axes=(None, 0)
-    )(basis)
-    tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
-    return primal, tuple(t[..., :4] for t in tangents), tuple(t[..., 4:] for t in tangents)
-
-
-def linear_initial_state(p) -> Float[Array, " 4"]:
-    """Scaled state at phase 0 of the steady linear response: of the free (frictionless)
-    TID, or of the stuck one when the friction force exceeds the force needed to hold the
-    inerter terminal still."""
-    mass, stiffness, damping, inertance, friction, k, c, _, amplitude, omega = p
-    jw = 1j * omega
-    spring = k + jw * c
-    terminal = spring / (spring - inertance * omega**2)
-    free_x = stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
-    stuck_x = stiffness / (stiffness + k - mass * omega**2 + jw * (damping + c))
-    holding_force = jnp.abs(spring * stuck_x) * amplitude / stiffness
-    stuck = holding_force < friction
-    x_hat = jnp.where(stuck, stuck_x, free_x)
-    y_hat = jnp.where(stuck, 0.0, free_x * terminal)
-    # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
-    return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real])
-
-
-def _transient(z, p, settings: SolverSettings, periods=None):
-    """Integrate `periods` (default `settings.transient_periods`, at most that; may be
-    traced) periods from `z` (keeps `z` if that fails)."""
-    if settings.transient_periods == 0:
-        return z
-    if settings.exact_friction:
-        count = settings.transient_periods if periods is None else periods
-        end = jax.lax.fori_loop(
-            0, count, lambda _, z: _coulomb.period(z, p, settings.samples, False)[1], z
-        )
-        return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
-    sol = _integrate(
-        vector_field,
-        z,
-        p,
-        2 * jnp.pi * (settings.transient_periods if periods is None else periods),
-        settings,
-        dfx.SaveAt(t1=True),
-        settings.max_steps * settings.transient_periods,
-    )
-    return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
 
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
@@ -298,7 +85,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
 
     def body(carry):
         z, best, best_residual, best_xs, _, steps = carry
-        xs, _, _, z_end, _, _ = _period_samples(z, p, settings)
+        xs, _, _, z_end, _, _ = period_samples(z, p, settings)
         r = z_end - z
         ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
         residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
@@ -333,7 +120,7 @@ class _Newton(eqx.Module):
 
 
 def _newton(z, p, settings: SolverSettings) -> _Newton:
-    z_end, monodromy = _period_tangents(z, p, settings)
+    z_end, monodromy = period_tangents(z, p, settings)
     residual = z_end - z
     update = jnp.linalg.solve(fixed_point_matrix(monodromy), residual)
     finite = jnp.all(jnp.isfinite(update))
@@ -421,7 +208,7 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
 def verified_samples(z: Float[Array, " 4"], p: Float[Array, " 10"], settings: SolverSettings):
     """x, y, y' sampled over the period from `z`, and the residual |Phi_T(z) - z| of that
     integration (inf where it is not finite)."""
-    samples = Samples(*_period_samples(z, p, settings))
+    samples = Samples(*period_samples(z, p, settings))
     return samples, _residual(samples, z)
 
 
@@ -456,7 +243,7 @@ class _Periodic(eqx.Module):
 
 
 def _sample_jacobians(z, p, settings: SolverSettings, directions):
-    primal, of_state, of_parameters = _samples_and_jacobian(z, p, settings, directions)
+    primal, of_state, of_parameters = samples_and_jacobian(z, p, settings, directions)
     return Samples(*primal), Samples(*of_state), Samples(*of_parameters)
 
 
@@ -508,10 +295,11 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
     Without `directions`, each iteration integrates one period with the variational
     equations (the residual Phi_T(z) - z and the monodromy matrix); the last iterate
     evaluated is then integrated once more to sample it over a period, and the residual
-    of that integration is the one returned, which decides convergence. With `directions`, each iteration
-    differentiates the integration along the state and `p[directions]`, which gives the
-    samples' Jacobians at once; the last update is applied to the samples to first order
-    (their error is then second order in the residual returned, the last one evaluated)."""
+    of that integration is the one returned, which decides convergence. With `directions`,
+    each iteration differentiates the integration along the state and `p[directions]`,
+    which gives the samples' Jacobians at once; the last update is applied to the samples
+    to first order (their error is then second order in the residual returned, the last
+    one evaluated)."""
     if directions:
         last, steps = _iterate(
             lambda z: _tangent_newton(z, p, settings, directions), z0, settings
@@ -593,7 +381,7 @@ def solve_orbit(
     scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
     p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
-        z_init = _transient(linear_initial_state(p_const), p_const, settings)
+        z_init = transient(linear_initial_state(p_const), p_const, settings)
     z_init = jax.lax.stop_gradient(z_init)
     if monodromy_init is not None:
         z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
@@ -638,11 +426,7 @@ def refined_peak(samples: Float[Array, " n"]) -> Float[Array, ""]:
 
     def top(s):
         i = jnp.argmax(s)
-        left, mid, right = s[i - 1], s[i], s[(i + 1) % s.shape[0]]
-        curvature = left - 2 * mid + right
-        safe = jnp.where(curvature < 0, curvature, -1.0)
-        vertex = mid - (right - left) ** 2 / (8 * safe)
-        return jnp.where(curvature < 0, jnp.maximum(vertex, mid), mid)
+        return parabola_top(s[i - 1], s[i], s[(i + 1) % s.shape[0]])
 
     return jnp.maximum(top(samples), top(-samples))
 

@@ -1,9 +1,10 @@
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
-
 
 PAPER_HOST_MASS = 1500.0  # kg
 PAPER_HOST_FREQUENCY_HZ = 4.0  # Hz
@@ -28,13 +29,22 @@ _FIELD_RULES = (
     ("tid_stiffness", "positive"),
     ("tid_damping", "non-negative"),
     ("friction_width", "non-negative or None"),
+    ("parasitic_damping", "non-negative"),
+    ("terminal_mass", "non-negative"),
+    ("series_stiffness", "positive or inf"),
+    ("backlash", "non-negative"),
 )
 FIELD_NAMES = tuple(name for name, _ in _FIELD_RULES)
+# The inerter's terms beyond inertance and friction (`TIDSystem`), with their defaults:
+# the paper's ideal device.
+DEVICE_TERMS = {"parasitic_damping": 0.0, "terminal_mass": 0.0, "series_stiffness": math.inf,
+                "backlash": 0.0}
 
 
 def check_values(name: str, value, allowed: str) -> None:
     """Raise `ValueError` naming `name` unless every entry of a concrete `value` is finite
-    and `allowed` ("positive" or "non-negative"). Traced values are not checked."""
+    and `allowed` ("positive" or "non-negative"), or where `allowed` is "positive or
+    inf", positive (infinity included). Traced values are not checked."""
     if isinstance(value, jax.core.Tracer):
         return
     array = np.asarray(value)
@@ -44,6 +54,12 @@ def check_values(name: str, value, allowed: str) -> None:
         raise ValueError(f"{name} must be real, got {value!r}")
     if array.size == 0:
         raise ValueError(f"{name} must not be empty")
+    if allowed == "positive or inf":
+        bad = ~(array > 0)
+        if np.any(bad):
+            first = array.reshape(-1)[np.argmax(bad.reshape(-1))]
+            raise ValueError(f"{name} must be positive (inf: rigid), got {float(first)!r}")
+        return
     bad = ~np.isfinite(array)
     if allowed == "positive":
         bad |= ~(array > 0)
@@ -88,7 +104,10 @@ class TIDSystem(eqx.Module):
         b y'' + c (y' - x') + k (y - x) + ff sgn(y') = 0
 
     with the inerter's dry friction `sgn` smoothed as `tanh(y' / width)`, or exact (with
-    sticking) where `friction_width` is 0.
+    sticking) where `friction_width` is 0. The inerter's own parasitic damping `cp` and
+    the moving mass `mt` at its terminal make the second equation
+
+        (b + mt) y'' + cp y' + c (y' - x') + k (y - x) + ff sgn(y') = 0.
 
     **Fields** (SI units):
 
@@ -117,6 +136,10 @@ class TIDSystem(eqx.Module):
     tid_stiffness: Float[Array, ""]
     tid_damping: Float[Array, ""]
     friction_width: Float[Array, ""] | None
+    parasitic_damping: Float[Array, ""]
+    terminal_mass: Float[Array, ""]
+    series_stiffness: Float[Array, ""]
+    backlash: Float[Array, ""]
     exact_friction: bool = eqx.field(static=True)
 
     def __init__(
@@ -129,17 +152,37 @@ class TIDSystem(eqx.Module):
         tid_stiffness: ArrayLike,
         tid_damping: ArrayLike,
         friction_width: ArrayLike | None = None,
+        *,
+        parasitic_damping: ArrayLike = 0.0,
+        terminal_mass: ArrayLike = 0.0,
+        series_stiffness: ArrayLike | None = math.inf,
+        backlash: ArrayLike = 0.0,
     ):
         values = locals()
+        if series_stiffness is None:
+            values["series_stiffness"] = math.inf
         # decided on the value given: arrays made here are traced inside `jax.jit`
         self.exact_friction = _is_exact(friction_width)
         for name, allowed in _FIELD_RULES:
+            value = values[name]
             if allowed == "non-negative or None":
-                value = values[name]
                 setattr(self, name,
                         None if value is None else _as_float_array(name, value, "non-negative"))
             else:
-                setattr(self, name, _as_float_array(name, values[name], allowed))
+                setattr(self, name, _as_float_array(name, value, allowed))
+        backlash = self.backlash
+        if (not isinstance(backlash, jax.core.Tracer) and np.any(np.asarray(backlash) > 0)
+                and self.rigid):
+            raise ValueError("backlash needs a finite series_stiffness (a rigid device with "
+                             "free play would impact)")
+
+    @property
+    def rigid(self) -> bool:
+        """Whether the inerter is rigid: an infinite `series_stiffness` (a traced one
+        counts as finite)."""
+        stiffness = self.series_stiffness
+        return not isinstance(stiffness, jax.core.Tracer) and bool(
+            np.all(np.isposinf(np.asarray(stiffness))))
 
     @property
     def mass_ratio(self) -> Float[Array, ""]:
@@ -167,8 +210,11 @@ class TIDSystem(eqx.Module):
         """A copy with some fields changed (validated like the constructor)."""
         unknown = sorted(set(changes) - set(FIELD_NAMES))
         if unknown:
-            raise ValueError(f"unknown TIDSystem field(s) {unknown}; fields are {list(FIELD_NAMES)}")
+            raise ValueError(
+                f"unknown TIDSystem field(s) {unknown}; fields are {list(FIELD_NAMES)}")
         values = {name: getattr(self, name) for name in FIELD_NAMES}
+        if self.rigid:
+            values["series_stiffness"] = math.inf  # the model, even where it is traced
         if self.exact_friction:
             values["friction_width"] = 0.0  # the model, even where the width is traced
         values.update(changes)
@@ -176,8 +222,12 @@ class TIDSystem(eqx.Module):
 
     def to_dict(self) -> dict[str, float | None]:
         """Fields as plain Python floats (for JSON/TOML; `friction_width` None for the
-        relative width); requires scalar fields."""
-        return {
+        relative width, `series_stiffness` None for a rigid device); requires scalar
+        fields."""
+        values = {
             name: None if getattr(self, name) is None else float(np.asarray(getattr(self, name)))
             for name in FIELD_NAMES
         }
+        if self.rigid:
+            values["series_stiffness"] = None
+        return values

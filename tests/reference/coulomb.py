@@ -120,7 +120,7 @@ class _Phase:
 
 
 class _System:
-    def __init__(self, M, K, C, b, ff, k, c, omega, A, n_grid):
+    def __init__(self, M, K, C, b, ff, k, c, omega, A, n_grid, cp=0.0):
         self.M, self.K, self.C, self.b, self.ff = M, K, C, b, ff
         self.k, self.c, self.omega, self.A = k, c, omega, A
         self.T = 2.0 * math.pi / omega
@@ -130,7 +130,7 @@ class _System:
                 [0.0, 1.0, 0.0, 0.0],
                 [-(K + k) / M, -(C + c) / M, k / M, c / M],
                 [0.0, 0.0, 0.0, 1.0],
-                [k / b, c / b, -k / b, -c / b],
+                [k / b, c / b, -k / b, -(c + cp) / b],
             ]
         )
         self.slip = _Modal(S4, [0.0, A / M, 0.0, 0.0], omega)
@@ -338,13 +338,18 @@ def coulomb_steady_state(
     n_grid=256,
     max_periods=4000,
     n_dense=2048,
+    parasitic_damping=0.0,
+    terminal_mass=0.0,
 ) -> dict:
     """Periodic steady state of the host + TID with exact Coulomb friction (SI units).
 
     Arguments: host mass M [kg], host stiffness K [N/m], host damping C [N s/m],
     inertance b [kg], friction force ff [N] (>= 0), TID stiffness k [N/m], TID damping
     c [N s/m], forcing frequency omega [rad/s], forcing amplitude A [N]; forcing is
-    ``A sin(omega t)`` on the host.
+    ``A sin(omega t)`` on the host. The inerter's own parasitic damping cp [N s/m] and
+    terminal mass mt [kg] (default 0) make its equation
+    ``(b + mt) y'' + cp y' + c (y' - x') + k (y - x) + ff sign(y') = 0``; at rest
+    (y' = 0) neither changes the stick and slip decisions.
 
     Returns a dict with ``x_max``, ``y_max`` (peak |x|, |y| over one steady period, m),
     ``converged`` (period-boundary state repeats to ``rtol``), ``periods`` (period maps
@@ -372,7 +377,8 @@ def coulomb_steady_state(
     if not (C >= 0.0 and c >= 0.0 and C + c > 0.0):
         raise ValueError("dampings must be >= 0 with host_damping + tid_damping > 0")
 
-    sysm = _System(M, K, C, b, ff, k, c, omega, A, n_grid)
+    sysm = _System(M, K, C, b + float(terminal_mass), ff, k, c, omega, A, n_grid,
+                   float(parasitic_damping))
     T = sysm.T
 
     # Initial guess: fully stuck periodic motion if it is consistent, else frictionless.

@@ -39,23 +39,25 @@ def linear_steady_state(case: dict) -> tuple[complex, complex]:
     """Complex amplitudes (X, Y) [m] of the frictionless steady state, x = Im(X e^{i w t})."""
     M, K, C = case["host_mass"], case["host_stiffness"], case["host_damping"]
     b, k, c = case["inertance"], case["tid_stiffness"], case["tid_damping"]
+    b = b + case.get("terminal_mass", 0.0)
     w, A = case["omega"], case["amplitude"]
     Z = k + 1j * w * c
-    D = k - b * w**2 + 1j * w * c
-    X = A / (K - M * w**2 + 1j * w * C + Z * (-b * w**2) / D)
+    D = k - b * w**2 + 1j * w * (c + case.get("parasitic_damping", 0.0))
+    device = -b * w**2 + 1j * w * case.get("parasitic_damping", 0.0)
+    X = A / (K - M * w**2 + 1j * w * C + Z * device / D)
     return complex(X), complex(Z * X / D)
 
 
 def _rhs(tau, u, p):
-    m, ch, ct, kt, bb, f, s = p[0], p[1], p[2], p[3], p[4], p[5], p[6]
+    m, ch, ct, kt, bb, f, s, cp = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]
     u0, u1, u2, u3 = u[0], u[1], u[2], u[3]
     fl = ct * (u1 - u3) + kt * (u0 - u2)
     a1 = (jnp.sin(tau) - ch * u1 - u0 - fl) / m
-    a3 = (fl - f * jnp.tanh(s * u3)) / bb
+    a3 = (fl - cp * u3 - f * jnp.tanh(s * u3)) / bb
     return jnp.stack([u1, a1, u3, a3])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _solvers(rtol: float, max_steps: int):
     term = diffrax.ODETerm(_rhs)
     solver = diffrax.Kvaerno5()
@@ -114,7 +116,10 @@ def transient_peaks(
 ) -> dict:
     """Periodic steady state of the smoothed-friction model for one case (SI units).
 
-    ``case`` holds the seven system keys plus ``omega`` [rad/s] and ``amplitude`` [N];
+    ``case`` holds the seven system keys plus ``omega`` [rad/s] and ``amplitude`` [N],
+    and optionally the inerter's ``parasitic_damping`` cp [N s/m] and ``terminal_mass``
+    mt [kg] (default 0), which make its equation
+    ``(b + mt) y'' + cp y' + c (y' - x') + k (y - x) + ff tanh(y' / eps) = 0``;
     ``friction_width`` eps [m/s] is the velocity scale of ``tanh(y'/eps)``.  Starts from
     the frictionless steady state (or from rest with ``from_rest``).
 
@@ -129,12 +134,13 @@ def transient_peaks(
     b, ff = float(case["inertance"]), float(case["friction_force"])
     k, c = float(case["tid_stiffness"]), float(case["tid_damping"])
     w, A = float(case["omega"]), float(case["amplitude"])
+    cp, mt = float(case.get("parasitic_damping", 0.0)), float(case.get("terminal_mass", 0.0))
     eps = float(friction_width)
     if not (eps > 0.0 and w > 0.0 and A > 0.0):
         raise ValueError("friction_width, omega and amplitude must be positive")
     L = A / K
-    p = jnp.asarray([M * w * w / K, C * w / K, c * w / K, k / K, b * w * w / K, ff / A,
-                     w * L / eps], dtype=jnp.float64)
+    p = jnp.asarray([M * w * w / K, C * w / K, c * w / K, k / K, (b + mt) * w * w / K, ff / A,
+                     w * L / eps, cp * w / K], dtype=jnp.float64)
     period_dense, period_jac = _solvers(float(rtol), int(max_steps))
 
     if from_rest:

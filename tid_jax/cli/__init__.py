@@ -20,9 +20,9 @@ from .._cache import enable_compilation_cache
 from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser
 from .frf import FRF_COLUMNS as FRF_COLUMNS
 from .frf import _add_frf_parser, _run_frf
+from .identify import _add_identify_parser, _run_identify
 from .retune import RETUNE_COLUMNS as RETUNE_COLUMNS
 from .retune import _add_retune_parser, _run_retune
-from .identify import _add_identify_parser, _run_identify
 from .robust import _add_robust_parser, _run_robust
 from .rtds import RTDS_COLUMNS as RTDS_COLUMNS
 from .rtds import _add_rtds_parser, _run_rtds

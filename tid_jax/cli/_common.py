@@ -17,14 +17,16 @@ from tqdm import tqdm
 from .. import __version__
 from .._band import DEFAULT_FREQUENCIES, default_omegas
 from .._cache import CACHE_ENVIRONMENT_VARIABLE
+from .._checks import check_rigid
 from .._io import check_writable_dir, json_text
 from .._linear import (
     den_hartog_tuning,
     linear_receptance,
     stuck_receptance,
 )
-from .._steady_state import SolverSettings
+from .._settings import SolverSettings
 from .._system import (
+    DEVICE_TERMS,
     PAPER_AMPLITUDES,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -54,6 +56,14 @@ PHYSICAL_INPUTS = (
      "non-negative"),
     ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
     ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
+    ("parasitic_damping", "N s/m", "parasitic viscous damping of the inerter, in parallel with "
+     "its inertance (default 0)", "non-negative"),
+    ("terminal_mass", "kg", "moving mass at the inerter's driven terminal (default 0)",
+     "non-negative"),
+    ("series_stiffness", "N/m", "stiffness of screw, nut and mounts in series with the "
+     "inerter mechanism (default: rigid; only rtds takes a compliant device)", "positive"),
+    ("backlash", "m", "total free play in that series connection (default 0; needs "
+     "series_stiffness)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
 )
 GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
@@ -72,6 +82,7 @@ DEFAULTS = {
     "n_frequencies": DEFAULT_FREQUENCIES,
 }
 MIN_FREQUENCIES = 5
+DEVICE_UNITS = {key: unit for key, unit, *_ in PHYSICAL_INPUTS if key in DEVICE_TERMS}
 
 
 class CLIError(Exception):
@@ -123,7 +134,12 @@ def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="forcing amplitudes A of A sin(wt) [N] (default: the paper's twelve, 100-3000 N)",
     )
-    grid.add_argument(
+    _add_band_arguments(grid)
+
+
+def _add_band_arguments(group) -> None:
+    """--band-hz and --n-frequencies."""
+    group.add_argument(
         "--band-hz",
         dest="band_hz",
         nargs=2,
@@ -132,7 +148,7 @@ def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
         help="forcing frequency band [Hz] (default: 0.65-1.4 times the host "
         "frequency, both resonance peaks)",
     )
-    grid.add_argument(
+    group.add_argument(
         "--n-frequencies",
         dest="n_frequencies",
         type=int,
@@ -272,6 +288,7 @@ def _system(inputs: dict) -> TIDSystem:
         tid_stiffness=inputs.get("tid_stiffness", k_dh),
         tid_damping=inputs.get("tid_damping", c_dh),
         friction_width=inputs.get("friction_width"),
+        **{name: inputs[name] for name in DEVICE_TERMS if name in inputs},
     )
 
 
@@ -306,6 +323,7 @@ class _Start(NamedTuple):
 def _start(args) -> _Start:
     inputs = _inputs(args)
     system = _system(inputs)
+    check_rigid(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)
     return _Start(inputs, system, _settings(inputs).for_system(system), frequencies_hz, omegas,
                   np.asarray(inputs["amplitudes"]), _Output(args))
@@ -353,6 +371,9 @@ def _describe(system: TIDSystem) -> str:
         f"{' (exact Coulomb friction)' if system.exact_friction else ''}, "
         f"k = {float(system.tid_stiffness):.5g} N/m, "
         f"c = {float(system.tid_damping):.4g} N s/m"
+        + "".join(f", {name} = {value:.4g} {DEVICE_UNITS[name]}"
+                  for name, value in system.to_dict().items()
+                  if name in DEVICE_TERMS and value not in (None, DEVICE_TERMS[name]))
     )
 
 

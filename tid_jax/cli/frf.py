@@ -1,6 +1,7 @@
 """`tid-jax frf`: the steady-state frequency response and the breakaway amplitude."""
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,62 +53,45 @@ def _add_frf_parser(subparsers) -> None:
     _add_output_arguments(parser)
 
 
+class _Grid(NamedTuple):
+    """The responses over amplitudes x frequencies (SI)."""
+
+    x_max: np.ndarray
+    y_max: np.ndarray
+    converged: np.ndarray
+    stable: np.ndarray
+    stick_fraction: np.ndarray
+    transitions: np.ndarray
+
+
 def _run_frf(args) -> int:
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     output.say(
         f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
         f"frequencies; {_describe(system)}"
     )
-    shape = (amplitudes.size, omegas.size)
-    x_max, y_max = np.empty(shape), np.empty(shape)
-    converged, stable = np.empty(shape, bool), np.empty(shape, bool)
-    stick, transitions = np.empty(shape), np.empty(shape, int)
-    with output.steps(amplitudes.size) as step:
-        for i, amplitude in enumerate(amplitudes):
-            response = frequency_response(system, omegas, amplitude, settings=settings)
-            x_max[i], y_max[i] = np.asarray(response.x_max), np.asarray(response.y_max)
-            converged[i] = np.asarray(response.converged)
-            stable[i] = np.asarray(response.stable)
-            stick[i], transitions[i] = response.stick_fraction, response.transitions
-            step(
-                f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
-                f"{converged[i].sum()}/{omegas.size} steady states converged"
-            )
-
+    grid = _solve(system, omegas, amplitudes, settings, output)
     static = (amplitudes / float(system.host_stiffness))[:, None]
-    x_norm, y_norm = x_max / static, y_max / static
+    x_norm, y_norm = grid.x_max / static, grid.y_max / static
     x_linear, y_linear = _linear_normalised(system, frequencies_hz)
     rows = [
         [
             float(amplitudes[i]),
             float(frequencies_hz[j]),
-            float(x_max[i, j]),
-            float(y_max[i, j]),
+            float(grid.x_max[i, j]),
+            float(grid.y_max[i, j]),
             float(x_norm[i, j]),
             float(y_norm[i, j]),
             float(x_linear[j]),
             float(y_linear[j]),
-            bool(converged[i, j]),
-            bool(stable[i, j]),
-            float(stick[i, j]),
-            int(transitions[i, j]),
+            bool(grid.converged[i, j]),
+            bool(grid.stable[i, j]),
+            float(grid.stick_fraction[i, j]),
+            int(grid.transitions[i, j]),
         ]
         for i in range(amplitudes.size)
         for j in range(omegas.size)
     ]
-    peak = np.argmax(np.where(converged, x_max, -np.inf), axis=1)
-    summary = [
-        {
-            "amplitude_N": float(amplitudes[i]),
-            "x_peak_over_A_K": float(x_norm[i, peak[i]]),
-            "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
-            "stroke_m": float(np.max(np.where(converged[i], y_max[i], -np.inf))),
-            "converged_points": int(converged[i].sum()),
-            "unstable_points": int((converged[i] & ~stable[i]).sum()),
-        }
-        for i in range(amplitudes.size)
-    ]
-
     breakaway = breakaway_amplitude(system, omegas)
     write_csv(output.path("frf.csv"), FRF_COLUMNS, rows)
     write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
@@ -123,6 +107,7 @@ def _run_frf(args) -> int:
         ),
         output.path("frf.png"),
     )
+    summary = _summary(grid, amplitudes, frequencies_hz, x_norm)
     json_path = output.path("frf.json")
     data = output.document(
         "frf",
@@ -131,12 +116,12 @@ def _run_frf(args) -> int:
         settings,
         frequencies_hz,
         amplitudes_N=[float(a) for a in amplitudes],
-        x_max_m=x_max.tolist(),
-        y_max_m=y_max.tolist(),
-        converged=converged.tolist(),
-        stable=stable.tolist(),
-        stick_fraction=stick.tolist(),
-        transitions=transitions.tolist(),
+        x_max_m=grid.x_max.tolist(),
+        y_max_m=grid.y_max.tolist(),
+        converged=grid.converged.tolist(),
+        stable=grid.stable.tolist(),
+        stick_fraction=grid.stick_fraction.tolist(),
+        transitions=grid.transitions.tolist(),
         x_linear_over_A_K=x_linear.tolist(),
         y_linear_over_A_K=y_linear.tolist(),
         breakaway_amplitude_N=np.asarray(breakaway.amplitude).tolist(),
@@ -145,8 +130,45 @@ def _run_frf(args) -> int:
         summary=summary,
     )
     write_json(json_path, data)
+    table = _table(summary, system, inputs["stroke_limit"], omegas.size)
+    return output.finish(data, table + "\n" + _breakaway_line(breakaway))
 
-    stroke_limit = inputs["stroke_limit"]
+
+def _solve(system, omegas, amplitudes, settings, output) -> _Grid:
+    """The frequency response, one amplitude after another (a progress step each)."""
+    shape = (amplitudes.size, omegas.size)
+    grid = _Grid(np.empty(shape), np.empty(shape), np.empty(shape, bool), np.empty(shape, bool),
+                 np.empty(shape), np.empty(shape, int))
+    with output.steps(amplitudes.size) as step:
+        for i, amplitude in enumerate(amplitudes):
+            response = frequency_response(system, omegas, amplitude, settings=settings)
+            for name, array in zip(_Grid._fields, grid, strict=True):
+                array[i] = np.asarray(getattr(response, name))
+            step(
+                f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N): "
+                f"{grid.converged[i].sum()}/{omegas.size} steady states converged"
+            )
+    return grid
+
+
+def _summary(grid: _Grid, amplitudes, frequencies_hz, x_norm) -> list[dict]:
+    """Per amplitude: the peak over the converged points, where it is, the stroke."""
+    converged = grid.converged
+    peak = np.argmax(np.where(converged, grid.x_max, -np.inf), axis=1)
+    return [
+        {
+            "amplitude_N": float(amplitudes[i]),
+            "x_peak_over_A_K": float(x_norm[i, peak[i]]),
+            "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
+            "stroke_m": float(np.max(np.where(converged[i], grid.y_max[i], -np.inf))),
+            "converged_points": int(converged[i].sum()),
+            "unstable_points": int((converged[i] & ~grid.stable[i]).sum()),
+        }
+        for i in range(amplitudes.size)
+    ]
+
+
+def _table(summary, system, stroke_limit, n_frequencies) -> str:
     header = [
         "A [N]",
         "peak x/(A/K)",
@@ -155,13 +177,13 @@ def _run_frf(args) -> int:
         "converged",
         "unstable",
     ]
-    table_rows = [
+    rows = [
         [
             f"{s['amplitude_N']:g}",
             f"{s['x_peak_over_A_K']:.2f}",
             f"{s['peak_frequency_Hz']:.3f}",
             f"{100 * s['stroke_m']:.2f}",
-            f"{s['converged_points']}/{omegas.size}",
+            f"{s['converged_points']}/{n_frequencies}",
             str(s["unstable_points"]),
         ]
         for s in summary
@@ -170,5 +192,4 @@ def _run_frf(args) -> int:
         f"Frequency response ({_describe(system)}); peaks on the grid, x normalised by "
         f"the static displacement A/K"
     )
-    return output.finish(data, title + "\n" + _format_table(header, table_rows) + "\n"
-                         + _breakaway_line(breakaway))
+    return title + "\n" + _format_table(header, rows)

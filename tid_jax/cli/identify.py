@@ -17,8 +17,9 @@ IDENTIFY_COLUMNS = ("record", "time_s", "displacement_m", "velocity_m_per_s", "f
                     "fitted_force_N", "residual_N")
 UNITS = {"inertance": "kg", "friction_force": "N", "parasitic_damping": "N s/m",
          "series_stiffness": "N/m", "backlash": "m", "terminal_mass": "kg"}
-# what `tid-jax retune --config` takes of the device (the TIDSystem's fields)
-SYSTEM_KEYS = ("inertance", "friction_force")
+# what `tid-jax retune --config` takes of the device (the TIDSystem's fields): the rigid
+# device's terms, which the steady-state solvers model
+SYSTEM_KEYS = ("inertance", "friction_force", "parasitic_damping")
 
 
 def _add_identify_parser(subparsers) -> None:
@@ -116,18 +117,7 @@ def _run_identify(args) -> int:
     estimates = {n: float(v) for n, v in zip(names, fit.estimates, strict=True)}
     errors = {n: float(v) for n, v in zip(names, fit.standard_errors, strict=True)}
     labels = [r.name or f"record {i + 1}" for i, r in enumerate(records)]
-    csv_rows, figure_records = [], []
-    for label, record, fitted in zip(labels, records, fit.fitted_force, strict=True):
-        motion = Motion.from_samples(record.time, record.displacement)
-        time, displacement = np.asarray(motion.time), np.asarray(motion.displacement)
-        velocity = np.asarray(motion.velocity)
-        force, fitted = np.asarray(record.force), np.asarray(fitted)
-        csv_rows += [[label, *row] for row in zip(time.tolist(), displacement.tolist(),
-                                                  velocity.tolist(), force.tolist(),
-                                                  fitted.tolist(), (fitted - force).tolist(),
-                                                  strict=True)]
-        figure_records.append(dict(name=label, time=time, displacement=displacement,
-                                   velocity=velocity, force=force, fitted=fitted))
+    csv_rows, figure_records = _samples(labels, records, fit)
     comparison = fit.comparison
     compared = [
         dict(model=model, parameters=list(MODEL_PARAMETERS[model]),
@@ -147,10 +137,12 @@ def _run_identify(args) -> int:
     comment = (f"The inerter identified by `{PROG} identify` ({args.model} model, tid_jax "
                f"{__version__});\nuse it with {PROG} retune --config THIS_FILE")
     if left_out:
-        comment += ("\nNot carried over (the steady-state model has no such term): "
+        comment += ("\nNot carried over (the steady-state solvers take a rigid device; "
+                    f"{PROG} rtds takes these as flags): "
                     + ", ".join(f"{n} = {estimates[n]:.6g} {UNITS[n]}" for n in left_out))
     write_toml(output.path("identify_config.toml"),
-               {key: estimates[key] for key in SYSTEM_KEYS}, comment=comment)
+               {key: estimates[key] for key in SYSTEM_KEYS if key in estimates},
+               comment=comment)
     json_path = output.path("identify.json")
     data = {
         "command": f"{PROG} identify",
@@ -171,6 +163,29 @@ def _run_identify(args) -> int:
     }
     write_json(json_path, data)
 
+    return output.finish(data, _table(names, estimates, errors, compared, labels, fit))
+
+
+def _samples(labels, records, fit):
+    """The rows of identify.csv (measured and fitted force per sample) and the records
+    as the figure takes them."""
+    csv_rows, figure_records = [], []
+    for label, record, fitted in zip(labels, records, fit.fitted_force, strict=True):
+        motion = Motion.from_samples(record.time, record.displacement)
+        time, displacement = np.asarray(motion.time), np.asarray(motion.displacement)
+        velocity = np.asarray(motion.velocity)
+        force, fitted = np.asarray(record.force), np.asarray(fitted)
+        csv_rows += [[label, *row] for row in zip(time.tolist(), displacement.tolist(),
+                                                  velocity.tolist(), force.tolist(),
+                                                  fitted.tolist(), (fitted - force).tolist(),
+                                                  strict=True)]
+        figure_records.append(dict(name=label, time=time, displacement=displacement,
+                                   velocity=velocity, force=force, fitted=fitted))
+    return csv_rows, figure_records
+
+
+def _table(names, estimates, errors, compared, labels, fit) -> str:
+    """The estimates, the comparison of the nested models and the residuals."""
     table = _format_table(
         ["parameter", "estimate", "std. error", "unit"],
         [[n, f"{estimates[n]:.6g}", f"{errors[n]:.3g}", UNITS[n]] for n in names],
@@ -186,4 +201,4 @@ def _run_identify(args) -> int:
                                 for label, rms in zip(labels, fit.rms, strict=True))
     if not bool(fit.converged):
         table += "\n\nWARNING: the least squares did not converge; the estimates are unreliable."
-    return output.finish(data, table)
+    return table

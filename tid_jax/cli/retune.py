@@ -64,54 +64,7 @@ def _run_retune(args) -> int:
     )
     with output.steps(RetuneSettings().progress_steps()) as step:
         result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
-
-    stiffness = float(system.host_stiffness)
-    # The frequency responses before and after retuning, on retune's check grid.
-    check_hz = np.asarray(result.check_omegas) / (2 * math.pi)
-    x_before = np.asarray(result.x_response_initial) / (amplitudes[:, None] / stiffness)
-    x_after = np.asarray(result.x_response) / (amplitudes[:, None] / stiffness)
-
-    k_dh, c_dh = _den_hartog(system)
-    stroke_limit = inputs["stroke_limit"]
-    static = amplitudes / stiffness
-    k_ratio = np.asarray(result.tid_stiffness) / k_dh
-    c_ratio = np.asarray(result.tid_damping) / c_dh
-    x_peak_before = np.asarray(result.x_peak_initial) / static
-    x_peak_after = np.asarray(result.x_peak) / static
-    y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
-    within = y_after <= stroke_limit
-    improved = x_peak_after <= x_peak_before
-    statuses = result.status_messages()
-    breakaway = breakaway_amplitude(system, omegas)
-    records = [
-        dict(
-            zip(
-                RETUNE_COLUMNS,
-                (
-                    float(amplitudes[i]),
-                    float(k_ratio[i]),
-                    float(result.tid_stiffness[i]),
-                    float(c_ratio[i]),
-                    float(result.tid_damping[i]),
-                    float(x_peak_before[i]),
-                    float(x_peak_after[i]),
-                    float(result.omega_peak[i]) / (2 * math.pi),
-                    float(y_before[i]),
-                    float(y_after[i]),
-                    stroke_limit,
-                    bool(within[i]),
-                    int(result.iterations[i]),
-                    bool(result.converged[i]),
-                    statuses[i]
-                    + ("" if within[i] else "; stroke over limit")
-                    + ("" if improved[i] else "; peak above the initial tuning's"),
-                ),
-                strict=True,
-            )
-        )
-        for i in range(amplitudes.size)
-    ]
-
+    records = _records(result, system, amplitudes, inputs["stroke_limit"])
     write_csv(
         output.path("retune.csv"),
         RETUNE_COLUMNS,
@@ -120,13 +73,63 @@ def _run_retune(args) -> int:
     write_toml(
         output.path("retune_config.toml"), _config_data(inputs), comment=_config_comment("retune")
     )
+    _save_plots(output, result, system, amplitudes, frequencies_hz, inputs["stroke_limit"])
+    json_path = output.path("retune.json")
+    data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
+    write_json(json_path, data)
+    breakaway = breakaway_amplitude(system, omegas)
+    return output.finish(data, _table(records, system, inputs["stroke_limit"]) + "\n"
+                         + "With the initial tuning: " + _breakaway_line(breakaway))
+
+
+def _records(result, system, amplitudes, stroke_limit) -> list[dict]:
+    """One record per amplitude, keyed by `RETUNE_COLUMNS`."""
+    k_dh, c_dh = _den_hartog(system)
+    static = amplitudes / float(system.host_stiffness)
+    x_peak_before = np.asarray(result.x_peak_initial) / static
+    x_peak_after = np.asarray(result.x_peak) / static
+    y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
+    within = y_after <= stroke_limit
+    improved = x_peak_after <= x_peak_before
+    statuses = result.status_messages()
+    return [
+        dict(zip(RETUNE_COLUMNS, (
+            float(amplitudes[i]),
+            float(result.tid_stiffness[i]) / k_dh,
+            float(result.tid_stiffness[i]),
+            float(result.tid_damping[i]) / c_dh,
+            float(result.tid_damping[i]),
+            float(x_peak_before[i]),
+            float(x_peak_after[i]),
+            float(result.omega_peak[i]) / (2 * math.pi),
+            float(y_before[i]),
+            float(y_after[i]),
+            stroke_limit,
+            bool(within[i]),
+            int(result.iterations[i]),
+            bool(result.converged[i]),
+            statuses[i]
+            + ("" if within[i] else "; stroke over limit")
+            + ("" if improved[i] else "; peak above the initial tuning's"),
+        ), strict=True))
+        for i in range(amplitudes.size)
+    ]
+
+
+def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit) -> None:
+    """The frequency responses before and after retuning (on retune's check grid) and the
+    summary against amplitude."""
+    k_dh, c_dh = _den_hartog(system)
+    static = amplitudes / float(system.host_stiffness)
+    k_ratio = np.asarray(result.tid_stiffness) / k_dh
+    c_ratio = np.asarray(result.tid_damping) / c_dh
     linear_hz, x_linear, _ = _linear_curves(system, frequencies_hz)
     plot.save_figure(
         plot.plot_retune_responses(
-            check_hz,
+            np.asarray(result.check_omegas) / (2 * math.pi),
             amplitudes,
-            x_before,
-            x_after,
+            np.asarray(result.x_response_initial) / static[:, None],
+            np.asarray(result.x_response) / static[:, None],
             k_ratio,
             c_ratio,
             linear=(linear_hz, x_linear),
@@ -139,19 +142,20 @@ def _run_retune(args) -> int:
             amplitudes,
             k_ratio,
             c_ratio,
-            x_peak_before,
-            x_peak_after,
-            y_before,
-            y_after,
+            np.asarray(result.x_peak_initial) / static,
+            np.asarray(result.x_peak) / static,
+            np.asarray(result.y_peak_initial),
+            np.asarray(result.y_peak),
             stroke_limit=stroke_limit,
             converged=np.asarray(result.converged),
         ),
         output.path("retune_summary.png"),
     )
-    json_path = output.path("retune.json")
-    data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
-    write_json(json_path, data)
 
+
+def _table(records, system, stroke_limit) -> str:
+    """The printed table of the records, with its title."""
+    k_dh, c_dh = _den_hartog(system)
     header = [
         "A [N]",
         "k/k_DH",
@@ -183,5 +187,4 @@ def _run_retune(args) -> int:
         f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
         f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
     )
-    return output.finish(data, title + "\n" + _format_table(header, rows) + "\n"
-                         + "With the initial tuning: " + _breakaway_line(breakaway))
+    return title + "\n" + _format_table(header, rows)

@@ -5,10 +5,9 @@ import math
 import numpy as np
 
 from .. import plot
-from .._design import ROBUST_SHARPNESS
 from .._io import write_csv, write_json, write_toml
 from .._retune import RetuneSettings
-from .._robust import robust_tune, tuning_performance
+from .._robust import RobustSettings, robust_tune, tuning_performance
 from ._common import (
     CLIError,
     _add_output_arguments,
@@ -76,7 +75,8 @@ def _run_robust(args) -> int:
         f"frequencies, {omegas.size} frequencies each; {_describe(system)}"
     )
     # The retune's steps, then the robust design's: its start, its stages and its end.
-    with output.steps(RetuneSettings().progress_steps() + 3 + len(ROBUST_SHARPNESS)) as step:
+    total = RetuneSettings().progress_steps() + 3 + len(RobustSettings().sharpness)
+    with output.steps(total) as step:
         result = robust_tune(
             system,
             amplitudes,
@@ -87,30 +87,7 @@ def _run_robust(args) -> int:
             progress=step,
         )
     given = tuning_performance(system, result.best, settings=settings)
-    robust = result.performance
-    best = result.best
-    records = [
-        dict(
-            zip(
-                ROBUST_COLUMNS,
-                (
-                    float(scale),
-                    float(amplitude),
-                    float(best.tid_stiffness[i, j]),
-                    float(best.tid_damping[i, j]),
-                    float(best.host_peak[i, j]),
-                    float(robust.host_peak[i, j]),
-                    float(robust.ratio[i, j]),
-                    float(robust.stroke_peak[i, j]),
-                    float(given.ratio[i, j]),
-                    float(given.stroke_peak[i, j]),
-                ),
-                strict=True,
-            )
-        )
-        for i, scale in enumerate(scales)
-        for j, amplitude in enumerate(amplitudes)
-    ]
+    records = _records(result, given, scales, amplitudes)
     write_csv(
         output.path("robust.csv"),
         ROBUST_COLUMNS,
@@ -119,7 +96,47 @@ def _run_robust(args) -> int:
     write_toml(
         output.path("robust_config.toml"), _config_data(inputs), comment=_config_comment("robust")
     )
-    nominal = scales.index(1.0)
+    _save_plot(output, result, given, amplitudes, scales.index(1.0), stroke_limit,
+               nominal_only=tolerance > 0)
+    summary = _summary(result, given, system, stroke_limit)
+    json_path = output.path("robust.json")
+    data = output.document(
+        "robust",
+        inputs,
+        system,
+        settings,
+        frequencies_hz,
+        host_frequency_scales=list(scales),
+        robust=summary,
+        results=records,
+    )
+    write_json(json_path, data)
+    return output.finish(data, _table(records, summary, system, stroke_limit, tolerance))
+
+
+def _records(result, given, scales, amplitudes) -> list[dict]:
+    """One record per scenario, keyed by `ROBUST_COLUMNS`."""
+    robust, best = result.performance, result.best
+    return [
+        dict(zip(ROBUST_COLUMNS, (
+            float(scale),
+            float(amplitude),
+            float(best.tid_stiffness[i, j]),
+            float(best.tid_damping[i, j]),
+            float(best.host_peak[i, j]),
+            float(robust.host_peak[i, j]),
+            float(robust.ratio[i, j]),
+            float(robust.stroke_peak[i, j]),
+            float(given.ratio[i, j]),
+            float(given.stroke_peak[i, j]),
+        ), strict=True))
+        for i, scale in enumerate(scales)
+        for j, amplitude in enumerate(amplitudes)
+    ]
+
+
+def _save_plot(output, result, given, amplitudes, nominal, stroke_limit, *, nominal_only):
+    robust = result.performance
     plot.save_figure(
         plot.plot_robust_comparison(
             amplitudes,
@@ -138,13 +155,17 @@ def _run_robust(args) -> int:
                 ),
             ],
             stroke_limit=stroke_limit,
-            title="Robust TID tuning" + (" (nominal host frequency)" if tolerance > 0 else ""),
+            title="Robust TID tuning" + (" (nominal host frequency)" if nominal_only else ""),
         ),
         output.path("robust.png"),
     )
+
+
+def _summary(result, given, system, stroke_limit) -> dict:
+    """The robust design and the given tuning's worst case, for the JSON and the title."""
     k_dh, c_dh = _den_hartog(system)
     k, c = float(result.tid_stiffness), float(result.tid_damping)
-    summary = {
+    return {
         "tid_stiffness": k,
         "tid_damping": c,
         "k_over_k_den_hartog": k / k_dh,
@@ -160,19 +181,12 @@ def _run_robust(args) -> int:
         "converged": bool(result.converged),
         "status": result.status_messages()[0],
     }
-    json_path = output.path("robust.json")
-    data = output.document(
-        "robust",
-        inputs,
-        system,
-        settings,
-        frequencies_hz,
-        host_frequency_scales=list(scales),
-        robust=summary,
-        results=records,
-    )
-    write_json(json_path, data)
 
+
+def _table(records, summary, system, stroke_limit, tolerance) -> str:
+    """The printed table of the scenarios, with its title."""
+    k_dh, c_dh = _den_hartog(system)
+    k, c = summary["tid_stiffness"], summary["tid_damping"]
     header = [
         "f_n x",
         "A [N]",
@@ -209,4 +223,4 @@ def _run_robust(args) -> int:
         + f" (given tuning: {summary['given_worst_ratio']:.3f} at "
         f"{summary['given_worst_amplitude_N']:g} N); {limit_text}; {summary['status']}"
     )
-    return output.finish(data, title + "\n" + _format_table(header, rows))
+    return title + "\n" + _format_table(header, rows)

@@ -5,11 +5,11 @@ import math
 import numpy as np
 
 from .. import plot
-from .._band import DEFAULT_FREQUENCIES
 from .._io import write_csv, write_json
 from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._common import (
     CLIError,
+    _add_band_arguments,
     _add_output_arguments,
     _add_structure_arguments,
     _describe,
@@ -59,7 +59,12 @@ def _add_rtds_parser(subparsers) -> None:
         "TOML file with the structure and device keys (and amplitudes, band_hz, "
         "n_frequencies), as for the other commands",
     )
-    forcing = parser.add_argument_group("forcing")
+    _add_forcing_arguments(parser.add_argument_group("forcing"))
+    _add_test_arguments(parser.add_argument_group("substructuring test"))
+    _add_output_arguments(parser)
+
+
+def _add_forcing_arguments(forcing) -> None:
     forcing.add_argument(
         "--amplitude",
         dest="amplitudes",
@@ -75,22 +80,10 @@ def _add_rtds_parser(subparsers) -> None:
         metavar="HZ",
         help="forcing frequencies [Hz] (instead of --band-hz)",
     )
-    forcing.add_argument(
-        "--band-hz",
-        dest="band_hz",
-        nargs=2,
-        type=float,
-        metavar=("LOW", "HIGH"),
-        help="forcing frequency band [Hz] (default: 0.65-1.4 times the host frequency)",
-    )
-    forcing.add_argument(
-        "--n-frequencies",
-        dest="n_frequencies",
-        type=int,
-        metavar="N",
-        help=f"frequencies in the band (default {DEFAULT_FREQUENCIES})",
-    )
-    test = parser.add_argument_group("substructuring test")
+    _add_band_arguments(forcing)
+
+
+def _add_test_arguments(test) -> None:
     test.add_argument(
         "--scheme",
         choices=SCHEMES,
@@ -106,7 +99,8 @@ def _add_rtds_parser(subparsers) -> None:
         type=float,
         default=1.0,
         metavar="RATIO",
-        help="guessed inertance b_g over the inerter's b (1.0)",
+        help="guessed inertance b_g over the device's inertance plus terminal mass, b + mt "
+        "(1.0)",
     )
     test.add_argument(
         "--guessed-force",
@@ -129,12 +123,6 @@ def _add_rtds_parser(subparsers) -> None:
         help="time constant of the actuator's first-order lag [ms] (0: none)",
     )
     test.add_argument(
-        "--parasitic-stiffness",
-        type=float,
-        metavar="N/m",
-        help="stiffness in series with the physical inerter [N/m] (default: rigid)",
-    )
-    test.add_argument(
         "--sample-rate",
         type=float,
         default=1000.0,
@@ -148,7 +136,6 @@ def _add_rtds_parser(subparsers) -> None:
         metavar="N",
         help="simulated duration in forcing periods (60)",
     )
-    _add_output_arguments(parser)
 
 
 def _run_rtds(args) -> int:
@@ -162,9 +149,6 @@ def _run_rtds(args) -> int:
     ratio = _number("guessed_inertance_ratio", args.guessed_inertance_ratio, "positive")
     lag = _number("actuator_lag_ms", args.actuator_lag_ms, "non-negative") / 1e3
     rate = _number("sample_rate", args.sample_rate, "positive")
-    parasitic = args.parasitic_stiffness
-    if parasitic is not None:
-        parasitic = _number("parasitic_stiffness", parasitic, "positive")
     system, settings = _system(inputs), _settings(inputs)
     if args.frequency_hz is not None:
         if args.band_hz is not None:
@@ -180,11 +164,10 @@ def _run_rtds(args) -> int:
         "scheme": args.scheme,
         "amplitude_N": amplitude,
         "delay_s": delay,
-        "guessed_inertance_kg": ratio * float(system.inertance),
+        "guessed_inertance_kg": ratio * float(system.inertance + system.terminal_mass),
         "guessed_force": args.guessed_force,
         "prediction": args.prediction,
         "actuator_lag_s": lag,
-        "parasitic_stiffness_N_per_m": parasitic,
         "sample_rate_Hz": rate,
         "periods": args.periods,
     }
@@ -204,25 +187,11 @@ def _run_rtds(args) -> int:
         guessed_force=args.guessed_force,
         prediction=prediction,
         actuator_lag=lag,
-        parasitic_stiffness=parasitic,
         sample_rate=rate,
         periods=args.periods,
         settings=settings,
     )
-    columns = {
-        "x_whole_m": result.reference_x_max,
-        "y_whole_m": result.reference_y_max,
-        "x_test_m": result.x_max,
-        "y_test_m": result.y_max,
-        "x_amplitude_error": result.x_amplitude_error,
-        "y_amplitude_error": result.y_amplitude_error,
-        "x_phase_error_rad": result.x_phase_error,
-        "y_phase_error_rad": result.y_phase_error,
-        "stable": result.stable,
-        "diverged": result.diverged,
-        "growth": result.growth,
-    }
-    columns = {key: np.atleast_1d(np.asarray(value)).tolist() for key, value in columns.items()}
+    columns = _columns(result)
     rows = [
         [float(f), amplitude, *(columns[key][j] for key in RTDS_COLUMNS[2:])]
         for j, f in enumerate(frequencies_hz)
@@ -243,6 +212,18 @@ def _run_rtds(args) -> int:
     data = output.document("rtds", inputs, system, settings, frequencies_hz, test=test, **columns)
     write_json(json_path, data)
 
+    table = _table(columns, frequencies_hz)
+    title = (
+        f"Substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
+        f"prediction {args.prediction}, {rate:g} Hz) against the whole system, "
+        f"A = {amplitude:g} N; {_describe(system)}"
+    )
+    return output.finish(data, title + "\n" + table)
+
+
+def _table(columns, frequencies_hz) -> str:
+    """The test against the whole system at each frequency (the test's values shown
+    only where it was stable)."""
     header = [
         "f [Hz]",
         "x whole [mm]",
@@ -280,9 +261,22 @@ def _run_rtds(args) -> int:
                 status,
             ]
         )
-    title = (
-        f"Substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
-        f"prediction {args.prediction}, {rate:g} Hz) against the whole system, "
-        f"A = {amplitude:g} N; {_describe(system)}"
-    )
-    return output.finish(data, title + "\n" + _format_table(header, table_rows))
+    return _format_table(header, table_rows)
+
+
+def _columns(result) -> dict[str, list]:
+    """The result's columns of `RTDS_COLUMNS` (but frequency and amplitude), as lists."""
+    columns = {
+        "x_whole_m": result.reference_x_max,
+        "y_whole_m": result.reference_y_max,
+        "x_test_m": result.x_max,
+        "y_test_m": result.y_max,
+        "x_amplitude_error": result.x_amplitude_error,
+        "y_amplitude_error": result.y_amplitude_error,
+        "x_phase_error_rad": result.x_phase_error,
+        "y_phase_error_rad": result.y_phase_error,
+        "stable": result.stable,
+        "diverged": result.diverged,
+        "growth": result.growth,
+    }
+    return {key: np.atleast_1d(np.asarray(value)).tolist() for key, value in columns.items()}

@@ -65,63 +65,25 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 def _run_sensitivity(args) -> int:
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
+    optimum = not args.no_optimum
     output.say(
         f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
-        f"{'' if args.no_optimum else ', with the retuned optimum'}; {_describe(system)}"
+        f"{', with the retuned optimum' if optimum else ''}; {_describe(system)}"
     )
     best = None
     results = []
-    retune_steps = 0 if args.no_optimum else RetuneSettings().progress_steps()
+    retune_steps = RetuneSettings().progress_steps() if optimum else 0
     with output.steps(retune_steps + amplitudes.size) as step:
-        if not args.no_optimum:
+        if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
             best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
                                 progress=step)
         for i, amplitude in enumerate(amplitudes):
-            results.append(
-                sensitivities(system, amplitude, omegas=omegas, optimum=not args.no_optimum,
-                              best=best, settings=settings)
-            )
+            results.append(sensitivities(system, amplitude, omegas=omegas, optimum=optimum,
+                                         best=best, settings=settings))
             step(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
-
-    records = []
-    for amplitude, result in zip(amplitudes, results, strict=True):
-        optimum = result.optimum
-        for i, name in enumerate(result.parameters):
-            at_bound = optimum is not None and bool(optimum.damping_at_bound)
-            optimal = (
-                [None] * 8
-                if optimum is None
-                else [
-                    float(optimum.tid_stiffness),
-                    float(optimum.tid_damping),
-                    float(optimum.host_elasticity[i]),
-                    float(optimum.stroke_elasticity[i]),
-                    float(optimum.stiffness_elasticity[i]),
-                    # Undefined (c* held at 0 by its bound): left empty.
-                    None if at_bound else float(optimum.damping_elasticity[i]),
-                    at_bound,
-                    bool(optimum.converged),
-                ]
-            )
-            values = [
-                float(amplitude),
-                name,
-                float(result.values[i]),
-                PARAMETER_UNITS[name],
-                float(result.host_peak),
-                float(result.host_derivative[i]),
-                float(result.host_elasticity[i]),
-                float(result.stroke_peak),
-                float(result.stroke_derivative[i]),
-                float(result.stroke_elasticity[i]),
-                *optimal[:6],
-                bool(result.converged),
-                optimal[7],
-                optimal[6],
-            ]
-            records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
-
+    records = [record for amplitude, result in zip(amplitudes, results, strict=True)
+               for record in _records(amplitude, result)]
     write_csv(
         output.path("sensitivity.csv"),
         SENSITIVITY_COLUMNS,
@@ -133,34 +95,82 @@ def _run_sensitivity(args) -> int:
         comment=_config_comment("sensitivity"),
     )
     if amplitudes.size > 1:
-        parameters = results[0].parameters
-
-        def series(get, names):
-            return {n: np.array([get(r)[parameters.index(n)] for r in results]) for n in names}
-
-        design = ("tid_stiffness", "tid_damping")
-        physical = [n for n in parameters if n not in design]
-        optimum_given = not args.no_optimum
-        plot.save_figure(
-            plot.plot_elasticities(
-                amplitudes,
-                series(lambda r: np.asarray(r.host_elasticity), parameters),
-                series(lambda r: np.asarray(r.stroke_elasticity), parameters),
-                optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical)
-                if optimum_given
-                else None,
-                optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical)
-                if optimum_given
-                else None,
-            ),
-            output.path("sensitivity.png"),
-        )
+        _save_plot(output, amplitudes, results, optimum)
     json_path = output.path("sensitivity.json")
     data = output.document("sensitivity", inputs, system, settings, frequencies_hz, results=records)
     write_json(json_path, data)
+    return output.finish(data, _table(records, results, amplitudes, system, optimum))
 
+
+def _records(amplitude, result) -> list[dict]:
+    """One record per parameter at one amplitude, keyed by `SENSITIVITY_COLUMNS`."""
+    optimum = result.optimum
+    at_bound = optimum is not None and bool(optimum.damping_at_bound)
+    records = []
+    for i, name in enumerate(result.parameters):
+        optimal = (
+            [None] * 8
+            if optimum is None
+            else [
+                float(optimum.tid_stiffness),
+                float(optimum.tid_damping),
+                float(optimum.host_elasticity[i]),
+                float(optimum.stroke_elasticity[i]),
+                float(optimum.stiffness_elasticity[i]),
+                # Undefined (c* held at 0 by its bound): left empty.
+                None if at_bound else float(optimum.damping_elasticity[i]),
+                at_bound,
+                bool(optimum.converged),
+            ]
+        )
+        values = [
+            float(amplitude),
+            name,
+            float(result.values[i]),
+            PARAMETER_UNITS[name],
+            float(result.host_peak),
+            float(result.host_derivative[i]),
+            float(result.host_elasticity[i]),
+            float(result.stroke_peak),
+            float(result.stroke_derivative[i]),
+            float(result.stroke_elasticity[i]),
+            *optimal[:6],
+            bool(result.converged),
+            optimal[7],
+            optimal[6],
+        ]
+        records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
+    return records
+
+
+def _save_plot(output, amplitudes, results, optimum: bool) -> None:
+    """The elasticities against amplitude."""
+    parameters = results[0].parameters
+
+    def series(get, names):
+        return {n: np.array([get(r)[parameters.index(n)] for r in results]) for n in names}
+
+    physical = [n for n in parameters if n not in ("tid_stiffness", "tid_damping")]
+    plot.save_figure(
+        plot.plot_elasticities(
+            amplitudes,
+            series(lambda r: np.asarray(r.host_elasticity), parameters),
+            series(lambda r: np.asarray(r.stroke_elasticity), parameters),
+            optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical)
+            if optimum
+            else None,
+            optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical)
+            if optimum
+            else None,
+        ),
+        output.path("sensitivity.png"),
+    )
+
+
+def _table(records, results, amplitudes, system, optimum: bool) -> str:
+    """The printed table, ranked by |e_x| per amplitude, with its title."""
     header = ["A [N]", "parameter", "value", "unit", "d x/dp [m/unit]", "e_x", "e_y"]
-    if not args.no_optimum:
+    if optimum:
         header += ["e_x retuned", "e_y retuned", "e_k*", "e_c*"]
     rows = []
     for amplitude in amplitudes:
@@ -178,7 +188,7 @@ def _run_sensitivity(args) -> int:
                 f"{r['host_elasticity']:.4f}",
                 f"{r['stroke_elasticity']:.4f}",
             ]
-            if not args.no_optimum:
+            if optimum:
                 row += [
                     f"{r['optimum_host_elasticity']:.4f}",
                     f"{r['optimum_stroke_elasticity']:.4f}",
@@ -199,4 +209,4 @@ def _run_sensitivity(args) -> int:
         f"optimal damping is at its bound 0, where it stays); ranked by |e_x|"
         + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
     )
-    return output.finish(data, title + "\n" + _format_table(header, rows))
+    return title + "\n" + _format_table(header, rows)

@@ -1,0 +1,93 @@
+"""The numerical settings of the steady-state solver, with their defaults."""
+
+import equinox as eqx
+
+from ._checks import is_positive
+
+
+class SolverSettings(eqx.Module):
+    """Numerical settings of the steady-state (shooting) solver. Defaults live here only.
+
+    - `rtol`, `atol`: tolerances of the adaptive integration, on the state scaled by the
+      static displacement A / K.
+    - `implicit`: integrate with the implicit Kvaerno5 instead of the explicit Tsit5, for
+      stiff problems (a narrow friction width against slow forcing).
+    - `max_steps`: integration steps allowed per forcing period.
+    - `transient_periods`: periods integrated from the initial guess before shooting.
+    - `max_newton_steps`: Newton iterations allowed.
+    - `periodicity_tol`: a point counts as converged only if |Phi_T(z0) - z0| is below this
+      (scaled), checked by a separate integration of the final orbit (smoothed friction;
+      exact friction takes `exact_periodicity_tol`).
+    - `samples`: points per period at which x and y are sampled; each peak is refined by a
+      parabola through the three samples around it.
+    - `exact_friction`: the exact Coulomb friction of a system with `friction_width=0`
+      (the stick-slip flow of `_coulomb`, in closed form between transitions; `rtol`,
+      `atol`, `max_steps` and `implicit` then play no part, and the samples also serve
+      to find the transitions). The entry points set it from the system
+      (`for_system`).
+    - `exact_periodicity_tol`: the `periodicity_tol` of exact friction, whose period map
+      has no integration error: Newton's iterations reach it in about one more step,
+      and it keeps the stroke of a terminal that sticks for most of the period (a small
+      difference of positions) accurate.
+    - `chunk`: points solved together as one vmapped batch (per device); larger batches
+      are solved chunk after chunk, so that each chunk's adaptive integrations and
+      Newton iterations wait only for its own slowest point (neighbouring points, of
+      similar stiffness, share a chunk).
+    """
+
+    rtol: float = 1e-8
+    atol: float = 1e-8
+    max_steps: int = 4096
+    transient_periods: int = 2
+    max_newton_steps: int = 10
+    periodicity_tol: float = 1e-6
+    exact_periodicity_tol: float = 1e-10
+    samples: int = 128
+    implicit: bool = False
+    exact_friction: bool = False
+    chunk: int = 64
+
+    def __check_init__(self):
+        for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol"):
+            value = getattr(self, name)
+            if not is_positive(value):
+                raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
+        for name, low in (("max_steps", 16), ("transient_periods", 0), ("max_newton_steps", 1),
+                          ("samples", 8), ("chunk", 1)):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= low):
+                raise ValueError(
+                    f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
+
+    def fallbacks(self) -> tuple["SolverSettings", ...]:
+        """Settings for further attempts, in turn, at points that did not converge: a
+        long transient towards the attracting orbit, then more Newton iterations, first on
+        integrations 100 times more accurate (Newton stalls where the integration error of
+        the period map exceeds `periodicity_tol`), then with the implicit Kvaerno5 (stiff
+        friction makes an explicit integration run out of steps)."""
+        persistent = eqx.tree_at(
+            lambda s: (s.transient_periods, s.max_newton_steps),
+            self,
+            (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
+        )
+        accurate = eqx.tree_at(lambda s: (s.rtol, s.atol), persistent,
+                               (self.rtol / 100, self.atol / 100))
+        stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
+                            (self.rtol / 10, self.atol / 10, True))
+        return accurate, stiff
+
+    def to_dict(self) -> dict:
+        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+    def for_system(self, system) -> "SolverSettings":
+        """These settings with the friction model of `system` (a `TIDSystem`): exact
+        Coulomb friction where its `friction_width` is 0."""
+        if self.exact_friction == system.exact_friction:
+            return self
+        if not system.exact_friction:
+            raise ValueError(
+                "SolverSettings.exact_friction follows the system (friction_width=0); got "
+                "exact_friction=True with a smoothed-friction system"
+            )
+        return eqx.tree_at(lambda s: (s.exact_friction, s.periodicity_tol), self,
+                           (True, self.exact_periodicity_tol))
