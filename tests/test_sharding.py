@@ -49,7 +49,7 @@ print(json.dumps(dict(
     padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
     if sharding is not None else 1,
     trimmed=len(seen),
-    solve_devices=len(solved[0]["x_max"].devices()),
+    solve_devices=len(solved[0].x_max.devices()),
     x_max=np.asarray(response.x_max).tolist(),
     y_max=np.asarray(response.y_max).tolist(),
     converged=np.asarray(response.converged).tolist(),
