@@ -8,6 +8,7 @@ import shutil
 import sys
 import time
 import tomllib
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -18,7 +19,7 @@ from .. import __version__
 from .._band import DEFAULT_FREQUENCIES, default_omegas
 from .._cache import CACHE_ENVIRONMENT_VARIABLE
 from .._checks import check_rigid
-from .._io import check_writable_dir, json_text
+from .._io import check_writable_dir, json_text, write_csv
 from .._linear import (
     den_hartog_tuning,
     linear_receptance,
@@ -470,6 +471,40 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+class Shown(NamedTuple):
+    """A column of a printed table: its header (a format string, filled in by `table`)
+    and the text of its cell for a record (a dict keyed by the command's CSV columns)."""
+
+    header: str
+    cell: Callable[[dict], str]
+
+
+def shown(header: str, key: str, spec: str, unit: float = 1.0) -> Shown:
+    """The column that prints `record[key] / unit` with the format `spec` ("-" for
+    None)."""
+
+    def cell(record: dict) -> str:
+        value = record[key]
+        return "-" if value is None else format(value / unit if unit != 1.0 else value, spec)
+
+    return Shown(header, cell)
+
+
+def table(columns: Sequence[Shown], records: Sequence[dict], **header_values) -> str:
+    """The printed table of `records`, one row each, in the `columns` declared."""
+    return _format_table([column.header.format(**header_values) for column in columns],
+                         [[column.cell(record) for column in columns] for record in records])
+
+
+def save_records(output: "_Output", name: str, columns: Sequence[str],
+                 records: Sequence[dict]) -> None:
+    """`name` (a CSV file in the output folder) with a row per record: its values in the
+    order `columns`, None as an empty cell."""
+    write_csv(output.path(name), columns,
+              [["" if record[key] is None else record[key] for key in columns]
+               for record in records])
 
 
 def _format_table(header: list[str], rows: list[list[str]]) -> str:

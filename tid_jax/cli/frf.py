@@ -6,22 +6,25 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import plot
-from .._io import write_csv, write_json, write_toml
+from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._response import frequency_response
 from ._common import (
+    Shown,
     _add_output_arguments,
     _add_system_arguments,
     _breakaway_line,
     _config_comment,
     _config_data,
     _describe,
-    _format_table,
     _host_frequency_hz,
     _linear_curves,
     _linear_normalised,
     _start,
     _stuck_curve,
+    save_records,
+    shown,
+    table,
 )
 
 FRF_COLUMNS = (
@@ -53,6 +56,17 @@ def _add_frf_parser(subparsers) -> None:
     _add_output_arguments(parser)
 
 
+# The printed table, a row per amplitude (`_summary`).
+FRF_TABLE = (
+    shown("A [N]", "amplitude_N", "g"),
+    shown("peak x/(A/K)", "x_peak_over_A_K", ".2f"),
+    shown("at f [Hz]", "peak_frequency_Hz", ".3f"),
+    shown("stroke [cm] (limit {limit_cm:g})", "stroke_m", ".2f", unit=0.01),
+    Shown("converged", lambda s: f"{s['converged_points']}/{s['points']}"),
+    shown("unstable", "unstable_points", "d"),
+)
+
+
 class _Grid(NamedTuple):
     """The responses over amplitudes x frequencies (SI)."""
 
@@ -74,8 +88,8 @@ def _run_frf(args) -> int:
     static = (amplitudes / float(system.host_stiffness))[:, None]
     x_norm, y_norm = grid.x_max / static, grid.y_max / static
     x_linear, y_linear = _linear_normalised(system, frequencies_hz)
-    rows = [
-        [
+    records = [
+        dict(zip(FRF_COLUMNS, (
             float(amplitudes[i]),
             float(frequencies_hz[j]),
             float(grid.x_max[i, j]),
@@ -88,12 +102,12 @@ def _run_frf(args) -> int:
             bool(grid.stable[i, j]),
             float(grid.stick_fraction[i, j]),
             int(grid.transitions[i, j]),
-        ]
+        ), strict=True))
         for i in range(amplitudes.size)
         for j in range(omegas.size)
     ]
     breakaway = breakaway_amplitude(system, omegas)
-    write_csv(output.path("frf.csv"), FRF_COLUMNS, rows)
+    save_records(output, "frf.csv", FRF_COLUMNS, records)
     write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
     plot.save_figure(
         plot.plot_frequency_response(
@@ -130,8 +144,8 @@ def _run_frf(args) -> int:
         summary=summary,
     )
     write_json(json_path, data)
-    table = _table(summary, system, inputs["stroke_limit"], omegas.size)
-    return output.finish(data, table + "\n" + _breakaway_line(breakaway))
+    return output.finish(data, _table(summary, system, inputs["stroke_limit"]) + "\n"
+                         + _breakaway_line(breakaway))
 
 
 def _solve(system, omegas, amplitudes, settings, output) -> _Grid:
@@ -162,34 +176,16 @@ def _summary(grid: _Grid, amplitudes, frequencies_hz, x_norm) -> list[dict]:
             "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
             "stroke_m": float(np.max(np.where(converged[i], grid.y_max[i], -np.inf))),
             "converged_points": int(converged[i].sum()),
+            "points": int(converged[i].size),
             "unstable_points": int((converged[i] & ~grid.stable[i]).sum()),
         }
         for i in range(amplitudes.size)
     ]
 
 
-def _table(summary, system, stroke_limit, n_frequencies) -> str:
-    header = [
-        "A [N]",
-        "peak x/(A/K)",
-        "at f [Hz]",
-        f"stroke [cm] (limit {100 * stroke_limit:g})",
-        "converged",
-        "unstable",
-    ]
-    rows = [
-        [
-            f"{s['amplitude_N']:g}",
-            f"{s['x_peak_over_A_K']:.2f}",
-            f"{s['peak_frequency_Hz']:.3f}",
-            f"{100 * s['stroke_m']:.2f}",
-            f"{s['converged_points']}/{n_frequencies}",
-            str(s["unstable_points"]),
-        ]
-        for s in summary
-    ]
+def _table(summary, system, stroke_limit) -> str:
     title = (
         f"Frequency response ({_describe(system)}); peaks on the grid, x normalised by "
         f"the static displacement A/K"
     )
-    return title + "\n" + _format_table(header, rows)
+    return title + "\n" + table(FRF_TABLE, summary, limit_cm=100 * stroke_limit)

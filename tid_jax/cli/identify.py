@@ -9,7 +9,7 @@ from .. import __version__, plot
 from .._device import Motion
 from .._identify import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
 from .._io import write_csv, write_json, write_toml
-from ._common import PROG, CLIError, _add_output_arguments, _format_table, _Output
+from ._common import PROG, CLIError, Shown, _add_output_arguments, _Output, shown, table
 
 RECORD_COLUMNS = ("time", "displacement", "force")
 OPTIONAL_COLUMN = "record"
@@ -184,21 +184,33 @@ def _samples(labels, records, fit):
     return csv_rows, figure_records
 
 
+# The printed tables: the estimates, and the comparison of the nested models (the first
+# model, the reference, has no change in BIC).
+ESTIMATES_TABLE = (
+    shown("parameter", "parameter", "s"),
+    shown("estimate", "estimate", ".6g"),
+    shown("std. error", "standard_error", ".3g"),
+    shown("unit", "unit", "s"),
+)
+COMPARISON_TABLE = (
+    shown("model", "model", "s"),
+    Shown("parameters", lambda row: str(len(row["parameters"]))),
+    shown("RMS [N]", "rms_N", ".4g"),
+    Shown("delta BIC", lambda row: "-" if row["first"] else f"{row['delta_bic']:.1f}"),
+    Shown("term supported",
+          lambda row: "-" if row["first"] else ("yes" if row["supported"] else "no")),
+)
+
+
 def _table(names, estimates, errors, compared, labels, fit) -> str:
     """The estimates, the comparison of the nested models and the residuals."""
-    table = _format_table(
-        ["parameter", "estimate", "std. error", "unit"],
-        [[n, f"{estimates[n]:.6g}", f"{errors[n]:.3g}", UNITS[n]] for n in names],
-    )
-    table += "\n\n" + _format_table(
-        ["model", "parameters", "RMS [N]", "delta BIC", "term supported"],
-        [[row["model"], str(len(row["parameters"])), f"{row['rms_N']:.4g}",
-          "-" if i == 0 else f"{row['delta_bic']:.1f}",
-          "-" if i == 0 else ("yes" if row["supported"] else "no")]
-         for i, row in enumerate(compared)],
-    )
-    table += "\n\n" + "\n".join(f"{label}: residual RMS {float(rms):.4g} N"
-                                for label, rms in zip(labels, fit.rms, strict=True))
+    text = table(ESTIMATES_TABLE, [
+        dict(parameter=n, estimate=estimates[n], standard_error=errors[n], unit=UNITS[n])
+        for n in names])
+    text += "\n\n" + table(COMPARISON_TABLE, [dict(row, first=i == 0)
+                                               for i, row in enumerate(compared)])
+    text += "\n\n" + "\n".join(f"{label}: residual RMS {float(rms):.4g} N"
+                              for label, rms in zip(labels, fit.rms, strict=True))
     if not bool(fit.converged):
-        table += "\n\nWARNING: the least squares did not converge; the estimates are unreliable."
-    return table
+        text += "\n\nWARNING: the least squares did not converge; the estimates are unreliable."
+    return text

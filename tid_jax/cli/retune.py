@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from .. import plot
-from .._io import write_csv, write_json, write_toml
+from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._retune import RetuneSettings, retune
 from ._common import (
@@ -16,10 +16,12 @@ from ._common import (
     _config_data,
     _den_hartog,
     _describe,
-    _format_table,
     _host_frequency_hz,
     _linear_curves,
     _start,
+    save_records,
+    shown,
+    table,
 )
 
 RETUNE_COLUMNS = (
@@ -38,6 +40,21 @@ RETUNE_COLUMNS = (
     "iterations",
     "converged",
     "status",
+)
+
+
+# The printed table: a header and the record's value shown.
+RETUNE_TABLE = (
+    shown("A [N]", "amplitude_N", "g"),
+    shown("k/k_DH", "k_over_k_den_hartog", ".3f"),
+    shown("k [kN/m]", "k_N_per_m", ".2f", unit=1e3),
+    shown("c/c_DH", "c_over_c_den_hartog", ".3f"),
+    shown("c [N s/m]", "c_N_s_per_m", ".1f"),
+    shown("x/(A/K) before", "x_peak_before_over_A_K", ".2f"),
+    shown("x/(A/K) after", "x_peak_after_over_A_K", ".2f"),
+    shown("f_peak [Hz]", "peak_frequency_after_Hz", ".3f"),
+    shown("stroke [cm] (limit {limit_cm:g})", "stroke_after_m", ".2f", unit=0.01),
+    shown("status", "status", "s"),
 )
 
 
@@ -65,11 +82,7 @@ def _run_retune(args) -> int:
     with output.steps(RetuneSettings().progress_steps()) as step:
         result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
     records = _records(result, system, amplitudes, inputs["stroke_limit"])
-    write_csv(
-        output.path("retune.csv"),
-        RETUNE_COLUMNS,
-        [[record[key] for key in RETUNE_COLUMNS] for record in records],
-    )
+    save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     write_toml(
         output.path("retune_config.toml"), _config_data(inputs), comment=_config_comment("retune")
     )
@@ -156,35 +169,8 @@ def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit
 def _table(records, system, stroke_limit) -> str:
     """The printed table of the records, with its title."""
     k_dh, c_dh = _den_hartog(system)
-    header = [
-        "A [N]",
-        "k/k_DH",
-        "k [kN/m]",
-        "c/c_DH",
-        "c [N s/m]",
-        "x/(A/K) before",
-        "x/(A/K) after",
-        "f_peak [Hz]",
-        f"stroke [cm] (limit {100 * stroke_limit:g})",
-        "status",
-    ]
-    rows = [
-        [
-            f"{r['amplitude_N']:g}",
-            f"{r['k_over_k_den_hartog']:.3f}",
-            f"{r['k_N_per_m'] / 1e3:.2f}",
-            f"{r['c_over_c_den_hartog']:.3f}",
-            f"{r['c_N_s_per_m']:.1f}",
-            f"{r['x_peak_before_over_A_K']:.2f}",
-            f"{r['x_peak_after_over_A_K']:.2f}",
-            f"{r['peak_frequency_after_Hz']:.3f}",
-            f"{100 * r['stroke_after_m']:.2f}",
-            r["status"],
-        ]
-        for r in records
-    ]
     title = (
         f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
         f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
     )
-    return title + "\n" + _format_table(header, rows)
+    return title + "\n" + table(RETUNE_TABLE, records, limit_cm=100 * stroke_limit)

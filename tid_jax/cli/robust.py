@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from .. import plot
-from .._io import write_csv, write_json, write_toml
+from .._io import write_json, write_toml
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance
 from ._common import (
@@ -16,8 +16,10 @@ from ._common import (
     _config_data,
     _den_hartog,
     _describe,
-    _format_table,
     _start,
+    save_records,
+    shown,
+    table,
 )
 
 ROBUST_COLUMNS = (
@@ -88,11 +90,7 @@ def _run_robust(args) -> int:
         )
     given = tuning_performance(system, result.best, settings=settings)
     records = _records(result, given, scales, amplitudes)
-    write_csv(
-        output.path("robust.csv"),
-        ROBUST_COLUMNS,
-        [[r[key] for key in ROBUST_COLUMNS] for r in records],
-    )
+    save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     write_toml(
         output.path("robust_config.toml"), _config_data(inputs), comment=_config_comment("robust")
     )
@@ -187,29 +185,16 @@ def _table(records, summary, system, stroke_limit, tolerance) -> str:
     """The printed table of the scenarios, with its title."""
     k_dh, c_dh = _den_hartog(system)
     k, c = summary["tid_stiffness"], summary["tid_damping"]
-    header = [
-        "f_n x",
-        "A [N]",
-        "best k/k_DH",
-        "best c/c_DH",
-        "ratio robust",
-        "ratio given",
-        "stroke robust [cm]",
-        "stroke given [cm]",
-    ]
-    rows = [
-        [
-            f"{r['host_frequency_scale']:g}",
-            f"{r['amplitude_N']:g}",
-            f"{r['best_k_N_per_m'] / k_dh:.3f}",
-            f"{r['best_c_N_s_per_m'] / c_dh:.3f}",
-            f"{r['robust_ratio']:.3f}",
-            f"{r['given_ratio']:.3f}",
-            f"{100 * r['robust_stroke_m']:.2f}",
-            f"{100 * r['given_stroke_m']:.2f}",
-        ]
-        for r in records
-    ]
+    columns = (
+        shown("f_n x", "host_frequency_scale", "g"),
+        shown("A [N]", "amplitude_N", "g"),
+        shown("best k/k_DH", "best_k_N_per_m", ".3f", unit=k_dh),
+        shown("best c/c_DH", "best_c_N_s_per_m", ".3f", unit=c_dh),
+        shown("ratio robust", "robust_ratio", ".3f"),
+        shown("ratio given", "given_ratio", ".3f"),
+        shown("stroke robust [cm]", "robust_stroke_m", ".2f", unit=0.01),
+        shown("stroke given [cm]", "given_stroke_m", ".2f", unit=0.01),
+    )
     limit_text = (
         "no stroke limit"
         if stroke_limit is None
@@ -223,4 +208,4 @@ def _table(records, summary, system, stroke_limit, tolerance) -> str:
         + f" (given tuning: {summary['given_worst_ratio']:.3f} at "
         f"{summary['given_worst_amplitude_N']:g} N); {limit_text}; {summary['status']}"
     )
-    return title + "\n" + _format_table(header, rows)
+    return title + "\n" + table(columns, records)

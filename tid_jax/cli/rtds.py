@@ -5,15 +5,15 @@ import math
 import numpy as np
 
 from .. import plot
-from .._io import write_csv, write_json
+from .._io import write_json
 from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
 from ._common import (
     CLIError,
+    Shown,
     _add_band_arguments,
     _add_output_arguments,
     _add_structure_arguments,
     _describe,
-    _format_table,
     _frequencies,
     _inputs,
     _number,
@@ -21,6 +21,9 @@ from ._common import (
     _read_config,
     _settings,
     _system,
+    save_records,
+    shown,
+    table,
 )
 
 RTDS_COLUMNS = (
@@ -192,11 +195,12 @@ def _run_rtds(args) -> int:
         settings=settings,
     )
     columns = _columns(result)
-    rows = [
-        [float(f), amplitude, *(columns[key][j] for key in RTDS_COLUMNS[2:])]
+    records = [
+        dict(zip(RTDS_COLUMNS, (float(f), amplitude,
+                                *(columns[key][j] for key in RTDS_COLUMNS[2:])), strict=True))
         for j, f in enumerate(frequencies_hz)
     ]
-    write_csv(output.path("rtds.csv"), RTDS_COLUMNS, rows)
+    save_records(output, "rtds.csv", RTDS_COLUMNS, records)
     label = f"test: {args.scheme}, {1e3 * delay:g} ms, b_g = {ratio:g} b"
     plot.save_figure(
         plot.plot_substructuring_response(
@@ -212,56 +216,43 @@ def _run_rtds(args) -> int:
     data = output.document("rtds", inputs, system, settings, frequencies_hz, test=test, **columns)
     write_json(json_path, data)
 
-    table = _table(columns, frequencies_hz)
+    text = table(RTDS_TABLE, records)
     title = (
         f"Substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
         f"prediction {args.prediction}, {rate:g} Hz) against the whole system, "
         f"A = {amplitude:g} N; {_describe(system)}"
     )
-    return output.finish(data, title + "\n" + table)
+    return output.finish(data, title + "\n" + text)
 
 
-def _table(columns, frequencies_hz) -> str:
-    """The test against the whole system at each frequency (the test's values shown
-    only where it was stable)."""
-    header = [
-        "f [Hz]",
-        "x whole [mm]",
-        "x test [mm]",
-        "x err [%]",
-        "y whole [mm]",
-        "y test [mm]",
-        "y err [%]",
-        "phase err x/y [deg]",
-        "test",
-    ]
-    table_rows = []
-    for j, f in enumerate(frequencies_hz):
-        stable = columns["stable"][j]
-        status = "stable" if stable else ("diverged" if columns["diverged"][j] else "growing")
+def _if_stable(column: Shown) -> Shown:
+    """`column`, shown only where the test was stable ("-" elsewhere)."""
+    return Shown(column.header, lambda r: column.cell(r) if r["stable"] else "-")
 
-        def shown(value, scale, digits, stable=stable):
-            return f"{scale * value:.{digits}f}" if stable else "-"
 
-        table_rows.append(
-            [
-                f"{f:.3f}",
-                f"{1e3 * columns['x_whole_m'][j]:.4f}",
-                shown(columns["x_test_m"][j], 1e3, 4),
-                shown(columns["x_amplitude_error"][j], 100, 2),
-                f"{1e3 * columns['y_whole_m'][j]:.4f}",
-                shown(columns["y_test_m"][j], 1e3, 4),
-                shown(columns["y_amplitude_error"][j], 100, 2),
-                (
-                    f"{math.degrees(columns['x_phase_error_rad'][j]):.2f}/"
-                    f"{math.degrees(columns['y_phase_error_rad'][j]):.2f}"
-                )
-                if stable
-                else "-",
-                status,
-            ]
-        )
-    return _format_table(header, table_rows)
+def _phase_errors(record: dict) -> str:
+    x, y = (math.degrees(record[f"{axis}_phase_error_rad"]) for axis in "xy")
+    return f"{x:.2f}/{y:.2f}"
+
+
+def _outcome(record: dict) -> str:
+    return ("stable" if record["stable"]
+            else "diverged" if record["diverged"] else "growing")
+
+
+# The printed table: the test against the whole system at each frequency (the test's
+# values shown only where it was stable).
+RTDS_TABLE = (
+    shown("f [Hz]", "frequency_Hz", ".3f"),
+    shown("x whole [mm]", "x_whole_m", ".4f", unit=1e-3),
+    _if_stable(shown("x test [mm]", "x_test_m", ".4f", unit=1e-3)),
+    _if_stable(shown("x err [%]", "x_amplitude_error", ".2f", unit=0.01)),
+    shown("y whole [mm]", "y_whole_m", ".4f", unit=1e-3),
+    _if_stable(shown("y test [mm]", "y_test_m", ".4f", unit=1e-3)),
+    _if_stable(shown("y err [%]", "y_amplitude_error", ".2f", unit=0.01)),
+    _if_stable(Shown("phase err x/y [deg]", _phase_errors)),
+    Shown("test", _outcome),
+)
 
 
 def _columns(result) -> dict[str, list]:

@@ -5,17 +5,20 @@ import numpy as np
 
 from .. import plot
 from .._design import PARAMETER_UNITS, best_tunings
-from .._io import write_csv, write_json, write_toml
+from .._io import write_json, write_toml
 from .._retune import RetuneSettings
 from .._sensitivity import sensitivities
 from ._common import (
+    Shown,
     _add_output_arguments,
     _add_system_arguments,
     _config_comment,
     _config_data,
     _describe,
-    _format_table,
     _start,
+    save_records,
+    shown,
+    table,
 )
 
 SENSITIVITY_COLUMNS = (
@@ -38,6 +41,26 @@ SENSITIVITY_COLUMNS = (
     "converged",
     "optimum_converged",
     "optimum_damping_at_bound",
+)
+
+
+# The printed table, a row per amplitude and parameter; the optimum's columns where it
+# was found.
+SENSITIVITY_TABLE = (
+    shown("A [N]", "amplitude_N", "g"),
+    shown("parameter", "parameter", "s"),
+    shown("value", "value", ".5g"),
+    shown("unit", "unit", "s"),
+    shown("d x/dp [m/unit]", "host_derivative_m_per_unit", ".3e"),
+    shown("e_x", "host_elasticity", ".4f"),
+    shown("e_y", "stroke_elasticity", ".4f"),
+)
+OPTIMUM_TABLE = (
+    shown("e_x retuned", "optimum_host_elasticity", ".4f"),
+    shown("e_y retuned", "optimum_stroke_elasticity", ".4f"),
+    shown("e_k*", "optimum_stiffness_elasticity", ".4f"),
+    Shown("e_c*", lambda r: "c* at 0" if r["optimum_damping_at_bound"]
+          else f"{r['optimum_damping_elasticity']:.4f}"),
 )
 
 
@@ -84,11 +107,7 @@ def _run_sensitivity(args) -> int:
             step(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
-    write_csv(
-        output.path("sensitivity.csv"),
-        SENSITIVITY_COLUMNS,
-        [["" if r[key] is None else r[key] for key in SENSITIVITY_COLUMNS] for r in records],
-    )
+    save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
     write_toml(
         output.path("sensitivity_config.toml"),
         _config_data(inputs),
@@ -169,34 +188,13 @@ def _save_plot(output, amplitudes, results, optimum: bool) -> None:
 
 def _table(records, results, amplitudes, system, optimum: bool) -> str:
     """The printed table, ranked by |e_x| per amplitude, with its title."""
-    header = ["A [N]", "parameter", "value", "unit", "d x/dp [m/unit]", "e_x", "e_y"]
-    if optimum:
-        header += ["e_x retuned", "e_y retuned", "e_k*", "e_c*"]
-    rows = []
-    for amplitude in amplitudes:
-        ranked = sorted(
-            (r for r in records if r["amplitude_N"] == float(amplitude)),
-            key=lambda r: -abs(r["host_elasticity"]),
-        )
-        for r in ranked:
-            row = [
-                f"{amplitude:g}",
-                r["parameter"],
-                f"{r['value']:.5g}",
-                r["unit"],
-                f"{r['host_derivative_m_per_unit']:.3e}",
-                f"{r['host_elasticity']:.4f}",
-                f"{r['stroke_elasticity']:.4f}",
-            ]
-            if optimum:
-                row += [
-                    f"{r['optimum_host_elasticity']:.4f}",
-                    f"{r['optimum_stroke_elasticity']:.4f}",
-                    f"{r['optimum_stiffness_elasticity']:.4f}",
-                    "c* at 0" if r["optimum_damping_at_bound"]
-                    else f"{r['optimum_damping_elasticity']:.4f}",
-                ]
-            rows.append(row)
+    columns = SENSITIVITY_TABLE + (OPTIMUM_TABLE if optimum else ())
+    ranked = [
+        r
+        for amplitude in amplitudes
+        for r in sorted((r for r in records if r["amplitude_N"] == float(amplitude)),
+                        key=lambda r: -abs(r["host_elasticity"]))
+    ]
     unconverged = [
         f"{a:g} N"
         for a, r in zip(amplitudes, results, strict=True)
@@ -209,4 +207,4 @@ def _table(records, results, amplitudes, system, optimum: bool) -> str:
         f"optimal damping is at its bound 0, where it stays); ranked by |e_x|"
         + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
     )
-    return title + "\n" + _format_table(header, rows)
+    return title + "\n" + table(columns, ranked)
