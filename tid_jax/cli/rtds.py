@@ -153,15 +153,7 @@ def _run_rtds(args) -> int:
     lag = _number("actuator_lag_ms", args.actuator_lag_ms, "non-negative") / 1e3
     rate = _number("sample_rate", args.sample_rate, "positive")
     system, settings = _system(inputs), _settings(inputs)
-    if args.frequency_hz is not None:
-        if args.band_hz is not None:
-            raise CLIError("give --frequency-hz or --band-hz, not both")
-        frequencies_hz = np.asarray(
-            [_number("frequency_hz", f, "positive") for f in args.frequency_hz]
-        )
-        omegas = 2 * math.pi * frequencies_hz
-    else:
-        frequencies_hz, omegas = _frequencies(inputs, system)
+    frequencies_hz, omegas = _test_frequencies(args, inputs, system)
     prediction = None if args.prediction == "none" else args.prediction
     test = {
         "scheme": args.scheme,
@@ -223,6 +215,17 @@ def _run_rtds(args) -> int:
         f"A = {amplitude:g} N; {_describe(system)}"
     )
     return output.finish(data, title + "\n" + text)
+
+
+def _test_frequencies(args, inputs, system):
+    """The forcing frequencies in Hz and rad/s: --frequency-hz, or the band."""
+    if args.frequency_hz is None:
+        return _frequencies(inputs, system)
+    if args.band_hz is not None:
+        raise CLIError("give --frequency-hz or --band-hz, not both")
+    frequencies_hz = np.asarray([_number("frequency_hz", f, "positive")
+                                 for f in args.frequency_hz])
+    return frequencies_hz, 2 * math.pi * frequencies_hz
 
 
 def _if_stable(column: Shown) -> Shown:
