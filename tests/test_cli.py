@@ -327,6 +327,18 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):
     assert not (tmp_path / "out").exists()  # nothing computed, nothing written
 
 
+def test_device_terms_from_config_and_flags(tmp_path):
+    from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
+
+    (tmp_path / "device.toml").write_text("parasitic_damping = 300.0\nterminal_mass = 2.0\n")
+    args = type("Args", (), {key: None for key in INPUT_KEYS})()
+    args.config = str(tmp_path / "device.toml")
+    args.terminal_mass = 3.0  # a flag overrides the file
+    system = _system(_inputs(args))
+    assert float(system.parasitic_damping) == 300.0 and float(system.terminal_mass) == 3.0
+    assert system.rigid and float(system.backlash) == 0.0
+
+
 def test_missing_config_file(tmp_path):
     status, _, stderr = run(["frf", "--config", tmp_path / "none.toml"])
     assert status == 2
