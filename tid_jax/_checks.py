@@ -20,14 +20,20 @@ def check_system(system) -> None:
         raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
 
 
-def check_rigid(system: TIDSystem, purpose: str) -> None:
-    """`ValueError` unless the system's inerter is rigid (no series stiffness, so no
-    backlash): the model of the steady-state solvers and of `purpose`."""
-    if not system.rigid:
+def check_steady_state_device(system: TIDSystem, purpose: str) -> None:
+    """`ValueError` unless the steady-state solvers take the system's device: a rigid one,
+    or a compliant one with a terminal mass (the node between the TID's spring and the
+    series stiffness) and smoothed friction."""
+    if system.rigid:
+        return
+    mass = system.terminal_mass
+    if not isinstance(mass, jax.core.Tracer) and not np.all(np.asarray(mass) > 0):
         raise ValueError(
-            f"{purpose} needs a rigid inerter (series_stiffness inf and backlash 0); "
-            "only linear_receptance and the substructuring test take a compliant one"
-        )
+            f"{purpose} needs terminal_mass > 0 with a compliant device (series_stiffness "
+            "finite): the mass of the node between the TID's spring and the series stiffness")
+    if system.exact_friction:
+        raise ValueError(f"{purpose} takes a compliant device with smoothed friction only: give "
+                         "friction_width > 0 or None, not 0")
 
 
 def check_concrete_system(system) -> None:

@@ -63,7 +63,7 @@ class _Period(eqx.Module):
 
 
 def _quantities(p):
-    mass, stiffness, damping, inertance, friction, k, c, _, _, _, amplitude, omega = p
+    mass, stiffness, damping, inertance, friction, k, c, *_, amplitude, omega = p
     scale = amplitude / stiffness
     return mass, stiffness, damping, inertance, k, c, omega, friction / scale
 

@@ -14,7 +14,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band, sweep
 from ._cache import compiled
-from ._checks import check_grid, check_rigid, check_system
+from ._checks import check_grid, check_steady_state_device, check_system
 from ._linear import den_hartog_tuning
 from ._peaks import (
     PEAK_NEWTON_STEPS,
@@ -525,7 +525,7 @@ def best_tunings(
     **Returns:** a `BestTunings` (arrays `[scales, amps]`).
     """
     check_system(system)
-    check_rigid(system, "best_tunings")
+    check_steady_state_device(system, "best_tunings")
     amps = check_amplitudes(amplitudes)
     scales = check_scales(host_frequency_scales)
     band = _band(system, omegas)

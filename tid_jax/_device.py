@@ -30,6 +30,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._checks import real_scalar
+from ._dynamics import dead_zone
 
 DEVICE_FIELDS = ("inertance", "friction_force", "parasitic_damping", "series_stiffness",
                  "backlash", "terminal_mass")
@@ -127,12 +128,6 @@ def _mechanism_force(device: InerterDevice, acceleration, velocity, width):
     """The force (N) that moves the mechanism (inertance, damping, friction)."""
     return (device.inertance * acceleration + device.parasitic_damping * velocity
             + device.friction_force * jnp.tanh(velocity / width))
-
-
-def dead_zone(d, gap):
-    """The stretch of a spring with total free play `gap` at relative displacement `d`:
-    `sgn(d) max(|d| - gap / 2, 0)`."""
-    return jnp.sign(d) * jnp.maximum(jnp.abs(d) - 0.5 * gap, 0.0)
 
 
 def device_force(device: InerterDevice, motion: Motion,

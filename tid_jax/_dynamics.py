@@ -14,6 +14,8 @@ PARAMETERS = (
     "tid_damping",
     "parasitic_damping",
     "terminal_mass",
+    "series_stiffness",
+    "backlash",
     "friction_width",
     "amplitude",
     "omega",
@@ -38,7 +40,7 @@ def parameters(system, amplitude, omega) -> list[Float[Array, ""]]:
     return [value.astype(dtype) for value in values]
 
 
-def parameter_vector(system, amplitude, omega) -> Float[Array, " 12"]:
+def parameter_vector(system, amplitude, omega) -> Float[Array, " 14"]:
     """Stack a `TIDSystem`'s fields, the forcing amplitude (N) and frequency (rad/s) into
     the flat vector `p` (order `PARAMETERS`)."""
     return jnp.stack(parameters(system, amplitude, omega))
@@ -49,39 +51,74 @@ def parameter_vector(system, amplitude, omega) -> Float[Array, " 12"]:
 # `z = (x, x', y, y')` is O(1) for every frequency and amplitude. The field is split into
 # its linear part, the forcing and the friction, so that the variational equations reuse
 # the linear part.
+#
+# A compliant device (a finite `series_stiffness` ks) adds its mechanism's displacement q
+# and velocity: `z = (x, x', y, y', q, q')`. The terminal y (mass mt > 0) is joined to the
+# mechanism by the series spring with its free play (a dead zone of half the backlash);
+# the mechanism (inertance b, parasitic damping cp) carries the friction:
+#     mt y'' = c (x' - y') + k (x - y) - ks D(y - q)
+#     b q''  = ks D(y - q) - cp q' - ff sgn(q')
 
 
-def linear_part(z: Float[Array, "4 ..."], p: Float[Array, " 12"]) -> tuple[Array, ...]:
-    """The rows of the linear part `L z` of the scaled vector field, for a state `z` or
-    for columns of states (`z[i]` arrays of one shape), written out elementwise."""
-    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, _, _, omega = p
-    x, v, y, w = z
+def linear_part(z: Float[Array, "n ..."], p: Float[Array, " 14"]) -> tuple[Array, ...]:
+    """The rows of the linear part `L z` of the scaled vector field of the rigid device,
+    for a state `z` or for columns of states (`z[i]` arrays of one shape), written out
+    elementwise."""
+    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, *_, omega = p
+    x, v, y, w = z[:4]
     spring = k * (x - y) + c * omega * (v - w)  # on the inerter terminal, per unit A/K
     host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
     return v, host, w, (spring - parasitic * omega * w) / ((inertance + terminal) * omega**2)
 
 
-def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 12"]) -> Float[Array, ""]:
-    """The friction's contribution to the scaled acceleration of the inerter terminal
-    at the scaled terminal velocity `w`."""
-    _, stiffness, _, inertance, friction, _, _, _, terminal, width, amplitude, omega = p
+def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 14"]) -> Float[Array, ""]:
+    """The friction's contribution to the scaled acceleration of the body it acts on (the
+    rigid device's terminal, or a compliant device's mechanism) at its scaled velocity
+    `w`."""
+    _, stiffness, _, inertance, friction, _, _, _, terminal, ks, _, width, amplitude, omega = p
     scale = amplitude / stiffness
-    return -friction * smooth_sign(omega * scale * w, width) / (
-        scale * (inertance + terminal) * omega**2)
+    mass = inertance + jnp.where(jnp.isinf(ks), terminal, 0.0)
+    return -friction * smooth_sign(omega * scale * w, width) / (scale * mass * omega**2)
 
 
-def vector_field(theta: Float[Array, ""], z: Float[Array, " 4"], p: Float[Array, " 12"]):
-    """Eq. (12) in scaled form (see above)."""
+def _compliant_field(z, p):
+    """The scaled field of the compliant device's six states, forcing and friction
+    apart."""
+    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, ks, gap, *_ = p
+    omega, scale = p[-1], p[-2] / stiffness
+    x, v, y, w, q, u = z
+    spring = k * (x - y) + c * omega * (v - w)
+    series = ks * dead_zone(y - q, gap / scale)
+    host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
+    return jnp.stack([v, host, w, (spring - series) / (terminal * omega**2), u,
+                      (series - parasitic * omega * u) / (inertance * omega**2)])
+
+
+def dead_zone(d, gap):
+    """The stretch of a spring with total free play `gap` at relative displacement `d`:
+    `sgn(d) max(|d| - gap / 2, 0)`."""
+    return jnp.sign(d) * jnp.maximum(jnp.abs(d) - 0.5 * gap, 0.0)
+
+
+def vector_field(theta: Float[Array, ""], z: Float[Array, " n"], p: Float[Array, " 14"]):
+    """Eq. (12) in scaled form (see above), of four states (rigid device) or six
+    (compliant device)."""
     mass, stiffness, omega = p[0], p[1], p[-1]
     force = stiffness * jnp.sin(theta) / (mass * omega**2)  # A sin(theta) in units of A/K
+    if z.shape[0] == 6:
+        field = _compliant_field(z, p)
+        return field.at[1].add(force).at[5].add(friction_acceleration(z[5], p))
     dx, dv, dy, dw = linear_part(z, p)
     return jnp.stack([dx, dv + force, dy, dw + friction_acceleration(z[3], p)])
 
 
-def tangent_field(theta: Float[Array, ""], z: Float[Array, " 4"], tangents, p):
-    """d/dtheta of `tangents` (4 x n, columns d z / d something) along the orbit through
-    `z`: the linear part plus the friction's slope in `z[3]`."""
-    del theta
+def tangent_field(theta: Float[Array, ""], z: Float[Array, " n"], tangents, p):
+    """d/dtheta of `tangents` (n x m, columns d z / d something) along the orbit through
+    `z`: the linear part plus the friction's slope in `z[3]` (rigid device), or the
+    field's forward derivatives (compliant device)."""
+    if z.shape[0] == 6:
+        return jax.vmap(lambda t: jax.jvp(lambda s: vector_field(theta, s, p), (z,), (t,))[1],
+                        in_axes=1, out_axes=1)(tangents)
     slope = jax.grad(friction_acceleration)(z[3], p)
     dx, dv, dy, dw = linear_part(tangents, p)
     return jnp.stack([dx, dv, dy, dw + slope * tangents[3]])

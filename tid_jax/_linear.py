@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._checks import check_grid, check_rigid, check_system
+from ._checks import check_grid, check_system
 from ._system import (
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
@@ -165,15 +165,43 @@ class Breakaway(eqx.Module):
       state with the inerter stuck exists: ff |K + k - M omega^2 + i omega (C + c)| /
       |k + i omega c|.
     - `minimum`, `omega_minimum`: its smallest value over the band from the lowest to
-      the highest of `omegas` (exact, not the grid's), N, and where, rad/s. Below it the
+      the highest of `omegas` (exact, not the grid's; for a compliant device, on a grid
+      of `COMPLIANT_BREAKAWAY_GRID` frequencies), N, and where, rad/s. Below it the
       inerter never slips at any frequency of the band: the TID acts as a spring and
       damper to ground and its inertance does nothing.
+
+    A compliant device's mechanism is what sticks: the terminal is then held by the
+    series spring ks alone (its free play left out), and the force on the mechanism is
+    ks Y.
     """
 
     omegas: Float[Array, " freqs"]
     amplitude: Float[Array, " freqs"]
     minimum: Float[Array, ""]
     omega_minimum: Float[Array, ""]
+
+
+# Frequencies over the band on which a compliant device's smallest breakaway amplitude is
+# found (its amplitude is no longer a ratio of quadratics in omega^2).
+COMPLIANT_BREAKAWAY_GRID = 4001
+
+
+def _compliant_breakaway(system: TIDSystem, w) -> Breakaway:
+    """`breakaway_amplitude` of a compliant device: the mechanism stuck, the terminal
+    (mass mt) held by the series spring ks alone (its free play left out), and the force
+    ks Y on the mechanism within ff; the minimum on a fine grid over the band."""
+    def amplitude(w):
+        spring = system.tid_stiffness + 1j * w * system.tid_damping
+        terminal = spring / (spring + system.series_stiffness - system.terminal_mass * w**2)
+        host = 1 / (system.host_stiffness - system.host_mass * w**2
+                    + 1j * w * system.host_damping + spring * (1 - terminal))
+        return system.friction_force / jnp.abs(system.series_stiffness * terminal * host)
+
+    fine = jnp.linspace(jnp.min(w), jnp.max(w), COMPLIANT_BREAKAWAY_GRID)
+    values = amplitude(fine)
+    best = jnp.argmin(values)
+    return Breakaway(omegas=w, amplitude=amplitude(w), minimum=values[best],
+                     omega_minimum=fine[best])
 
 
 def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
@@ -189,8 +217,9 @@ def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     **Returns:** a `Breakaway`.
     """
     check_system(system)
-    check_rigid(system, "breakaway_amplitude")
     w = jnp.atleast_1d(jnp.asarray(check_grid("omegas", omegas)))
+    if system.compliant:
+        return _compliant_breakaway(system, w)
     mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
     stiffness = system.host_stiffness + k
     damping = system.host_damping + c

@@ -46,7 +46,8 @@ def _phases(settings: SolverSettings, dtype):
 
 
 def period_samples(z0, p, settings: SolverSettings):
-    """x, y and y' sampled over one period from `z0`, the state after the period, the
+    """x, y and the velocity of the friction's body (y' of a rigid device, q' of a
+    compliant one) sampled over one period from `z0`, the state after the period, the
     largest |y| at a stick-slip transition and the number of transitions (exact friction;
     else 0)."""
     if settings.exact_friction:
@@ -60,12 +61,12 @@ def period_samples(z0, p, settings: SolverSettings):
     )
     ys = sol.ys
     zero = jnp.zeros((), z0.dtype)
-    return ys[:-1, 0], ys[:-1, 2], ys[:-1, 3], ys[-1], zero, zero
+    return ys[:-1, 0], ys[:-1, 2], ys[:-1, -1], ys[-1], zero, zero
 
 
 def _field_and_tangents(theta, y, p):
     """The vector field with its variational equations: `y = (z, tangents)`, where the
-    tangents (4 x 4) are d z / d z0."""
+    tangents (n x n) are d z / d z0."""
     z, tangents = y
     return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
 
@@ -80,7 +81,7 @@ def period_tangents(z, p, settings: SolverSettings):
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
-        _field_and_tangents, (z, jnp.eye(4, dtype=z.dtype)), p, 2 * jnp.pi, settings,
+        _field_and_tangents, (z, jnp.eye(z.shape[0], dtype=z.dtype)), p, 2 * jnp.pi, settings,
         dfx.SaveAt(t1=True), settings.max_steps,
     )
     z_end, monodromy = (y[-1] for y in sol.ys)
@@ -88,26 +89,30 @@ def period_tangents(z, p, settings: SolverSettings):
 
 
 def samples_and_jacobian(z, p, settings, directions=()):
-    """One integration of a period from `z` with tangents along the four state directions
+    """One integration of a period from `z` with tangents along the state directions
     and the parameters `p[i]`, `i` in `directions`, differentiating the integration itself
     (so that the derivatives are those of the computed samples, to rounding): `(xs, ys,
     ws, z_end)`, their Jacobians with respect to `z` (that of `z_end` is the monodromy
     matrix) and with respect to those parameters (last axis of size `len(directions)`)."""
     index = jnp.asarray(directions, dtype=int)
     fn = lambda z0, q: period_samples(z0, p.at[index].set(q), settings)
-    basis = jnp.eye(4 + len(directions), dtype=z.dtype)
+    n = z.shape[0]
+    basis = jnp.eye(n + len(directions), dtype=z.dtype)
     primal, tangents = jax.vmap(
-        lambda t: jax.jvp(fn, (z, p[index]), (t[:4], t[4:])), out_axes=(None, 0)
+        lambda t: jax.jvp(fn, (z, p[index]), (t[:n], t[n:])), out_axes=(None, 0)
     )(basis)
     tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
-    return primal, tuple(t[..., :4] for t in tangents), tuple(t[..., 4:] for t in tangents)
+    return primal, tuple(t[..., :n] for t in tangents), tuple(t[..., n:] for t in tangents)
 
 
-def linear_initial_state(p) -> Float[Array, " 4"]:
+def linear_initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
     """Scaled state at phase 0 of the steady linear response: of the free (frictionless)
     TID, or of the stuck one when the friction force exceeds the force needed to hold the
-    inerter terminal still."""
-    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, _,
+    friction's body (the rigid device's terminal, a compliant device's mechanism) still.
+    Four states, or six for a `compliant` device."""
+    if compliant:
+        return _compliant_initial_state(p)
+    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, *_,
      amplitude, omega) = p
     jw = 1j * omega
     spring = k + jw * c
@@ -120,6 +125,30 @@ def linear_initial_state(p) -> Float[Array, " 4"]:
     y_hat = jnp.where(stuck, 0.0, free_x * terminal)
     # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
     return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real])
+
+
+def _compliant_initial_state(p):
+    """`linear_initial_state` of a compliant device (backlash left out): the terminal's
+    dynamic stiffness to ground is that of the series spring and the mechanism in series,
+    or of the spring alone with the mechanism stuck."""
+    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, ks, _,
+     _, amplitude, omega) = p
+    jw = 1j * omega
+    spring = k + jw * c
+    mechanism = jw * parasitic - inertance * omega**2
+
+    def host_and_terminal(device):
+        terminal = spring / (spring + device - terminal_mass * omega**2)  # Y / X
+        x = stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
+        return x, x * terminal
+
+    free_x, free_y = host_and_terminal(ks * mechanism / (ks + mechanism))
+    stuck_x, stuck_y = host_and_terminal(ks)
+    stuck = jnp.abs(ks * stuck_y) * amplitude / stiffness < friction
+    x_hat = jnp.where(stuck, stuck_x, free_x)
+    y_hat = jnp.where(stuck, stuck_y, free_y)
+    q_hat = jnp.where(stuck, 0.0, free_y * ks / (ks + mechanism))
+    return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real, q_hat.imag, q_hat.real])
 
 
 def transient(z, p, settings: SolverSettings, periods=None):

@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._cache import compiled
-from ._checks import check_grid, check_rigid, check_system
+from ._checks import check_grid, check_steady_state_device, check_system
 from ._dynamics import parameters
 from ._period import linear_initial_state, transient
 from ._settings import SolverSettings
@@ -35,7 +35,8 @@ class FrequencyResponse(eqx.Module):
     - `stable`: all Floquet multipliers inside the unit circle (only meaningful if
       converged), but for the multiplier 1 of a terminal stuck for the whole period (exact
       friction), along whose position the orbits form a neutral family.
-    - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s.
+    - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s,
+      and for a compliant device its mechanism's (q, q').
     - `residual`: periodicity residual, in units of the static displacement A / K.
     - `newton_steps`: shooting iterations used.
     - `floquet_multipliers`: eigenvalues of the monodromy matrix.
@@ -55,11 +56,11 @@ class FrequencyResponse(eqx.Module):
     y_max: Float[Array, "*grid"]
     converged: Bool[Array, "*grid"]
     stable: Bool[Array, "*grid"]
-    state: Float[Array, "*grid 4"]
+    state: Float[Array, "*grid states"]
     residual: Float[Array, "*grid"]
     newton_steps: Int[Array, "*grid"]
-    floquet_multipliers: Complex[Array, "*grid 4"]
-    monodromy: Float[Array, "*grid 4 4"]
+    floquet_multipliers: Complex[Array, "*grid states"]
+    monodromy: Float[Array, "*grid states states"]
     stick_fraction: Float[Array, "*grid"]
     transitions: Int[Array, "*grid"]
 
@@ -75,11 +76,11 @@ class _Solutions(eqx.Module):
     y_max: Float[Array, " points"]
     converged: Bool[Array, " points"]
     stable: Bool[Array, " points"]
-    state: Float[Array, "points 4"]
+    state: Float[Array, "points states"]
     residual: Float[Array, " points"]
     newton_steps: Int[Array, " points"]
-    floquet_multipliers: Complex[Array, "points 4"]
-    monodromy: Float[Array, "points 4 4"]
+    floquet_multipliers: Complex[Array, "points states"]
+    monodromy: Float[Array, "points states states"]
     stick_fraction: Float[Array, " points"]
     transitions: Int[Array, " points"]
 
@@ -131,7 +132,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
 
     def start(q, z, warm_start):
-        z = jnp.where(warm_start, z, linear_initial_state(q))
+        z = jnp.where(warm_start, z, linear_initial_state(q, settings.compliant))
         return transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
 
     chunk = settings.chunk
@@ -141,7 +142,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         lambda batch: verified_samples(*batch, settings), (shots.state, p), chunk, valid
     )
     static = amplitudes / systems.host_stiffness
-    units = jnp.stack([static, omegas * static] * 2, axis=-1)
+    units = jnp.stack([static, omegas * static] * (settings.states // 2), axis=-1)
     peak = jax.vmap(refined_peak)
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
@@ -208,7 +209,7 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     count = omegas.shape[0]
     use_warm = jnp.full(count, warm is not None)
     if warm is None:
-        warm = jnp.zeros((count, 4), omegas.dtype)
+        warm = jnp.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
     outs = []
     for start, stop, size in _block_sizes(count, settings.chunk):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
@@ -273,7 +274,8 @@ def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "
     of `solve_orbit` (displacements in A / K, velocities in omega A / K); `host_stiffness`
     K is one value or one per amplitude (lane)."""
     static = response.amplitudes[:, None] / jnp.reshape(host_stiffness, (-1, 1))
-    units = jnp.stack([static + 0 * response.omegas, static * response.omegas] * 2, axis=-1)
+    pairs = response.state.shape[-1] // 2
+    units = jnp.stack([static + 0 * response.omegas, static * response.omegas] * pairs, axis=-1)
     return response.state / units
 
 
@@ -299,7 +301,7 @@ def frequency_response(
     axis of a scalar input dropped. Points that fail to converge are flagged in `converged`.
     """
     check_system(system)
-    check_rigid(system, "frequency_response")
+    check_steady_state_device(system, "frequency_response")
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)

@@ -11,7 +11,13 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import Peaks, _band, response_peaks
 from ._cache import compiled
-from ._checks import check_grid, check_optimiser_options, check_rigid, check_system, is_positive
+from ._checks import (
+    check_grid,
+    check_optimiser_options,
+    check_steady_state_device,
+    check_system,
+    is_positive,
+)
 from ._dynamics import PARAMETERS, parameters
 from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._peaks import (
@@ -249,7 +255,7 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     lower, upper, interior = bracket(index, omegas)
 
     def on_stencil(f, at):
-        nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + (4, 4))
+        nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
         return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
 
     for step in range(PEAK_NEWTON_STEPS):
@@ -400,7 +406,7 @@ def retune(
     **Returns:** a `RetuneResult`.
     """
     check_system(system)
-    check_rigid(system, "retune")
+    check_steady_state_device(system, "retune")
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
     check_retune_options(max_steps, tol, retune_settings)

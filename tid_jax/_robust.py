@@ -11,7 +11,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_rigid, check_system, is_positive
+from ._checks import check_steady_state_device, check_system, is_positive
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
@@ -226,7 +226,7 @@ def tuning_performance(
     **Returns:** a `TuningPerformance`.
     """
     check_system(system)
-    check_rigid(system, "tuning_performance")
+    check_steady_state_device(system, "tuning_performance")
     check_best(best, system)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     amps = np.asarray(best.amplitudes)
@@ -376,7 +376,7 @@ def robust_tune(
     **Returns:** a `RobustDesign`.
     """
     check_system(system)
-    check_rigid(system, "robust_tune")
+    check_steady_state_device(system, "robust_tune")
     amps = check_amplitudes(amplitudes)
     scales = check_scales(host_frequency_scales)
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)

@@ -12,8 +12,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ._cache import compiled
-from ._device import dead_zone
-from ._dynamics import smooth_sign
+from ._dynamics import dead_zone, smooth_sign
 from ._linear import linear_receptance
 from ._peaks import parabola_top
 from ._system import TIDSystem

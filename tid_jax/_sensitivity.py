@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_rigid, check_system
+from ._checks import check_steady_state_device, check_system
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
@@ -251,6 +251,8 @@ def sensitivities(
     below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
+    The parameters are `PARAMETERS`: a compliant device's series stiffness and backlash
+    are not among them.
 
     **Arguments:**
 
@@ -267,7 +269,7 @@ def sensitivities(
     **Returns:** a `Sensitivities` (parameters in the order `PARAMETERS`).
     """
     check_system(system)
-    check_rigid(system, "sensitivities")
+    check_steady_state_device(system, "sensitivities")
     amplitude = check_amplitude(amplitude)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):

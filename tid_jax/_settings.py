@@ -29,6 +29,8 @@ class SolverSettings(eqx.Module):
       has no integration error: Newton's iterations reach it in about one more step,
       and it keeps the stroke of a terminal that sticks for most of the period (a small
       difference of positions) accurate.
+    - `compliant`: the six states of a compliant device (a finite `series_stiffness`):
+      set from the system by the entry points (`for_system`).
     - `chunk`: points solved together as one vmapped batch (per device); larger batches
       are solved chunk after chunk, so that each chunk's adaptive integrations and
       Newton iterations wait only for its own slowest point (neighbouring points, of
@@ -45,6 +47,7 @@ class SolverSettings(eqx.Module):
     samples: int = 128
     implicit: bool = False
     exact_friction: bool = False
+    compliant: bool = False
     chunk: int = 64
 
     def __check_init__(self):
@@ -79,9 +82,21 @@ class SolverSettings(eqx.Module):
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
+    @property
+    def states(self) -> int:
+        """The states of the scaled model: x, x', y, y', and a compliant device's
+        mechanism q, q'."""
+        return 6 if self.compliant else 4
+
     def for_system(self, system) -> "SolverSettings":
-        """These settings with the friction model of `system` (a `TIDSystem`): exact
-        Coulomb friction where its `friction_width` is 0."""
+        """These settings with the model of `system` (a `TIDSystem`): exact Coulomb
+        friction where its `friction_width` is 0, six states for a compliant device."""
+        if self.compliant != system.compliant:
+            if system.compliant and system.exact_friction:
+                raise ValueError(
+                    "exact friction (friction_width=0) takes a rigid device; give a compliant "
+                    "device a friction_width > 0 or None")
+            self = eqx.tree_at(lambda s: s.compliant, self, system.compliant)
         if self.exact_friction == system.exact_friction:
             return self
         if not system.exact_friction:

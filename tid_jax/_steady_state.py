@@ -22,15 +22,15 @@ class Orbit(eqx.Module):
     """The periodic steady state at one (frequency, amplitude), scaled state units
     (displacements in A / K, velocities in omega A / K) unless stated."""
 
-    state: Float[Array, " 4"]  # scaled (x, x', y, y') at phase 0 of the forcing
+    state: Float[Array, " states"]  # scaled (x, x', y, y'[, q, q']) at phase 0
     x_samples: Float[Array, " samples"]  # scaled x over one period
     y_samples: Float[Array, " samples"]
     y_velocity_samples: Float[Array, " samples"]
     y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction; else 0)
-    monodromy: Float[Array, "4 4"]  # dPhi_T/dz at `state`
+    monodromy: Float[Array, "states states"]  # dPhi_T/dz at `state`
     # d state / d p[i] for i in the `directions` of `solve_orbit` (implicit derivatives)
     state_derivatives: Float[Array, "4 directions"]
-    floquet_multipliers: Complex[Array, " 4"]
+    floquet_multipliers: Complex[Array, " states"]
     residual: Float[Array, ""]  # max |Phi_T(z0) - z0|, scaled
     newton_steps: Int[Array, ""]
     converged: Bool[Array, ""]
@@ -39,7 +39,7 @@ class Orbit(eqx.Module):
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 
 
-def _held(monodromy: Float[Array, "4 4"]) -> Bool[Array, "4 1"]:
+def _held(monodromy: Float[Array, "states states"]) -> Bool[Array, "states 1"]:
     """The coordinates that the period returns unchanged whatever the start (rows of
     `monodromy` that are unit rows): the position of an inerter terminal stuck for the
     whole period (exact friction), along which the periodic orbits form a family."""
@@ -47,7 +47,7 @@ def _held(monodromy: Float[Array, "4 4"]) -> Bool[Array, "4 1"]:
     return jnp.all(eye - monodromy == 0, axis=-1, keepdims=True)
 
 
-def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
+def fixed_point_matrix(monodromy: Float[Array, "states states"]) -> Float[Array, "states states"]:
     """`I - monodromy`, the Jacobian of the periodicity residual, with the rows of held
     coordinates (`_held`) replaced by unit rows: of the family of periodic orbits, the
     one through the current value is kept."""
@@ -55,7 +55,7 @@ def fixed_point_matrix(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
     return jnp.where(_held(monodromy), eye, eye - monodromy)
 
 
-def moving_part(monodromy: Float[Array, "4 4"]) -> Float[Array, "4 4"]:
+def moving_part(monodromy: Float[Array, "states states"]) -> Float[Array, "states states"]:
     """`monodromy` with the rows of held coordinates (`_held`) zeroed: their multiplier 1
     becomes 0 and the others are unchanged, so that its multipliers judge the stability
     of the motion about the family of orbits."""
@@ -113,9 +113,9 @@ def settled_state(z0, p, settings: SolverSettings, monodromy):
 
 
 class _Newton(eqx.Module):
-    z: Float[Array, " 4"]  # the iterate
-    update: Float[Array, " 4"]  # its Newton update (zero where it is not finite)
-    monodromy: Float[Array, "4 4"]
+    z: Float[Array, " states"]  # the iterate
+    update: Float[Array, " states"]  # its Newton update (zero where it is not finite)
+    monodromy: Float[Array, "states states"]
     residual: Float[Array, ""]  # max |Phi_T(z) - z|, inf where not finite
 
 
@@ -139,8 +139,8 @@ class Shots(eqx.Module):
     accurate as the integration, and where the friction is steep an update from a point
     already within the periodicity tolerance can leave it.)"""
 
-    state: Float[Array, "points 4"]
-    monodromy: Float[Array, "points 4 4"]
+    state: Float[Array, "points states"]
+    monodromy: Float[Array, "points states states"]
     residual: Float[Array, " points"]
     newton_steps: Int[Array, " points"]
 
@@ -154,7 +154,7 @@ class _Queue(eqx.Module):
     shots: Shots
 
 
-def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
+def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points params"],
                 settings: SolverSettings, slots: int,
                 valid: Bool[Array, " points"] | None = None) -> Shots:
     """Newton shooting for every point (`z0[i]`, `p[i]`) on `slots` lanes that work through
@@ -172,7 +172,7 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
         steps=jnp.zeros(slots, int),
         active=jnp.arange(slots) < count,
         next_point=jnp.minimum(slots, count),
-        shots=Shots(z0, jnp.zeros((size, 4, 4), z0.dtype), jnp.full(size, inf),
+        shots=Shots(z0, jnp.zeros((size,) + z0.shape[-1:] * 2, z0.dtype), jnp.full(size, inf),
                     jnp.zeros(size, int)),
     )
 
@@ -205,7 +205,8 @@ def shoot_queue(z0: Float[Array, "points 4"], p: Float[Array, "points 10"],
     return jax.lax.while_loop(lambda queue: jnp.any(queue.active), body, start).shots
 
 
-def verified_samples(z: Float[Array, " 4"], p: Float[Array, " 10"], settings: SolverSettings):
+def verified_samples(z: Float[Array, " states"], p: Float[Array, " params"],
+                     settings: SolverSettings):
     """x, y, y' sampled over the period from `z`, and the residual |Phi_T(z) - z| of that
     integration (inf where it is not finite)."""
     samples = Samples(*period_samples(z, p, settings))
@@ -224,7 +225,7 @@ class Samples(eqx.Module):
     xs: Float[Array, " samples"]
     ys: Float[Array, " samples"]
     ws: Float[Array, " samples"]
-    z_end: Float[Array, " 4"]
+    z_end: Float[Array, " states"]
     y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction)
     transitions: Float[Array, ""]  # their number (exact friction; else 0, not counted)
 
@@ -235,9 +236,9 @@ class _Periodic(eqx.Module):
     Jacobians with respect to the state (`state_jacobians`) and to `p[directions]`
     (`parameter_jacobians`), each a `Samples` of Jacobians."""
 
-    z: Float[Array, " 4"]
+    z: Float[Array, " states"]
     samples: Samples
-    monodromy: Float[Array, "4 4"]
+    monodromy: Float[Array, "states states"]
     state_jacobians: Samples | None
     parameter_jacobians: Samples | None
 
@@ -248,8 +249,8 @@ def _sample_jacobians(z, p, settings: SolverSettings, directions):
 
 
 class _TangentNewton(eqx.Module):
-    z: Float[Array, " 4"]
-    update: Float[Array, " 4"]
+    z: Float[Array, " states"]
+    update: Float[Array, " states"]
     residual: Float[Array, ""]
     samples: Samples
     of_state: Samples
@@ -359,10 +360,10 @@ _with_orbit_derivatives.defjvp(_orbit_jvp, symbolic_zeros=True)
 
 
 def solve_orbit(
-    p: Float[Array, " 10"] | Sequence[Float[Array, ""]],
+    p: Float[Array, " params"] | Sequence[Float[Array, ""]],
     settings: SolverSettings,
-    z_init: Float[Array, " 4"] | None = None,
-    monodromy_init: Float[Array, "4 4"] | None = None,
+    z_init: Float[Array, " states"] | None = None,
+    monodromy_init: Float[Array, "states states"] | None = None,
     directions: tuple[int, ...] = (),
 ) -> Orbit:
     """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`; or
@@ -381,7 +382,8 @@ def solve_orbit(
     scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
     p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
-        z_init = transient(linear_initial_state(p_const), p_const, settings)
+        z_init = transient(linear_initial_state(p_const, settings.compliant), p_const,
+                           settings)
     z_init = jax.lax.stop_gradient(z_init)
     if monodromy_init is not None:
         z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
@@ -394,7 +396,7 @@ def solve_orbit(
             fixed_point_matrix(monodromy), jax.lax.stop_gradient(orbit.parameter_jacobians.z_end)
         )
     else:
-        state_derivatives = jnp.zeros((4, 0), monodromy.dtype)
+        state_derivatives = jnp.zeros((monodromy.shape[0], 0), monodromy.dtype)
     return Orbit(
         state=orbit.z,
         x_samples=orbit.samples.xs,

@@ -80,6 +80,18 @@ def _as_float_array(name: str, value, allowed: str) -> Array:
     return array
 
 
+def _is_compliant(stiffness) -> bool:
+    """Whether a `series_stiffness` makes the device compliant (finite, or traced); one
+    that mixes finite and infinite entries is an error."""
+    if isinstance(stiffness, jax.core.Tracer):
+        return True
+    finite = np.isfinite(np.asarray(stiffness, dtype=float))
+    if np.any(finite) and not np.all(finite):
+        raise ValueError("series_stiffness must be finite everywhere or infinite (rigid) "
+                         f"everywhere, got {np.asarray(stiffness).tolist()!r}")
+    return bool(np.all(finite))
+
+
 def _is_exact(width) -> bool:
     """Whether a `friction_width` selects exact Coulomb friction (all zero); a width that
     mixes zero and positive entries is an error."""
@@ -141,6 +153,7 @@ class TIDSystem(eqx.Module):
     series_stiffness: Float[Array, ""]
     backlash: Float[Array, ""]
     exact_friction: bool = eqx.field(static=True)
+    compliant: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -163,6 +176,7 @@ class TIDSystem(eqx.Module):
             values["series_stiffness"] = math.inf
         # decided on the value given: arrays made here are traced inside `jax.jit`
         self.exact_friction = _is_exact(friction_width)
+        self.compliant = _is_compliant(values["series_stiffness"])
         for name, allowed in _FIELD_RULES:
             value = values[name]
             if allowed == "non-negative or None":
@@ -178,11 +192,9 @@ class TIDSystem(eqx.Module):
 
     @property
     def rigid(self) -> bool:
-        """Whether the inerter is rigid: an infinite `series_stiffness` (a traced one
-        counts as finite)."""
-        stiffness = self.series_stiffness
-        return not isinstance(stiffness, jax.core.Tracer) and bool(
-            np.all(np.isposinf(np.asarray(stiffness))))
+        """Whether the inerter is rigid: an infinite `series_stiffness` (decided on the
+        value given; a traced one counts as finite)."""
+        return not self.compliant
 
     @property
     def mass_ratio(self) -> Float[Array, ""]:

@@ -18,7 +18,7 @@ from tqdm import tqdm
 from .. import __version__
 from .._band import DEFAULT_FREQUENCIES, default_omegas
 from .._cache import CACHE_ENVIRONMENT_VARIABLE
-from .._checks import check_rigid
+from .._checks import check_steady_state_device
 from .._io import check_writable_dir, json_text, write_csv
 from .._linear import (
     den_hartog_tuning,
@@ -62,7 +62,8 @@ PHYSICAL_INPUTS = (
     ("terminal_mass", "kg", "moving mass at the inerter's driven terminal (default 0)",
      "non-negative"),
     ("series_stiffness", "N/m", "stiffness of screw, nut and mounts in series with the "
-     "inerter mechanism (default: rigid; only rtds takes a compliant device)", "positive"),
+     "inerter mechanism (default: rigid; a compliant device needs terminal_mass > 0, and "
+     "smoothed friction)", "positive"),
     ("backlash", "m", "total free play in that series connection (default 0; needs "
      "series_stiffness)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
@@ -324,7 +325,7 @@ class _Start(NamedTuple):
 def _start(args) -> _Start:
     inputs = _inputs(args)
     system = _system(inputs)
-    check_rigid(system, f"{PROG} {args.command}")
+    check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)
     return _Start(inputs, system, _settings(inputs).for_system(system), frequencies_hz, omegas,
                   np.asarray(inputs["amplitudes"]), _Output(args))

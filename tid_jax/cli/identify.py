@@ -137,8 +137,8 @@ def _run_identify(args) -> int:
     comment = (f"The inerter identified by `{PROG} identify` ({args.model} model, tid_jax "
                f"{__version__});\nuse it with {PROG} retune --config THIS_FILE")
     if left_out:
-        comment += ("\nNot carried over (the steady-state solvers take a rigid device; "
-                    f"{PROG} rtds takes these as flags): "
+        comment += ("\nNot carried over (to design with them, add them with the device's "
+                    "terminal_mass, which the records do not identify): "
                     + ", ".join(f"{n} = {estimates[n]:.6g} {UNITS[n]}" for n in left_out))
     write_toml(output.path("identify_config.toml"),
                {key: estimates[key] for key in SYSTEM_KEYS if key in estimates},
