@@ -243,6 +243,29 @@ def plot_peaks_vs_amplitude(curves, *, stroke_limit=None, title=None):
     return fig
 
 
+def plot_device_designs(devices, *, title=None):
+    """Designs with several inerter devices against forcing amplitude (N): the peak host
+    displacement over A / K with Den Hartog's tuning (dashed) and retuned (solid), and the
+    retuned k and c over Den Hartog's. `devices` maps a device's name to its
+    `(amplitudes, x_den_hartog, x_retuned, k_ratio, c_ratio)`."""
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4), layout="constrained")
+    for name, (amplitudes, x_dh, x_retuned, k_ratio, c_ratio) in devices.items():
+        (line,) = axes[0].plot(amplitudes, x_dh, "--o", label=f"{name}, Den Hartog")
+        style = dict(color=line.get_color(), marker="s")
+        axes[0].plot(amplitudes, x_retuned, label=f"{name}, retuned", **style)
+        axes[1].plot(amplitudes, k_ratio, label=name, **style)
+        axes[2].plot(amplitudes, c_ratio, label=name, **style)
+    for ax, label in zip(axes, ("peak host displacement x / (A/K)", "retuned k / k_DH",
+                                "retuned c / c_DH"), strict=True):
+        ax.set(xlabel="forcing amplitude A [N]", ylabel=label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    axes[1].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
 def plot_retune_summary(
     amplitudes,
     k_ratio,
