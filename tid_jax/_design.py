@@ -26,7 +26,14 @@ from ._peaks import (
     true_peaks,
 )
 from ._response import batched, frequency_response, scaled_states
-from ._retune import RETUNE_OUTCOMES, RetuneSettings, check_retune_options, optimal_tunings
+from ._retune import (
+    RETUNE_OUTCOMES,
+    RetuneSettings,
+    check_retune_options,
+    design_of_tuning,
+    optimal_tunings,
+    tuning_of_design,
+)
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
 
@@ -56,6 +63,7 @@ OTHER = tuple(i for i in range(len(PARAMETERS)) if i not in (_K, _C))
 # curvature of the smooth maximum across peaks is exact). Smaller steps amplify the noise
 # of the orbit solver in the gradients, larger ones the truncation error.
 _STENCIL_STEP = 1e-3
+UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
 _CHUNK = 3  # points per kernel call (one compiled shape for every use)
 MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
 
@@ -207,7 +215,7 @@ class Context:
     frequency, the solver settings, whether the host's peaks are located in continuous
     frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
     the grid's, refined by parabolas) and the reference tuning of the design variables
-    u = (ln(k / k_ref), sqrt(c / c_ref))."""
+    u = (ln(k / k_ref), sqrt(c / c_ref)) (`_retune.design_of_tuning`, unscaled)."""
 
     def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool):
         self.system = system
@@ -220,10 +228,13 @@ class Context:
         self.k_ref, self.c_ref = float(k_ref), float(c_ref)
 
     def tuning(self, u) -> tuple[float, float]:
-        return self.k_ref * float(np.exp(u[0])), self.c_ref * float(u[1]) ** 2
+        k, c = tuning_of_design(np.asarray(u, dtype=float), self.k_ref, self.c_ref, UNSCALED,
+                                np)
+        return float(k), float(c)
 
     def design(self, k, c, *, floor=0.0) -> np.ndarray:
-        return np.array([np.log(k / self.k_ref), np.sqrt(max(c / self.c_ref, floor))])
+        c = max(c, floor * self.c_ref)
+        return design_of_tuning(k, c, self.k_ref, self.c_ref, UNSCALED, np)
 
     def theta(self, k, c, amplitude) -> np.ndarray:
         theta = np.append(self.values, float(amplitude))

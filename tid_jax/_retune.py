@@ -149,22 +149,23 @@ class RetuneResult(eqx.Module):
 DAMPING_BOUND_RATIO = 1e-3
 
 
-# Scales of the design variables u = (DESIGN_SCALE[0] ln(k / k_ref), DESIGN_SCALE[1]
-# sqrt(c / c_ref)): they make the curvature of the log peak about one in each, so that
-# BFGS's first steps (from an identity Hessian) are about the right length.
+# Scales of retune's design variables: they make the curvature of the log peak about one
+# in each, so that BFGS's first steps (from an identity Hessian) are about the right
+# length. (The robust design's trust-region steps are measured in unscaled ones.)
 DESIGN_SCALE = (10.0, 3.0)
 
 
-def _design_to_tuning(u, k_ref, c_ref):
-    # k > 0 through an exponential; c >= 0 through a square, so that the bound c = 0 is a
-    # stationary point of the unconstrained problem and can be reached exactly.
-    return k_ref * jnp.exp(u[0] / DESIGN_SCALE[0]), c_ref * (u[1] / DESIGN_SCALE[1]) ** 2
+def tuning_of_design(u, k_ref, c_ref, scale=DESIGN_SCALE, xp=jnp):
+    """The tuning (k, c) of the design variables u = (scale[0] ln(k / k_ref), scale[1]
+    sqrt(c / c_ref)): k > 0 through an exponential, c >= 0 through a square, so that the
+    bound c = 0 is a stationary point of the unconstrained problem and can be reached
+    exactly. `xp`: the array module (`jax.numpy`, or `numpy` on the host)."""
+    return k_ref * xp.exp(u[0] / scale[0]), c_ref * (u[1] / scale[1]) ** 2
 
 
-def _tuning_to_design(k, c, k_ref, c_ref):
-    return jnp.stack(
-        [DESIGN_SCALE[0] * jnp.log(k / k_ref), DESIGN_SCALE[1] * jnp.sqrt(c / c_ref)], axis=-1
-    )
+def design_of_tuning(k, c, k_ref, c_ref, scale=DESIGN_SCALE, xp=jnp):
+    """The design variables of the tuning (k, c), the inverse of `tuning_of_design`."""
+    return xp.stack([scale[0] * xp.log(k / k_ref), scale[1] * xp.sqrt(c / c_ref)], axis=-1)
 
 
 # The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
@@ -239,7 +240,7 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
                                      system.inertance)
-    k, c = _design_to_tuning(u, k_ref, c_ref)
+    k, c = tuning_of_design(u, k_ref, c_ref)
     tuned = with_tuning(system, k, c)
     warm_tuning, states, monodromies, derivatives = warm
     change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
@@ -447,7 +448,7 @@ def optimal_tunings(
     c0 = jnp.asarray(systems.tid_damping, amps.dtype)
     # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
     # variables and would never be left.
-    u = _tuning_to_design(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
+    u = design_of_tuning(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     iterations = jnp.zeros(amps.shape, dtype=int)
     sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
     fine = _on_check_grid(bands, refinement)
@@ -475,7 +476,7 @@ def optimal_tunings(
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "
             f"{int(jnp.max(steps))} iterations at most")
-    k, c = _design_to_tuning(u.T, k_ref, c_ref)
+    k, c = tuning_of_design(u.T, k_ref, c_ref)
     # Both designs in one batch, every steady state shot from its design's orbits on the
     # design grid (interpolated in between) and verified afresh.
     _, final_states, _, _ = orbits
