@@ -319,7 +319,17 @@ def _stencil(u, central: bool) -> list[np.ndarray]:
     return [np.asarray(u, dtype=float)] + [u + np.asarray(step) for step in steps]
 
 
-def coordinates(ctx: Context, u, stencil: list[_Curves], response: str):
+class Terms(NamedTuple):
+    """A smooth maximum's terms (log peaks), whether each is a candidate, their gradients
+    (u0, u1, parameters `OTHER`) and those gradients' derivatives along u0 and u1."""
+
+    values: np.ndarray
+    mask: np.ndarray
+    grad: np.ndarray
+    dgrad: np.ndarray
+
+
+def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms:
     """Log peaks, their gradients in the coordinates (u0, u1, parameters `OTHER`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
     scenario, from the curves at the designs `_stencil(u, central)` (central when there
@@ -347,14 +357,15 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str):
         changed = np.any(np.abs(located - located[0]) > 1, axis=0)
         dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
     curves = stencil[0]
-    values = getattr(curves, f"log_{response}")
-    return values, getattr(curves, f"peak_{response}"), grad, dgrad
+    return Terms(getattr(curves, f"log_{response}"), getattr(curves, f"peak_{response}"), grad,
+                 dgrad)
 
 
-def smooth_max(values, mask, grad, dgrad, sharpness):
+def smooth_max(candidates: Terms, sharpness):
     """Smooth maximum G = ln(sum exp(s T)) / s of the candidate terms T, its gradient in
     all coordinates and its derivatives along u0, u1 (rows) in all coordinates: the exact
     curvature of the log-sum-exp plus the weighted curvatures of the terms."""
+    values, mask, grad, dgrad = candidates
     terms = np.where(mask, values, -np.inf)
     top = np.max(terms)
     if not np.isfinite(top):
@@ -373,8 +384,8 @@ def smooth_max(values, mask, grad, dgrad, sharpness):
 class Evaluation(NamedTuple):
     u: np.ndarray
     stencils: list  # per scenario, the curves at `_stencil(u, central)`
-    host_terms: tuple  # (values, mask, grad, dgrad), all scenarios' terms concatenated
-    stroke_terms: tuple
+    host_terms: Terms  # all scenarios' terms concatenated
+    stroke_terms: Terms
 
     def centres(self) -> list[_Curves]:
         return [stencil[0] for stencil in self.stencils]
@@ -398,12 +409,12 @@ def evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> Evaluation:
     stencils = [curves[i : i + n] for i in range(0, len(curves), n)]
     host, stroke = [], []
     for scenario, stencil in zip(scenarios, stencils, strict=True):
-        values, mask, grad, dgrad = coordinates(ctx, designs[0], stencil, "x")
-        host.append((values - scenario.offset, mask, grad, dgrad))
+        terms = coordinates(ctx, designs[0], stencil, "x")
+        host.append(terms._replace(values=terms.values - scenario.offset))
         stroke.append(coordinates(ctx, designs[0], stencil, "y"))
 
     def join(parts):
-        return tuple(np.concatenate([part[i] for part in parts]) for i in range(4))
+        return Terms(*(np.concatenate(field) for field in zip(*parts, strict=True)))
 
     return Evaluation(designs[0], stencils, join(host), join(stroke))
 
@@ -433,19 +444,12 @@ def check_amplitude(amplitude) -> float:
     return float(array)
 
 
-def check_amplitudes(amplitudes) -> np.ndarray:
-    array = np.atleast_1d(check_grid("amplitudes", amplitudes))
+def check_distinct(name: str, values) -> np.ndarray:
+    """A 1-d grid of distinct, finite, positive values, else `ValueError` naming `name`."""
+    array = np.atleast_1d(check_grid(name, values))
     if np.unique(array).size != array.size:
-        raise ValueError(f"amplitudes must be distinct, got {array.tolist()}")
+        raise ValueError(f"{name} must be distinct, got {array.tolist()}")
     return array
-
-
-def check_scales(scales) -> np.ndarray:
-    array = np.atleast_1d(check_grid("host_frequency_scales", scales))
-    if np.unique(array).size != array.size:
-        raise ValueError(f"host_frequency_scales must be distinct, got {array.tolist()}")
-    return array
-
 
 
 # --- the best tuning per scenario, any tuning against it, the robust tuning ---------------
@@ -537,8 +541,8 @@ def best_tunings(
     """
     check_system(system)
     check_steady_state_device(system, "best_tunings")
-    amps = check_amplitudes(amplitudes)
-    scales = check_scales(host_frequency_scales)
+    amps = check_distinct("amplitudes", amplitudes)
+    scales = check_distinct("host_frequency_scales", host_frequency_scales)
     band = _band(system, omegas)
     check_retune_options(max_steps, tol, retune_settings)
     lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
@@ -571,7 +575,6 @@ def best_tunings(
     )
 
 
-
 def _same(a: float | None, b: float | None) -> bool:
     """Two field values agree (`None`, the default friction width, only with itself)."""
     if a is None or b is None:
@@ -584,12 +587,8 @@ def check_best(best, system: TIDSystem) -> None:
         raise ValueError(f"best must be a BestTunings, got {type(best).__name__}")
     nominal = best.system.to_dict()
     given = system.to_dict()
-    different = [
-        name
-        for name in FIELD_NAMES
-        if name not in ("tid_stiffness", "tid_damping")
-        and not _same(nominal[name], given[name])
-    ]
+    different = [name for name in FIELD_NAMES if name not in ("tid_stiffness", "tid_damping")
+                 and not _same(nominal[name], given[name])]
     if different:
         raise ValueError(
             f"best was computed for another system: {different[0]} is "

@@ -20,9 +20,8 @@ from ._design import (
     Evaluation,
     Scenario,
     best_tunings,
-    check_amplitudes,
     check_best,
-    check_scales,
+    check_distinct,
     cold_start,
     evaluate_design,
     smooth_max,
@@ -106,10 +105,10 @@ class _Minimum(NamedTuple):
 def _models(evaluation: Evaluation, sharpness, stroke_log_limit):
     """The worst case f (smooth maximum of the host terms) and, if a stroke limit is given,
     the constraint c = (smooth maximum of the log inerter peaks) - ln(limit) <= 0."""
-    f = Model(*smooth_max(*evaluation.host_terms, sharpness))
+    f = Model(*smooth_max(evaluation.host_terms, sharpness))
     if stroke_log_limit is None:
         return f, None
-    value, grad, hess = smooth_max(*evaluation.stroke_terms, sharpness)
+    value, grad, hess = smooth_max(evaluation.stroke_terms, sharpness)
     return f, Model(value - stroke_log_limit, grad, hess)
 
 
@@ -377,8 +376,8 @@ def robust_tune(
     """
     check_system(system)
     check_steady_state_device(system, "robust_tune")
-    amps = check_amplitudes(amplitudes)
-    scales = check_scales(host_frequency_scales)
+    amps = check_distinct("amplitudes", amplitudes)
+    scales = check_distinct("host_frequency_scales", host_frequency_scales)
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
     check_retune_options(max_steps, tol, retune_settings)
     if not isinstance(robust_settings, RobustSettings):

@@ -141,7 +141,7 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
     derivatives: at most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0,
     where the damping is at its bound)."""
     final = evaluate_design(ctx, u, [scenario], [z_init], central=True)
-    model = Model(*smooth_max(*final.host_terms, sharpness))
+    model = Model(*smooth_max(final.host_terms, sharpness))
     free = slice(0, 1) if at_bound else slice(0, 2)
     for _ in range(_POLISH):
         g, h = model.grad[free], model.curvature()[free, free]
@@ -151,7 +151,7 @@ def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
         step[free] = trust_step(g, h, MAX_STEP)
         trial = evaluate_design(ctx, final.u + step, [scenario],
                                  [curves.states for curves in final.centres()], central=True)
-        trial_model = Model(*smooth_max(*trial.host_terms, sharpness))
+        trial_model = Model(*smooth_max(trial.host_terms, sharpness))
         if not trial_model.value < model.value:
             break
         final, model = trial, trial_model
