@@ -26,6 +26,7 @@ def main() -> None:
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
     from tid_jax._io import write_csv
+    from tid_jax._sensitivity import elasticity_series
 
     system = tj.paper_system()
     amplitudes = np.asarray(args.amplitudes or tj.PAPER_AMPLITUDES, dtype=float)
@@ -99,19 +100,10 @@ def main() -> None:
             ])
     write_csv(args.out / "sensitivity_vs_amplitude.csv", header, rows)
 
-    def series(get, names):
-        return {name: np.array([get(r)[parameters.index(name)] for r in results])
-                for name in names}
-
-    # The optimum does not depend on the tuning it starts from: its k and c entries are 0.
-    physical = [name for name in parameters if name not in ("tid_stiffness", "tid_damping")]
+    host, stroke, optimum_host, optimum_stroke = elasticity_series(results)
     plot.save_figure(
         plot.plot_elasticities(
-            amplitudes,
-            series(lambda r: np.asarray(r.host_elasticity), parameters),
-            series(lambda r: np.asarray(r.stroke_elasticity), parameters),
-            optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical),
-            optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical),
+            amplitudes, host, stroke, optimum_host=optimum_host, optimum_stroke=optimum_stroke,
             title="Elasticities of the peak responses, paper's system: Den Hartog tuning "
             "(solid) and retuned for each amplitude (dashed)",
         ),

@@ -64,32 +64,39 @@ def linear_part(z: Float[Array, "n ..."], p: Float[Array, " 14"]) -> tuple[Array
     """The rows of the linear part `L z` of the scaled vector field of the rigid device,
     for a state `z` or for columns of states (`z[i]` arrays of one shape), written out
     elementwise."""
-    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, *_, omega = p
+    _, _, _, inertance, _, _, _, parasitic, terminal, *_, omega = p
     x, v, y, w = z[:4]
-    spring = k * (x - y) + c * omega * (v - w)  # on the inerter terminal, per unit A/K
-    host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
+    spring, host = _host_rows(x, v, y, w, p)
     return v, host, w, (spring - parasitic * omega * w) / ((inertance + terminal) * omega**2)
 
 
-def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 14"]) -> Float[Array, ""]:
+def _host_rows(x, v, y, w, p):
+    """The force of the TID's spring and damper on the inerter terminal (per unit A/K)
+    and the host's scaled acceleration, forcing apart."""
+    mass, stiffness, damping, _, _, k, c, *_, omega = p
+    spring = k * (x - y) + c * omega * (v - w)
+    return spring, -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
+
+
+def friction_acceleration(w: Float[Array, ""], p: Float[Array, " 14"],
+                          compliant: bool = False) -> Float[Array, ""]:
     """The friction's contribution to the scaled acceleration of the body it acts on (the
-    rigid device's terminal, or a compliant device's mechanism) at its scaled velocity
-    `w`."""
-    _, stiffness, _, inertance, friction, _, _, _, terminal, ks, _, width, amplitude, omega = p
+    rigid device's terminal, with its terminal mass, or a `compliant` device's
+    mechanism) at its scaled velocity `w`."""
+    _, stiffness, _, inertance, friction, _, _, _, terminal, _, _, width, amplitude, omega = p
     scale = amplitude / stiffness
-    mass = inertance + jnp.where(jnp.isinf(ks), terminal, 0.0)
+    mass = inertance if compliant else inertance + terminal
     return -friction * smooth_sign(omega * scale * w, width) / (scale * mass * omega**2)
 
 
 def _compliant_field(z, p):
     """The scaled field of the compliant device's six states, forcing and friction
     apart."""
-    mass, stiffness, damping, inertance, _, k, c, parasitic, terminal, ks, gap, *_ = p
+    _, stiffness, _, inertance, _, _, _, parasitic, terminal, ks, gap, *_ = p
     omega, scale = p[-1], p[-2] / stiffness
     x, v, y, w, q, u = z
-    spring = k * (x - y) + c * omega * (v - w)
+    spring, host = _host_rows(x, v, y, w, p)
     series = ks * dead_zone(y - q, gap / scale)
-    host = -(stiffness * x + damping * omega * v + spring) / (mass * omega**2)
     return jnp.stack([v, host, w, (spring - series) / (terminal * omega**2), u,
                       (series - parasitic * omega * u) / (inertance * omega**2)])
 
@@ -107,7 +114,7 @@ def vector_field(theta: Float[Array, ""], z: Float[Array, " n"], p: Float[Array,
     force = stiffness * jnp.sin(theta) / (mass * omega**2)  # A sin(theta) in units of A/K
     if z.shape[0] == 6:
         field = _compliant_field(z, p)
-        return field.at[1].add(force).at[5].add(friction_acceleration(z[5], p))
+        return field.at[1].add(force).at[5].add(friction_acceleration(z[5], p, compliant=True))
     dx, dv, dy, dw = linear_part(z, p)
     return jnp.stack([dx, dv + force, dy, dw + friction_acceleration(z[3], p)])
 

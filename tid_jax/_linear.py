@@ -119,11 +119,16 @@ def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
     `omega`).
     """
     w = jnp.asarray(omega)
+    mechanism = 1j * w * system.parasitic_damping - system.inertance * w**2
+    return _receptance(system, w, mechanism / (1 + mechanism / system.series_stiffness))
+
+
+def _receptance(system: TIDSystem, w, device) -> LinearReceptance:
+    """Host and terminal receptances when the terminal (with its mass) is held to ground
+    by the dynamic stiffness `device`."""
     jw = 1j * w
     spring = system.tid_stiffness + jw * system.tid_damping
-    mechanism = jw * system.parasitic_damping - system.inertance * w**2
-    device = mechanism / (1 + mechanism / system.series_stiffness) - system.terminal_mass * w**2
-    inerter_terminal = spring / (spring + device)  # Y/X
+    inerter_terminal = spring / (spring + device - system.terminal_mass * w**2)  # Y/X
     dynamic_stiffness = (
         system.host_stiffness
         - system.host_mass * w**2
@@ -191,11 +196,8 @@ def _compliant_breakaway(system: TIDSystem, w) -> Breakaway:
     (mass mt) held by the series spring ks alone (its free play left out), and the force
     ks Y on the mechanism within ff; the minimum on a fine grid over the band."""
     def amplitude(w):
-        spring = system.tid_stiffness + 1j * w * system.tid_damping
-        terminal = spring / (spring + system.series_stiffness - system.terminal_mass * w**2)
-        host = 1 / (system.host_stiffness - system.host_mass * w**2
-                    + 1j * w * system.host_damping + spring * (1 - terminal))
-        return system.friction_force / jnp.abs(system.series_stiffness * terminal * host)
+        held = _receptance(system, w, system.series_stiffness)  # the mechanism stuck
+        return system.friction_force / jnp.abs(system.series_stiffness * held.inerter)
 
     fine = jnp.linspace(jnp.min(w), jnp.max(w), COMPLIANT_BREAKAWAY_GRID)
     values = amplitude(fine)

@@ -306,3 +306,22 @@ def sensitivities(
     )
 
 
+def elasticity_series(results) -> tuple[dict, dict, dict | None, dict | None]:
+    """The elasticities of `Sensitivities` at several amplitudes (`results`, one each) as
+    one series per parameter: of the host peak and the stroke at the given tuning, and,
+    where the optimum was found, at the optimum for every parameter but the tuning itself
+    (on which the optimum does not depend; None otherwise)."""
+    parameters = results[0].parameters
+
+    def series(get, names):
+        return {name: np.array([np.asarray(get(r))[parameters.index(name)] for r in results])
+                for name in names}
+
+    host = series(lambda r: r.host_elasticity, parameters)
+    stroke = series(lambda r: r.stroke_elasticity, parameters)
+    if results[0].optimum is None:
+        return host, stroke, None, None
+    physical = [name for name in parameters if name not in ("tid_stiffness", "tid_damping")]
+    return (host, stroke, series(lambda r: r.optimum.host_elasticity, physical),
+            series(lambda r: r.optimum.stroke_elasticity, physical))
+

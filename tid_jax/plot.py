@@ -394,6 +394,8 @@ PARAMETER_LABELS = {
     "friction_force": "friction force ff",
     "tid_stiffness": "TID stiffness k",
     "tid_damping": "TID damping c",
+    "parasitic_damping": "parasitic damping cp",
+    "terminal_mass": "terminal mass mt",
     "amplitude": "forcing amplitude A",
 }
 

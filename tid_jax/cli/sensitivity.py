@@ -1,13 +1,12 @@
 """`tid-jax sensitivity`: sensitivities of the peaks, at the tuning and the optimum."""
 
 
-import numpy as np
 
 from .. import plot
 from .._design import PARAMETER_UNITS, best_tunings
 from .._io import write_json, write_toml
 from .._retune import RetuneSettings
-from .._sensitivity import sensitivities
+from .._sensitivity import elasticity_series, sensitivities
 from ._common import (
     Shown,
     _add_output_arguments,
@@ -114,7 +113,7 @@ def _run_sensitivity(args) -> int:
         comment=_config_comment("sensitivity"),
     )
     if amplitudes.size > 1:
-        _save_plot(output, amplitudes, results, optimum)
+        _save_plot(output, amplitudes, results)
     json_path = output.path("sensitivity.json")
     data = output.document("sensitivity", inputs, system, settings, frequencies_hz, results=records)
     write_json(json_path, data)
@@ -162,26 +161,12 @@ def _records(amplitude, result) -> list[dict]:
     return records
 
 
-def _save_plot(output, amplitudes, results, optimum: bool) -> None:
+def _save_plot(output, amplitudes, results) -> None:
     """The elasticities against amplitude."""
-    parameters = results[0].parameters
-
-    def series(get, names):
-        return {n: np.array([get(r)[parameters.index(n)] for r in results]) for n in names}
-
-    physical = [n for n in parameters if n not in ("tid_stiffness", "tid_damping")]
+    host, stroke, optimum_host, optimum_stroke = elasticity_series(results)
     plot.save_figure(
-        plot.plot_elasticities(
-            amplitudes,
-            series(lambda r: np.asarray(r.host_elasticity), parameters),
-            series(lambda r: np.asarray(r.stroke_elasticity), parameters),
-            optimum_host=series(lambda r: np.asarray(r.optimum.host_elasticity), physical)
-            if optimum
-            else None,
-            optimum_stroke=series(lambda r: np.asarray(r.optimum.stroke_elasticity), physical)
-            if optimum
-            else None,
-        ),
+        plot.plot_elasticities(amplitudes, host, stroke, optimum_host=optimum_host,
+                               optimum_stroke=optimum_stroke),
         output.path("sensitivity.png"),
     )
 
