@@ -171,6 +171,8 @@ def test_saved_config_reproduces_the_run(frf_run, tmp_path):
     _, stdout, _, out = frf_run
     config = tomllib.loads((out / "frf_config.toml").read_text())
     assert config["amplitudes"] == [200.0, 600.0]
+    # the device in its own table
+    assert config["inerter"] == {"inertance": 75.0, "friction_force": 20.0}
     assert config["band_hz"] == [3.0, 5.0]
     status, again, _ = run(
         ["frf", "--config", out / "frf_config.toml", "--out", tmp_path, "--json", "--quiet"]
@@ -313,6 +315,11 @@ BAD_TOML = 'host_mass = 1500\nfriction_force = "twenty\n'
         (["frf", "--series-stiffness", "0"], None, "series_stiffness must be finite and positive"),
         (["frf", "--backlash", "1e-4"], None, "backlash needs a finite series_stiffness"),
         (["frf", "--parasitic-damping", "-3"], None, "parasitic_damping must be finite and"),
+        (["frf"], "[inerter]\nhost_mass = 1.0\n", "unknown key 'host_mass' in [inerter]"),
+        (["frf"], "inerter = 75.0\n", "inerter must be a table [inerter]"),
+        (["frf"], "inertance = 75.0\n[inerter]\ninertance = 70.0\n",
+         "'inertance' is given both at the top level and in [inerter]"),
+        (["frf"], "[inerter]\nbacklash = -1e-4\n", "backlash must be finite and non-negative"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):
@@ -330,13 +337,24 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):
 def test_device_terms_from_config_and_flags(tmp_path):
     from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
 
-    (tmp_path / "device.toml").write_text("parasitic_damping = 300.0\nterminal_mass = 2.0\n")
     args = type("Args", (), {key: None for key in INPUT_KEYS})()
     args.config = str(tmp_path / "device.toml")
-    args.terminal_mass = 3.0  # a flag overrides the file
+    # the device's keys at the top level or in the [inerter] table
+    for text in ("parasitic_damping = 300.0\nterminal_mass = 2.0\n",
+                 "[inerter]\nparasitic_damping = 300.0\nterminal_mass = 2.0\n"):
+        (tmp_path / "device.toml").write_text(text)
+        args.terminal_mass = 3.0  # a flag overrides the file
+        system = _system(_inputs(args))
+        assert float(system.parasitic_damping) == 300.0 and float(system.terminal_mass) == 3.0
+        assert system.rigid and float(system.backlash) == 0.0
+    (tmp_path / "device.toml").write_text(
+        "host_mass = 2000.0\n[inerter]\ninertance = 60.0\nfriction_force = 15.0\n"
+        "terminal_mass = 2.0\nseries_stiffness = 3e5\nbacklash = 1e-4\n")
+    args.terminal_mass = None
     system = _system(_inputs(args))
-    assert float(system.parasitic_damping) == 300.0 and float(system.terminal_mass) == 3.0
-    assert system.rigid and float(system.backlash) == 0.0
+    assert float(system.host_mass) == 2000.0 and float(system.inertance) == 60.0
+    assert float(system.friction_force) == 15.0 and float(system.series_stiffness) == 3e5
+    assert system.compliant and float(system.backlash) == 1e-4
 
 
 def test_missing_config_file(tmp_path):

@@ -99,6 +99,37 @@ def test_sensitivities_to_the_device_terms(system, band):
 COMPLIANT = dict(series_stiffness=3e5, terminal_mass=2.0)  # mounts at about 10 Hz
 
 
+def test_sensitivities_to_compliance_and_backlash(system, band):
+    device = system.replace(backlash=2e-4, parasitic_damping=300.0, **COMPLIANT)
+    amplitude = 400.0
+    sens = tj.sensitivities(device, amplitude, omegas=band, optimum=False)
+    assert bool(sens.converged)
+    assert sens.parameters[-3:] == ("series_stiffness", "backlash", "amplitude")
+
+    def peaks(changed):
+        result = tj.peaks(changed, [amplitude], band)
+        return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
+
+    for name in ("series_stiffness", "backlash"):
+        i = sens.parameters.index(name)
+        value = float(sens.values[i])
+        h = 1e-3 * value
+        fd = (peaks(device.replace(**{name: value + h}))
+              - peaks(device.replace(**{name: value - h}))) / (2 * h)
+        assert float(sens.host_derivative[i]) == pytest.approx(fd[0], rel=1e-3), name
+        assert float(sens.stroke_derivative[i]) == pytest.approx(fd[1], rel=1e-3), name
+    # Exact laws of the six-state model. Scaling every mass, stiffness (ks too), damping
+    # and force by s leaves x and y unchanged: those elasticities sum to 0. Scaling the
+    # forces and the free play by s scales x and y by s (the default friction width
+    # follows A): e_A + e_ff + e_backlash = 1.
+    index = {name: i for i, name in enumerate(sens.parameters)}
+    for e in (np.asarray(sens.host_elasticity), np.asarray(sens.stroke_elasticity)):
+        assert float(np.sum(e) - e[index["backlash"]]) == pytest.approx(0.0, abs=1e-4)
+        assert float(e[index["amplitude"]] + e[index["friction_force"]]
+                     + e[index["backlash"]]) == pytest.approx(1.0, abs=1e-4)
+    assert abs(float(sens.host_elasticity[index["series_stiffness"]])) > 0.05  # it matters
+
+
 @pytest.mark.parametrize("device", [COMPLIANT,
                                     dict(COMPLIANT, backlash=2e-4, parasitic_damping=300.0)])
 def test_compliant_device_matches_the_reference(system, device):

@@ -139,6 +139,7 @@ def test_cli_identifies_and_writes_files_retune_accepts(tmp_path):
     config = tmp_path / "out" / "identify_config.toml"
     with open(config, "rb") as file:
         saved = tomllib.load(file)
+    saved = saved["inerter"]
     assert set(saved) == {"inertance", "friction_force"}  # the ideal model's terms
     args = type("Args", (), {key: None for key in INPUT_KEYS})()
     args.config = str(config)

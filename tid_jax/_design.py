@@ -39,8 +39,10 @@ from ._system import FIELD_NAMES, TIDSystem
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
-# forcing amplitude.
-PARAMETERS = FIELD_NAMES[:7] + ("parasitic_damping", "terminal_mass", "amplitude")
+# forcing amplitude, last. A compliant device adds its series stiffness and backlash; a
+# rigid one has neither to vary (see `parameters_of`).
+RIGID_PARAMETERS = FIELD_NAMES[:7] + ("parasitic_damping", "terminal_mass", "amplitude")
+COMPLIANT_PARAMETERS = RIGID_PARAMETERS[:-1] + ("series_stiffness", "backlash", "amplitude")
 PARAMETER_UNITS = {
     "host_mass": "kg",
     "host_stiffness": "N/m",
@@ -51,12 +53,18 @@ PARAMETER_UNITS = {
     "tid_damping": "N s/m",
     "parasitic_damping": "N s/m",
     "terminal_mass": "kg",
+    "series_stiffness": "N/m",
+    "backlash": "m",
     "amplitude": "N",
 }
-_K, _C = PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping")
-# Parameters other than the design (k, c), in the order of the optimiser's coordinates
-# (u0, u1, *OTHER): u0 = ln(k / k_ref), u1 = sqrt(c / c_ref), as in `retune`.
-OTHER = tuple(i for i in range(len(PARAMETERS)) if i not in (_K, _C))
+_K, _C = RIGID_PARAMETERS.index("tid_stiffness"), RIGID_PARAMETERS.index("tid_damping")
+
+
+def parameters_of(system: TIDSystem) -> tuple[str, ...]:
+    """The parameters of `system`'s sensitivities: `COMPLIANT_PARAMETERS` for a compliant
+    device, else `RIGID_PARAMETERS`."""
+    return COMPLIANT_PARAMETERS if system.compliant else RIGID_PARAMETERS
+
 
 # Design-variable step of the differences of exact gradients that give the curvature of
 # each refined peak (forward while optimising, central for the final derivatives; the
@@ -104,29 +112,17 @@ def _log_candidates(values, omegas, true):
 
 
 def _changed_system(system, theta, scale):
-    """`system` with the parameters `theta` (order `PARAMETERS`, amplitude last and unused)
-    and its host stiffness multiplied by `scale**2`."""
-    mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, _ = theta
-    return eqx.tree_at(
-        lambda s: (
-            s.host_mass,
-            s.host_stiffness,
-            s.host_damping,
-            s.inertance,
-            s.friction_force,
-            s.tid_stiffness,
-            s.tid_damping,
-            s.parasitic_damping,
-            s.terminal_mass,
-        ),
-        system,
-        (mass, stiffness * scale**2, damping, inertance, friction, k, c, parasitic, terminal),
-    )
+    """`system` with the parameters `theta` (order `parameters_of(system)`, amplitude last
+    and unused) and its host stiffness multiplied by `scale**2`."""
+    values = dict(zip(parameters_of(system)[:-1], theta, strict=False))
+    values["host_stiffness"] = values["host_stiffness"] * scale**2
+    return eqx.tree_at(lambda s: [getattr(s, name) for name in values], system,
+                       list(values.values()))
 
 
 def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
-    `locate` (see `_log_candidates`), for the parameters `theta` (order `PARAMETERS`),
+    `locate` (see `_log_candidates`), for the parameters `theta` (order `parameters_of(system)`),
     with the host stiffness multiplied by `scale**2`."""
     changed = _changed_system(system, theta, scale)
     xs, ys, converged, states = sweep(changed, theta[-1], omegas, settings, z_init)
@@ -181,7 +177,7 @@ def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locat
 class _Curves(NamedTuple):
     """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency
     (then the true peaks of |x|, if located), their candidate masks (`_log_candidates`),
-    Jacobians `[entries, PARAMETERS]`, convergence of every orbit, the orbits' states and
+    Jacobians `[entries, parameters]`, convergence of every orbit, the orbits' states and
     the grid indices of the true peaks."""
 
     log_x: np.ndarray
@@ -196,7 +192,7 @@ class _Curves(NamedTuple):
 
     def top(self, response: str) -> tuple[float, np.ndarray]:
         """Log of the grid peak of `response` ("x" or "y"), as `_peaks.grid_peak` finds it,
-        and its gradient (`PARAMETERS`)."""
+        and its gradient (over `Context.parameters`)."""
         values = np.where(
             getattr(self, f"peak_{response}"), getattr(self, f"log_{response}"), -np.inf
         )
@@ -223,7 +219,11 @@ class Context:
         self.settings = settings
         self.omegas = np.asarray(omegas, dtype=float)
         self.ratio_grid = jnp.asarray(self.omegas / float(system.host_frequency))
-        self.values = np.array([float(getattr(system, name)) for name in PARAMETERS[:-1]])
+        self.parameters = parameters_of(system)
+        self.values = np.array([float(getattr(system, name)) for name in self.parameters[:-1]])
+        # Parameters other than the design (k, c), in the order of the optimiser's
+        # coordinates (u0, u1, *other): u0 = ln(k / k_ref), u1 = sqrt(c / c_ref).
+        self.other = [i for i in range(len(self.parameters)) if i not in (_K, _C)]
         k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
         self.k_ref, self.c_ref = float(k_ref), float(c_ref)
 
@@ -321,7 +321,7 @@ def _stencil(u, central: bool) -> list[np.ndarray]:
 
 class Terms(NamedTuple):
     """A smooth maximum's terms (log peaks), whether each is a candidate, their gradients
-    (u0, u1, parameters `OTHER`) and those gradients' derivatives along u0 and u1."""
+    (u0, u1, parameters `Context.other`) and those gradients' derivatives along u0 and u1."""
 
     values: np.ndarray
     mask: np.ndarray
@@ -330,7 +330,7 @@ class Terms(NamedTuple):
 
 
 def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms:
-    """Log peaks, their gradients in the coordinates (u0, u1, parameters `OTHER`) and
+    """Log peaks, their gradients in the coordinates (u0, u1, parameters `Context.other`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
     scenario, from the curves at the designs `_stencil(u, central)` (central when there
     are five). Only the second derivatives of each refined peak come from differences."""
@@ -338,7 +338,7 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
     jac = [getattr(curves, f"jac_{response}") for curves in stencil]
     centre = jac[0]
     grad = np.concatenate(
-        [k * centre[:, [_K]], 2 * ctx.c_ref * u[1] * centre[:, [_C]], centre[:, OTHER]], axis=1
+        [k * centre[:, [_K]], 2 * ctx.c_ref * u[1] * centre[:, [_C]], centre[:, ctx.other]], axis=1
     )
     dgrad = np.empty(grad.shape[:1] + (2,) + grad.shape[1:])
     for i in range(2):
@@ -348,7 +348,7 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
             d_jac = (jac[1 + i] - centre) / _STENCIL_STEP
         dgrad[:, i, 0] = k * d_jac[:, _K] + (k * centre[:, _K] if i == 0 else 0.0)
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
-        dgrad[:, i, 2:] = d_jac[:, OTHER]
+        dgrad[:, i, 2:] = d_jac[:, ctx.other]
     if response == "x" and stencil[0].located.size:
         # A true peak's entry holds the same peak at every design of the stencil unless the
         # set of highest local maxima changed between them (its grid index jumps): then

@@ -11,8 +11,6 @@ from ._checks import check_steady_state_device, check_system
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
-    OTHER,
-    PARAMETERS,
     BestTunings,
     Context,
     Scenario,
@@ -171,20 +169,20 @@ def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol
     k, c = ctx.tuning(u)
     g, h_uu = model.grad, model.curvature()
     free = [0] if at_bound else [0, 1]
-    du_dp = np.zeros((2, len(OTHER)))
+    du_dp = np.zeros((2, len(ctx.other)))
     du_dp[free] = -np.linalg.solve(h_uu[np.ix_(free, free)], model.hess[free, 2:])
     centre = final.centres()[0]
     values, _, stroke_grads, _ = coordinates(ctx, u, final.stencils[0], "y")
     stroke_grad = stroke_grads[int(np.argmax(np.where(centre.peak_y, values, -np.inf)))]
-    n = len(PARAMETERS)
+    n = len(ctx.parameters)
     d_log_host, d_log_stroke, dk, dc = (np.zeros(n) for _ in range(4))
     # Envelope theorem, with the first-order effect of the gradient left at the optimum
     # (the smooth maximum is stiff across a balance of peaks: a small step there leaves a
     # gradient that is not negligible against the partial derivative).
-    d_log_host[list(OTHER)] = g[2:] + g[:2] @ du_dp
-    d_log_stroke[list(OTHER)] = stroke_grad[2:] + stroke_grad[:2] @ du_dp
-    dk[list(OTHER)] = k * du_dp[0]
-    dc[list(OTHER)] = 2 * ctx.c_ref * u[1] * du_dp[1]
+    d_log_host[ctx.other] = g[2:] + g[:2] @ du_dp
+    d_log_stroke[ctx.other] = stroke_grad[2:] + stroke_grad[:2] @ du_dp
+    dk[ctx.other] = k * du_dp[0]
+    dc[ctx.other] = 2 * ctx.c_ref * u[1] * du_dp[1]
     host_peak, stroke_peak = centre.host_peak(), centre.stroke_peak()
     at_optimum = decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
     # At the bound the peak must rise with the damping (a positive curvature in u1).
@@ -251,12 +249,14 @@ def sensitivities(
     below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
-    The parameters are `PARAMETERS`: a compliant device's series stiffness and backlash
-    are not among them.
+    The parameters are `parameters_of(system)`: the physical fields of the steady-state
+    model and the amplitude, with a compliant device's series stiffness and backlash (a
+    rigid device has neither to vary). At zero backlash its derivative is the one-sided
+    one (the free play opening) and its elasticity 0.
 
     **Arguments:**
 
-    - `system`: the `TIDSystem` (rigid device) at its given tuning.
+    - `system`: the `TIDSystem` at its given tuning.
     - `amplitude`: forcing amplitude A, N.
     - `omegas`: the band, rad/s (default `default_omegas(system)`).
     - `optimum`: also the sensitivities at the retuned optimum.
@@ -266,7 +266,7 @@ def sensitivities(
     - `max_steps`, `tol`, `retune_settings`: of the optimiser that finds the optimum (as
       in `retune`).
 
-    **Returns:** a `Sensitivities` (parameters in the order `PARAMETERS`).
+    **Returns:** a `Sensitivities` (parameters in the order `parameters_of(system)`).
     """
     check_system(system)
     check_steady_state_device(system, "sensitivities")
@@ -293,7 +293,7 @@ def sensitivities(
                                          retune_settings.sharpness[-1])
     host_peak, stroke_peak = np.exp(log_host), np.exp(log_stroke)
     return Sensitivities(
-        parameters=PARAMETERS,
+        parameters=ctx.parameters,
         values=jnp.asarray(theta),
         host_peak=jnp.asarray(host_peak),
         stroke_peak=jnp.asarray(stroke_peak),

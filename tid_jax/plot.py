@@ -396,6 +396,8 @@ PARAMETER_LABELS = {
     "tid_damping": "TID damping c",
     "parasitic_damping": "parasitic damping cp",
     "terminal_mass": "terminal mass mt",
+    "series_stiffness": "series stiffness ks",
+    "backlash": "backlash",
     "amplitude": "forcing amplitude A",
 }
 

@@ -71,6 +71,10 @@ PHYSICAL_INPUTS = (
 GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
 INPUT_KEYS = tuple(key for key, *_ in PHYSICAL_INPUTS) + GRID_INPUTS
 SOLVER_TABLE = "solver"
+# The inerter device's keys: at the top level of a config or in its [inerter] table (the
+# configs that commands write use the table).
+INERTER_TABLE = "inerter"
+INERTER_KEYS = ("inertance", "friction_force", "friction_width", *DEVICE_TERMS)
 # Pairs of which at most one may be given; the first has a default.
 ALTERNATIVES = (("host_frequency_hz", "host_stiffness"), ("host_damping_ratio", "host_damping"))
 DEFAULTS = {
@@ -193,6 +197,8 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_config(path: str) -> dict:
+    """The checked contents of the config file `path`, its [inerter] table merged into
+    the top level."""
     try:
         with open(path, "rb") as file:
             config = tomllib.load(file)
@@ -200,25 +206,32 @@ def _read_config(path: str) -> dict:
         raise CLIError(f"config {path} is not valid TOML: {error}") from None
     except OSError as error:
         raise CLIError(f"cannot read config {path}: {error.strerror}") from None
-    unknown = [key for key in config if key not in INPUT_KEYS and key != SOLVER_TABLE]
+    tables = (SOLVER_TABLE, INERTER_TABLE)
+    unknown = [key for key in config if key not in INPUT_KEYS + tables]
     if unknown:
         raise CLIError(
-            f"config {path}: unknown key {unknown[0]!r}; "
-            f"allowed keys are {', '.join(INPUT_KEYS)} and a [{SOLVER_TABLE}] table"
+            f"config {path}: unknown key {unknown[0]!r}; allowed keys are "
+            f"{', '.join(INPUT_KEYS)}, an [{INERTER_TABLE}] and a [{SOLVER_TABLE}] table"
         )
-    solver = config.get(SOLVER_TABLE, {})
-    if not isinstance(solver, dict):
-        raise CLIError(f"config {path}: {SOLVER_TABLE} must be a table [{SOLVER_TABLE}]")
     # the friction model follows friction_width (0: exact), not a solver setting
-    fields = tuple(name for name in SolverSettings.__dataclass_fields__
-                   if name != "exact_friction")
-    unknown = [key for key in solver if key not in fields]
-    if unknown:
-        raise CLIError(
-            f"config {path}: unknown key {unknown[0]!r} in [{SOLVER_TABLE}]; "
-            f"allowed keys are {', '.join(fields)}"
-        )
-    return config
+    solver_keys = tuple(name for name in SolverSettings.__dataclass_fields__
+                        if name != "exact_friction")
+    for table, allowed in ((SOLVER_TABLE, solver_keys), (INERTER_TABLE, INERTER_KEYS)):
+        entries = config.get(table, {})
+        if not isinstance(entries, dict):
+            raise CLIError(f"config {path}: {table} must be a table [{table}]")
+        unknown = [key for key in entries if key not in allowed]
+        if unknown:
+            raise CLIError(
+                f"config {path}: unknown key {unknown[0]!r} in [{table}]; "
+                f"allowed keys are {', '.join(allowed)}"
+            )
+    inerter = config.pop(INERTER_TABLE, {})
+    twice = [key for key in inerter if key in config]
+    if twice:
+        raise CLIError(f"config {path}: {twice[0]!r} is given both at the top level and in "
+                       f"[{INERTER_TABLE}]; give it once")
+    return {**config, **inerter}
 
 
 def _number(name: str, value, allowed: str) -> float:
@@ -532,7 +545,11 @@ def _config_comment(command: str) -> str:
 
 
 def _config_data(inputs: dict) -> dict:
-    return {key: value for key, value in inputs.items() if value != {}}
+    """`inputs` as a config file holds them: the device's keys in an [inerter] table."""
+    data = {key: value for key, value in inputs.items()
+            if key not in INERTER_KEYS and value != {}}
+    inerter = {key: inputs[key] for key in INERTER_KEYS if key in inputs}
+    return {**data, INERTER_TABLE: inerter} if inerter else data
 
 
 def _breakaway_line(breakaway) -> str:

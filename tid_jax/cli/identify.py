@@ -9,7 +9,16 @@ from .. import __version__, plot
 from .._device import Motion
 from .._identify import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
 from .._io import write_csv, write_json, write_toml
-from ._common import PROG, CLIError, Shown, _add_output_arguments, _Output, shown, table
+from ._common import (
+    INERTER_TABLE,
+    PROG,
+    CLIError,
+    Shown,
+    _add_output_arguments,
+    _Output,
+    shown,
+    table,
+)
 
 RECORD_COLUMNS = ("time", "displacement", "force")
 OPTIONAL_COLUMN = "record"
@@ -141,7 +150,8 @@ def _run_identify(args) -> int:
                     "terminal_mass, which the records do not identify): "
                     + ", ".join(f"{n} = {estimates[n]:.6g} {UNITS[n]}" for n in left_out))
     write_toml(output.path("identify_config.toml"),
-               {key: estimates[key] for key in SYSTEM_KEYS if key in estimates},
+               {INERTER_TABLE: {key: estimates[key] for key in SYSTEM_KEYS
+                                if key in estimates}},
                comment=comment)
     json_path = output.path("identify.json")
     data = {
