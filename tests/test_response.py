@@ -170,6 +170,23 @@ def test_bad_grids_raise(system, omegas, amplitudes, message):
         tj.frequency_response(system, omegas, amplitudes)
 
 
+def test_single_precision_is_refused():
+    # Without float64 the steady states cannot reach their tolerances: a clear error, not
+    # minutes of failed solves. (A fresh process: this one computes in float64.)
+    import subprocess
+    import sys
+
+    code = ("import tid_jax as tj\n"
+            "try:\n"
+            "    tj.frequency_response(tj.paper_system(), [25.0], [100.0])\n"
+            "except ValueError as error:\n"
+            "    print(error)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True, env={"JAX_ENABLE_X64": "0", "JAX_PLATFORMS": "cpu",
+                                           "PATH": ""})
+    assert "tid_jax needs double precision" in done.stdout
+
+
 def test_unconverged_point_is_flagged_and_retried(system):
     # One Newton iteration from the linear guess cannot reach the stick-slip orbit: the
     # batched solve flags the point; frequency_response then solves it again, persistently.

@@ -15,7 +15,17 @@ def is_positive(value) -> bool:
             and math.isfinite(value) and value > 0)
 
 
+def check_precision() -> None:
+    """`ValueError` unless JAX computes in double precision: the steady states' tolerances
+    (1e-8 and below) are out of reach in single precision, where orbits fail to converge
+    after many fallbacks."""
+    if not jax.config.jax_enable_x64:
+        raise ValueError('tid_jax needs double precision: run jax.config.update('
+                         '"jax_enable_x64", True) before importing tid_jax')
+
+
 def check_system(system) -> None:
+    check_precision()
     if not isinstance(system, TIDSystem):
         raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
 

@@ -30,7 +30,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._cache import compiled
-from ._checks import choice, integer
+from ._checks import check_precision, choice, integer
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
@@ -301,6 +301,7 @@ def identify_inerter(records, *, model: str = "ideal",
 
     **Returns:** an `InerterFit` (SI units).
     """
+    check_precision()
     choice("model", model, MODELS)
     integer("settings.max_steps", settings.max_steps, 1)
     records = _records(records)
