@@ -71,18 +71,19 @@ def test_retune_with_terminal_mass_is_the_h_infinity_optimum_of_the_total_mass(s
     assert abs(k / ideal_k - 1) > 0.02  # the mass moves the optimum
 
 
-def test_sensitivities_to_the_device_terms(system, band):
-    device = system.replace(**DEVICE)
+def _sensitivities_against_differences(device, band, names):
+    """`tj.sensitivities` of `device` at 400 N (no optimum), its derivatives with respect
+    to `names` checked against central differences of `tj.peaks`."""
     amplitude = 400.0
     sens = tj.sensitivities(device, amplitude, omegas=band, optimum=False)
     assert bool(sens.converged)
-    assert sens.parameters[-3:] == ("parasitic_damping", "terminal_mass", "amplitude")
+    assert sens.parameters[-3:] == (*names, "amplitude")
 
     def peaks(changed):
         result = tj.peaks(changed, [amplitude], band)
         return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
 
-    for name in ("parasitic_damping", "terminal_mass"):
+    for name in names:
         i = sens.parameters.index(name)
         value = float(sens.values[i])
         h = 1e-3 * value
@@ -90,6 +91,12 @@ def test_sensitivities_to_the_device_terms(system, band):
               - peaks(device.replace(**{name: value - h}))) / (2 * h)
         assert float(sens.host_derivative[i]) == pytest.approx(fd[0], rel=1e-3), name
         assert float(sens.stroke_derivative[i]) == pytest.approx(fd[1], rel=1e-3), name
+    return sens
+
+
+def test_sensitivities_to_the_device_terms(system, band):
+    sens = _sensitivities_against_differences(system.replace(**DEVICE), band,
+                                              ("parasitic_damping", "terminal_mass"))
     # Scaling every mass, stiffness, damping and force by s leaves x and y unchanged:
     # the elasticities, the device's among them, sum to 0.
     assert float(np.sum(sens.host_elasticity)) == pytest.approx(0.0, abs=1e-4)
@@ -101,23 +108,7 @@ COMPLIANT = dict(series_stiffness=3e5, terminal_mass=2.0)  # mounts at about 10 
 
 def test_sensitivities_to_compliance_and_backlash(system, band):
     device = system.replace(backlash=2e-4, parasitic_damping=300.0, **COMPLIANT)
-    amplitude = 400.0
-    sens = tj.sensitivities(device, amplitude, omegas=band, optimum=False)
-    assert bool(sens.converged)
-    assert sens.parameters[-3:] == ("series_stiffness", "backlash", "amplitude")
-
-    def peaks(changed):
-        result = tj.peaks(changed, [amplitude], band)
-        return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
-
-    for name in ("series_stiffness", "backlash"):
-        i = sens.parameters.index(name)
-        value = float(sens.values[i])
-        h = 1e-3 * value
-        fd = (peaks(device.replace(**{name: value + h}))
-              - peaks(device.replace(**{name: value - h}))) / (2 * h)
-        assert float(sens.host_derivative[i]) == pytest.approx(fd[0], rel=1e-3), name
-        assert float(sens.stroke_derivative[i]) == pytest.approx(fd[1], rel=1e-3), name
+    sens = _sensitivities_against_differences(device, band, ("series_stiffness", "backlash"))
     # Exact laws of the six-state model. Scaling every mass, stiffness (ks too), damping
     # and force by s leaves x and y unchanged: those elasticities sum to 0. Scaling the
     # forces and the free play by s scales x and y by s (the default friction width
