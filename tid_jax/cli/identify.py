@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from .. import __version__, plot
+from .._design import PARAMETER_UNITS
 from .._device import Motion
 from .._identify import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
 from .._io import write_csv, write_json, write_toml
@@ -24,8 +25,6 @@ RECORD_COLUMNS = ("time", "displacement", "force")
 OPTIONAL_COLUMN = "record"
 IDENTIFY_COLUMNS = ("record", "time_s", "displacement_m", "velocity_m_per_s", "force_N",
                     "fitted_force_N", "residual_N")
-UNITS = {"inertance": "kg", "friction_force": "N", "parasitic_damping": "N s/m",
-         "series_stiffness": "N/m", "backlash": "m", "terminal_mass": "kg"}
 # what `tid-jax retune --config` takes of the device (the TIDSystem's fields): the rigid
 # device's terms, which the steady-state solvers model
 SYSTEM_KEYS = ("inertance", "friction_force", "parasitic_damping")
@@ -148,7 +147,7 @@ def _run_identify(args) -> int:
     if left_out:
         comment += ("\nNot carried over (to design with them, add them with the device's "
                     "terminal_mass, which the records do not identify): "
-                    + ", ".join(f"{n} = {estimates[n]:.6g} {UNITS[n]}" for n in left_out))
+                    + ", ".join(f"{n} = {estimates[n]:.6g} {PARAMETER_UNITS[n]}" for n in left_out))
     write_toml(output.path("identify_config.toml"),
                {INERTER_TABLE: {key: estimates[key] for key in SYSTEM_KEYS
                                 if key in estimates}},
@@ -165,7 +164,7 @@ def _run_identify(args) -> int:
         "standard_errors": errors,
         "correlations": {a: {b: float(fit.correlations[i, j]) for j, b in enumerate(names)}
                          for i, a in enumerate(names)},
-        "units": {n: UNITS[n] for n in names},
+        "units": {n: PARAMETER_UNITS[n] for n in names},
         "converged": bool(fit.converged),
         "least_squares_steps": int(fit.steps),
         "comparison": compared,
@@ -215,7 +214,7 @@ COMPARISON_TABLE = (
 def _table(names, estimates, errors, compared, labels, fit) -> str:
     """The estimates, the comparison of the nested models and the residuals."""
     text = table(ESTIMATES_TABLE, [
-        dict(parameter=n, estimate=estimates[n], standard_error=errors[n], unit=UNITS[n])
+        dict(parameter=n, estimate=estimates[n], standard_error=errors[n], unit=PARAMETER_UNITS[n])
         for n in names])
     text += "\n\n" + table(COMPARISON_TABLE, [dict(row, first=i == 0)
                                                for i, row in enumerate(compared)])
