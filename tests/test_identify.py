@@ -62,6 +62,20 @@ def test_paper_device_is_recovered():
         pytest.approx(1.0)
 
 
+def test_a_known_terminal_mass_is_held_and_separated_from_the_inertance():
+    # A rigid device's terminal mass moves with the inertance: the records see b + mt.
+    device = dict(PAPER_DEVICE, terminal_mass=2.0)
+    records = _records(device)
+    lumped = tj.identify_inerter(records, model="ideal")
+    held = tj.identify_inerter(records, model="ideal", terminal_mass=2.0)
+    assert bool(lumped.converged) and bool(held.converged)
+    assert float(lumped.estimates[0]) == pytest.approx(77.0, rel=0.01)
+    _assert_recovered(held, PAPER_DEVICE)
+    assert held.device.terminal_mass == 2.0 and lumped.device.terminal_mass == 0.0
+    with pytest.raises(ValueError, match="terminal_mass must be finite and non-negative"):
+        tj.identify_inerter(records, terminal_mass=-1.0)
+
+
 def test_parasitic_damping_is_recovered_and_supported():
     device = dict(PAPER_DEVICE, parasitic_damping=300.0)
     fit = tj.identify_inerter(_records(device), model="damped")
@@ -182,3 +196,29 @@ def test_backlash_is_recovered_where_the_compliant_model_fails():
     rms = np.asarray(fit.comparison.rms)
     assert rms[2] > 5 * noise and rms[3] < 1.1 * noise
     assert bool(fit.comparison.supported[3]) and float(fit.comparison.delta_bic[3]) < -10
+
+
+def test_cli_carries_a_compliant_device_with_its_terminal_mass_to_retune(tmp_path):
+    device = dict(COMPLIANT_DEVICE, terminal_mass=2.0)
+    path = tmp_path / "records.csv"
+    _write_records(path, synthetic_records(noise=NOISE, seed=0, loaded=True, **device))
+    status, _, stderr = run(["identify", path, "--model", "compliant", "--terminal-mass", "2",
+                             "--out", tmp_path / "out", "--quiet"])
+    assert status == 0, stderr
+    data = json.loads((tmp_path / "out" / "identify.json").read_text())
+    for name, value in data["parameters"].items():
+        assert abs(value - device[name]) < 3 * data["standard_errors"][name], name
+    config = tmp_path / "out" / "identify_config.toml"
+    with open(config, "rb") as file:
+        saved = tomllib.load(file)["inerter"]
+    assert set(saved) == {"inertance", "friction_force", "parasitic_damping",
+                          "series_stiffness", "terminal_mass"}
+    args = type("Args", (), {key: None for key in INPUT_KEYS})()
+    args.config = str(config)
+    system = _system(_inputs(args))
+    assert system.compliant and float(system.terminal_mass) == 2.0
+    assert float(system.series_stiffness) == pytest.approx(saved["series_stiffness"])
+    # a terminal mass that is no mass is refused before anything is read or fitted
+    status, _, stderr = run(["identify", path, "--terminal-mass", "-1", "--out",
+                             tmp_path / "bad"])
+    assert status == 2 and "--terminal-mass must be a non-negative" in stderr

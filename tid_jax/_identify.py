@@ -30,7 +30,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._cache import compiled
-from ._checks import check_precision, choice, integer
+from ._checks import check_precision, choice, integer, real_scalar
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
@@ -96,7 +96,8 @@ class ModelComparison(eqx.Module):
 class InerterFit(eqx.Module):
     """A device identified from records: `model`, the fitted `parameters` (names of
     `InerterDevice` fields) with their `estimates`, `standard_errors` and `correlations`
-    (SI units), the `device` (the estimates, other fields at their defaults), the
+    (SI units), the `device` (the estimates and the terminal mass held, other fields at
+    their defaults), the
     residual RMS per record (N), the fitted force of each record (N), whether the least
     squares converged (and every integration succeeded), its steps, and the comparison of
     the nested models up to this one."""
@@ -131,6 +132,7 @@ class _Scales(eqx.Module):
 
     parameters: tuple[str, ...] = eqx.field(static=True)
     scales: Float[Array, " parameters"]
+    terminal_mass: Float[Array, ""]  # kg, known and held
 
     def device(self, x) -> InerterDevice:
         values = {}
@@ -141,7 +143,7 @@ class _Scales(eqx.Module):
                 values[name] = self.scales[i] * jnp.abs(x[i])
             else:
                 values[name] = self.scales[i] * x[i]
-        return InerterDevice(**values)
+        return InerterDevice(**values, terminal_mass=self.terminal_mass)
 
     def values(self, x) -> Float[Array, " parameters"]:
         device = self.device(x)
@@ -200,7 +202,7 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
 
 def _linear_start(parameters, motions, forces, width):
     """Least-squares inertance, friction and damping of the rigid device (linear in
-    them), for the first models' start."""
+    them), for the first models' start; `forces` less the terminal mass's."""
     columns = {
         "inertance": lambda m: m.acceleration,
         "friction_force": lambda m: np.tanh(np.asarray(m.velocity) / width(m)),
@@ -227,7 +229,7 @@ _SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspa
 
 
 def _scanned_start(parameters, values, motions, forces, force_scale,
-                   settings: IdentifySettings, typical, stiffness_limit):
+                   settings: IdentifySettings, typical, stiffness_limit, terminal_mass):
     """`values` with the scanned terms (`_SCAN`) of the model at the best of their
     scanned starting values, tried together (a term fitted before also keeps its value
     as a candidate; no series stiffness above `stiffness_limit`), the others held."""
@@ -240,7 +242,8 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     # a series stiffness whose resonance the records cannot resolve is not tried
     candidates = [c[c <= stiffness_limit] if name == "series_stiffness" else c
                   for name, c in zip(scanned, candidates, strict=True)]
-    scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]))
+    scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]),
+                     terminal_mass)
     best, best_values = np.inf, values
     for point in itertools.product(*candidates):
         trial = values.copy()
@@ -253,17 +256,17 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
 
 
 def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical,
-         stiffness_limit):
+         stiffness_limit, terminal_mass):
     """Least squares for `model` from the parameter values `start` (a dict; where a
     term is missing from it, the scanned terms start from a scan)."""
     parameters = MODEL_PARAMETERS[model]
     values = np.array([start.get(name, typical[name]) for name in parameters])
     if any(name not in start for name in parameters):
         values = _scanned_start(parameters, values, motions, forces, force_scale, settings,
-                                typical, stiffness_limit)
+                                typical, stiffness_limit, terminal_mass)
     scales = np.array([abs(v) if v != 0 else typical[name] for name, v in
                        zip(parameters, values, strict=True)])
-    scales = _Scales(parameters, jnp.asarray(scales))
+    scales = _Scales(parameters, jnp.asarray(scales), terminal_mass)
     x0 = scales.unknowns(jnp.asarray(values))
     x, residual, jacobian, chain, ok, steps = _solve(x0, scales, motions, forces,
                                                      force_scale, settings)
@@ -284,7 +287,7 @@ def _covariance(jacobian, pieces, p):
     return inverse @ (jacobian.T @ (variance[:, None] * jacobian)) @ inverse
 
 
-def identify_inerter(records, *, model: str = "ideal",
+def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.0,
                      settings: IdentifySettings = IdentifySettings(),
                      progress: Callable[[str], None] | None = None) -> InerterFit:
     """Identify the inerter device from test records; the nested models before `model`
@@ -296,6 +299,11 @@ def identify_inerter(records, *, model: str = "ideal",
       measured force N).
     - `model`: one of `MODELS`: "ideal" (b, ff), "damped" (+ parasitic damping),
       "compliant" (+ series stiffness), "backlash" (+ free play).
+    - `terminal_mass`: the device's moving mass at its driven terminal, kg, known from
+      the device (weighed or from its drawings), held at this value in every model: the
+      records cannot tell it from the inertance (of a rigid device not at all), and a
+      compliant device's design needs it (`TIDSystem.terminal_mass`). With the default
+      0, the inertance of a rigid model includes it.
     - `settings`: `IdentifySettings`.
     - `progress`: if given, called with a line as each model is fitted.
 
@@ -303,6 +311,7 @@ def identify_inerter(records, *, model: str = "ideal",
     """
     check_precision()
     choice("model", model, MODELS)
+    real_scalar("terminal_mass", terminal_mass, "non-negative")
     integer("settings.max_steps", settings.max_steps, 1)
     records = _records(records)
     motions = [Motion.from_samples(r.time, r.displacement) for r in records]
@@ -311,12 +320,16 @@ def identify_inerter(records, *, model: str = "ideal",
     if peak_force == 0:
         raise ValueError("records: the force is zero throughout")
     force_scale = jnp.asarray(peak_force)  # an argument of the compiled programs, not a key
+    held_mass = jnp.asarray(float(terminal_mass))
+    # the forces less the terminal mass's, to which the rigid models' starts are linear
+    mechanism_forces = [f - held_mass * m.acceleration
+                        for f, m in zip(forces, motions, strict=True)]
     width = lambda m: float(friction_width(m, settings.force))
     # typical sizes: the starting values of terms fitted afresh, and the scales of terms
     # whose start is zero
     omega_max = max(math.sqrt(float(np.max(np.abs(m.acceleration)))
                               / float(np.max(np.abs(m.displacement)))) for m in motions)
-    b0, ff0 = _linear_start(MODEL_PARAMETERS["ideal"], motions, forces, width)
+    b0, ff0 = _linear_start(MODEL_PARAMETERS["ideal"], motions, mechanism_forces, width)
     b0 = abs(b0) if b0 != 0 else peak_force / float(np.max(np.abs(motions[0].acceleration)))
     typical = {
         "inertance": b0,
@@ -335,10 +348,11 @@ def identify_inerter(records, *, model: str = "ideal",
     for name in MODELS[: MODELS.index(model) + 1]:
         parameters = MODEL_PARAMETERS[name]
         if name in ("ideal", "damped"):
-            start = dict(zip(parameters, _linear_start(parameters, motions, forces, width),
-                             strict=True))
+            start = dict(zip(parameters, _linear_start(parameters, motions, mechanism_forces,
+                                                       width), strict=True))
         scales, x, residual, jacobian, chain, ok, steps = _fit(
-            name, start, motions, forces, force_scale, settings, typical, stiffness_limit)
+            name, start, motions, forces, force_scale, settings, typical, stiffness_limit,
+            held_mass)
         values = np.asarray(scales.values(x))
         start = dict(zip(parameters, values, strict=True))
         rss = float(np.sum(residual**2))
@@ -372,7 +386,8 @@ def identify_inerter(records, *, model: str = "ideal",
         model=model,
         parameters=MODEL_PARAMETERS[model],
         device=InerterDevice(**dict(zip(MODEL_PARAMETERS[model],
-                                        (float(v) for v in last["values"]), strict=True))),
+                                        (float(v) for v in last["values"]), strict=True)),
+                             terminal_mass=float(terminal_mass)),
         estimates=jnp.asarray(last["values"]),
         standard_errors=jnp.asarray(last["errors"]),
         correlations=jnp.asarray(last["correlations"]),

@@ -26,8 +26,10 @@ OPTIONAL_COLUMN = "record"
 IDENTIFY_COLUMNS = ("record", "time_s", "displacement_m", "velocity_m_per_s", "force_N",
                     "fitted_force_N", "residual_N")
 # what `tid-jax retune --config` takes of the device (the TIDSystem's fields): the rigid
-# device's terms, which the steady-state solvers model
-SYSTEM_KEYS = ("inertance", "friction_force", "parasitic_damping")
+# device's terms, and with the terminal mass that a compliant device's node needs (given,
+# not identified) its series stiffness and backlash
+RIGID_KEYS = ("inertance", "friction_force", "parasitic_damping")
+COMPLIANT_KEYS = ("series_stiffness", "backlash")
 
 
 def _add_identify_parser(subparsers) -> None:
@@ -50,6 +52,13 @@ def _add_identify_parser(subparsers) -> None:
         help="device model: ideal (inertance and friction, the paper's), damped "
         "(+ parasitic damping), compliant (+ series stiffness), backlash (+ free play); "
         "default ideal",
+    )
+    parser.add_argument(
+        "--terminal-mass", type=float, default=0.0, metavar="KG",
+        help="the device's moving mass at its driven terminal, kg, known from the device "
+        "(the records cannot tell it from the inertance): held in the fit, and with it a "
+        "compliant device's series stiffness and backlash go into identify_config.toml "
+        "(default 0: the inertance includes it, and the config carries the rigid terms)",
     )
     _add_output_arguments(parser)
 
@@ -113,13 +122,17 @@ def _read_records(path: str) -> list[InerterRecord]:
 
 
 def _run_identify(args) -> int:
+    if not (math.isfinite(args.terminal_mass) and args.terminal_mass >= 0):
+        raise CLIError(f"--terminal-mass must be a non-negative number of kg, got "
+                       f"{args.terminal_mass:g}")
     records = _read_records(args.records)
     output = _Output(args)
     output.say(f"identifying the {args.model} model from {len(records)} record(s), "
                f"{sum(r.time.size for r in records)} samples")
     models = MODELS[: MODELS.index(args.model) + 1]
     with output.steps(len(models)) as step:
-        fit = identify_inerter(records, model=args.model, progress=step)
+        fit = identify_inerter(records, model=args.model, terminal_mass=args.terminal_mass,
+                               progress=step)
 
     names = list(fit.parameters)
     estimates = {n: float(v) for n, v in zip(names, fit.estimates, strict=True)}
@@ -141,23 +154,23 @@ def _run_identify(args) -> int:
                                  title=f"inerter identified, {args.model} model"),
         output.path("identify.png"),
     )
-    left_out = [n for n in names if n not in SYSTEM_KEYS]
+    device = _config_device(estimates, args.terminal_mass)
+    left_out = [n for n in names if n not in device]
     comment = (f"The inerter identified by `{PROG} identify` ({args.model} model, tid_jax "
                f"{__version__});\nuse it with {PROG} retune --config THIS_FILE")
     if left_out:
-        comment += ("\nNot carried over (to design with them, add them with the device's "
-                    "terminal_mass, which the records do not identify): "
+        comment += ("\nNot carried over (a compliant device's node needs the device's "
+                    "terminal mass, which the records do not identify: give it with "
+                    f"{PROG} identify --terminal-mass KG): "
                     + ", ".join(f"{n} = {estimates[n]:.6g} {PARAMETER_UNITS[n]}" for n in left_out))
-    write_toml(output.path("identify_config.toml"),
-               {INERTER_TABLE: {key: estimates[key] for key in SYSTEM_KEYS
-                                if key in estimates}},
-               comment=comment)
+    write_toml(output.path("identify_config.toml"), {INERTER_TABLE: device}, comment=comment)
     json_path = output.path("identify.json")
     data = {
         "command": f"{PROG} identify",
         "version": __version__,
         "records_file": args.records,
         "model": args.model,
+        "terminal_mass": args.terminal_mass,
         "records": [dict(name=label, samples=int(r.time.size), rms_N=float(rms))
                     for label, r, rms in zip(labels, records, fit.rms, strict=True)],
         "parameters": estimates,
@@ -173,6 +186,16 @@ def _run_identify(args) -> int:
     write_json(json_path, data)
 
     return output.finish(data, _table(names, estimates, errors, compared, labels, fit))
+
+
+def _config_device(estimates: dict, terminal_mass: float) -> dict:
+    """The device as `tid-jax retune --config` takes it: the rigid terms identified, and
+    with a terminal mass the compliant ones and the terminal mass itself."""
+    keys = RIGID_KEYS + (COMPLIANT_KEYS if terminal_mass > 0 else ())
+    device = {key: estimates[key] for key in keys if key in estimates}
+    if terminal_mass > 0:
+        device["terminal_mass"] = terminal_mass
+    return device
 
 
 def _samples(labels, records, fit):
