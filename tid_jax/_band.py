@@ -91,28 +91,61 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
     can have corners, where the highest of the terminal's excursions within a period
     changes, which Newton steps on its slope would miss). NaN where a steady state in the
     band, or of a stencil, did not converge."""
+    omegas, states, converged, index, centre, valid, lower, upper, interior = _selection(
+        response, systems.host_stiffness)
+    converged = np.array(converged)
+
+    def solve(at, warm):
+        solved = lane_response(systems, response.amplitudes, at.reshape(at.shape[0], -1),
+                               settings, warm)
+        return (np.asarray(solved.x_max).reshape(at.shape),
+                np.all(np.asarray(solved.converged), axis=-1))
+
+    for step in range(PEAK_NEWTON_STEPS):
+        at, warm = _stencils(centre, interior, states, omegas, stencil_points(step))
+        values, ok = solve(at, warm)
+        converged &= ok
+        estimate, centre = _newton_steps(values, at, lower, upper, interior)
+    at, warm = _stencils(centre, interior, states, omegas, 1)
+    values, ok = solve(at, warm)
+    return _peaks_found(response, omegas, index, valid, centre, estimate, values[..., 0],
+                        converged & ok)
+
+
+@eqx.filter_jit
+def _selection(response: FrequencyResponse, host_stiffness):
+    """The grid's part of `response_peaks`, one program: the lanes' frequencies and scaled
+    states, whether every steady state converged, and the `REFINED_PEAKS` highest local
+    maxima of each lane with their brackets."""
     omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
-    states = scaled_states(response, systems.host_stiffness)
+    states = scaled_states(response, host_stiffness)
     converged = jnp.all(response.converged, axis=-1)
     # Selection only: an orbit that was not found makes the lane's peaks NaN below.
     grid = jnp.where(response.converged, response.x_max, 0.0)
     index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
     lower, upper, interior = jax.vmap(bracket)(index, omegas)
+    return omegas, states, converged, index, centre, valid, lower, upper, interior
 
-    def solve(at):
-        flat = at.reshape(at.shape[0], -1)
-        warm = jax.vmap(interpolated)(states, omegas, flat)
-        solved = lane_response(systems, response.amplitudes, flat, settings, warm)
-        return solved.x_max.reshape(at.shape), jnp.all(solved.converged, axis=-1)
 
-    for step in range(PEAK_NEWTON_STEPS):
-        at = jax.vmap(ft.partial(stencil, points=stencil_points(step)))(centre, interior)
-        values, ok = solve(at)
-        converged &= ok
-        estimate, centre = jax.vmap(newton_peak)(values, at, lower, upper, interior)
-    values, ok = solve(centre[..., None])
-    converged &= ok
-    peak = located_peak(estimate, values[..., 0])
+@eqx.filter_jit
+def _stencils(centre, interior, states, omegas, points: int):
+    """The stencils of `points` frequencies around each lane's peaks (lanes x peaks x
+    points; one point: the centres) and the grid's states interpolated to them (lanes x
+    frequencies of the stencils, flat)."""
+    at = jax.vmap(ft.partial(stencil, points=points))(centre, interior)
+    return at, jax.vmap(interpolated)(states, omegas, at.reshape(at.shape[0], -1))
+
+
+_newton_steps = eqx.filter_jit(jax.vmap(newton_peak))
+
+
+@eqx.filter_jit
+def _peaks_found(response: FrequencyResponse, omegas, index, valid, centre, estimate, values,
+                 converged) -> Peaks:
+    """`Peaks` from the located maxima of `response_peaks` (the last Newton step's
+    `estimate`, the response `values` at their frequencies `centre`) and the grid's
+    stroke."""
+    peak = located_peak(estimate, values)
     best = jnp.argmax(jnp.where(valid, peak, -jnp.inf), axis=1)
 
     def take(a):

@@ -2,6 +2,7 @@ import math
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ._checks import check_grid, check_system
@@ -191,6 +192,7 @@ class Breakaway(eqx.Module):
 COMPLIANT_BREAKAWAY_GRID = 4001
 
 
+@eqx.filter_jit
 def _compliant_breakaway(system: TIDSystem, w) -> Breakaway:
     """`breakaway_amplitude` of a compliant device: the mechanism stuck, the terminal
     (mass mt) held by the series spring ks alone (its free play left out), and the force
@@ -219,9 +221,16 @@ def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     **Returns:** a `Breakaway`.
     """
     check_system(system)
-    w = jnp.atleast_1d(jnp.asarray(check_grid("omegas", omegas)))
+    w = np.atleast_1d(np.asarray(check_grid("omegas", omegas), dtype=float))
     if system.compliant:
         return _compliant_breakaway(system, w)
+    return _rigid_breakaway(system, w)
+
+
+@eqx.filter_jit
+def _rigid_breakaway(system: TIDSystem, w) -> Breakaway:
+    """`breakaway_amplitude` of a rigid device: the minimum over the band in closed
+    form."""
     mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
     stiffness = system.host_stiffness + k
     damping = system.host_damping + c

@@ -201,25 +201,32 @@ def _block_sizes(count: int, chunk: int):
             chunk, 1 << (size - 1).bit_length())
 
 
+def _on_host(tree):
+    """Every array of `tree` as a NumPy array: the batches are cut, padded and put together
+    on the host, so that no small program is compiled (or loaded) for each of those steps."""
+    return jax.tree.map(np.asarray, tree)
+
+
 def _solve_blocks(settings, batch, warm=None) -> _Solutions:
-    """`_points` on the flat `batch = (omegas, amplitudes, systems)`, block by block: every
-    block is shot from the states `warm` if given (else from the linear state after a
-    transient), so that one compiled program serves every kind of call."""
+    """`_points` on the flat `batch = (omegas, amplitudes, systems)` (NumPy arrays), block
+    by block: every block is shot from the states `warm` if given (else from the linear
+    state after a transient), so that one compiled program serves every kind of call.
+    The solutions are NumPy arrays."""
     omegas = batch[0]
     count = omegas.shape[0]
-    use_warm = jnp.full(count, warm is not None)
+    use_warm = np.full(count, warm is not None)
     if warm is None:
-        warm = jnp.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
+        warm = np.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
     outs = []
     for start, stop, size in _block_sizes(count, settings.chunk):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
-        valid = jnp.asarray(np.arange(start, start + size) < stop)
+        valid = np.arange(start, start + size) < stop
         part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))
         out = sharded_batch(
             lambda b, w, u, v: _points(b[2], b[0], b[1], settings, w, v, u), *part, valid
         )
-        outs.append(jax.tree.map(lambda value, n=stop - start: value[:n], out))
-    return jax.tree.map(lambda *values: jnp.concatenate(values), *outs)
+        outs.append(jax.tree.map(lambda value, n=stop - start: np.asarray(value)[:n], out))
+    return jax.tree.map(lambda *values: np.concatenate(values), *outs)
 
 
 def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSettings,
@@ -230,11 +237,11 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     (e.g. the orbit of a nearby design). Points that do not converge are solved again,
     from the linear steady state, with each of `settings.fallbacks()` in turn until they
     do; the best attempt is kept. Each block of the batch is sharded over all JAX devices
-    (`sharded_batch`)."""
-    batch = (omegas, amplitudes, systems)
-    out = _solve_blocks(settings, batch, warm)
+    (`sharded_batch`). The solutions are NumPy arrays."""
+    batch = _on_host((omegas, amplitudes, systems))
+    out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     for fallback in settings.fallbacks():
-        failed = np.flatnonzero(~np.asarray(out.converged))
+        failed = np.flatnonzero(~out.converged)
         if not failed.size:
             break
         retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
@@ -244,11 +251,17 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
 
 def _keep_better(out: _Solutions, retry: _Solutions, points) -> _Solutions:
     """`out` with the results `retry` at its `points` where they converged and `out`'s did
-    not, or where their residual is smaller."""
-    better = np.asarray(retry.converged) & ~np.asarray(out.converged)[points]
-    better |= np.asarray(retry.residual) < np.asarray(out.residual)[points]
+    not, or where their residual is smaller (NumPy arrays)."""
+    better = retry.converged & ~out.converged[points]
+    better |= retry.residual < out.residual[points]
     chosen = points[better]
-    return jax.tree.map(lambda value, new: value.at[chosen].set(new[better]), out, retry)
+
+    def kept(value, new):
+        value = value.copy()
+        value[chosen] = new[better]
+        return value
+
+    return jax.tree.map(kept, out, retry)
 
 
 def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
@@ -258,15 +271,17 @@ def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
     `omegas` (one grid for every lane, or one row per lane), every lane in one batch;
     with `warm` (scaled states, lanes x frequencies), each steady state is shot from its
     state there."""
-    amplitudes, omegas = jnp.asarray(amplitudes), jnp.asarray(omegas)
+    amplitudes, omegas = np.asarray(amplitudes), np.asarray(omegas)
     shape = amplitudes.shape + omegas.shape[-1:]
-    flat = lambda a: jnp.broadcast_to(a, shape).reshape(-1)
-    lanes = jax.tree.map(lambda leaf: flat(leaf[:, None]), systems)
+    flat = lambda a: np.broadcast_to(a, shape).reshape(-1)
+    lanes = jax.tree.map(lambda leaf: flat(np.asarray(leaf)[:, None]), systems)
     if warm is not None:
-        warm = warm.reshape((-1,) + warm.shape[2:])
+        warm = np.asarray(warm).reshape((-1,) + warm.shape[2:])
     out = solve_points(lanes, flat(omegas), flat(amplitudes[:, None]), settings, warm)
-    out = jax.tree.map(lambda value: value.reshape(shape + value.shape[1:]), out)
-    return FrequencyResponse(omegas=omegas, amplitudes=amplitudes, **out.fields())
+    # (placed on the device as they are: `jnp.asarray` would compile a program per shape)
+    out = jax.tree.map(lambda value: jax.device_put(value.reshape(shape + value.shape[1:])), out)
+    return FrequencyResponse(omegas=jax.device_put(omegas),
+                             amplitudes=jax.device_put(amplitudes), **out.fields())
 
 
 def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "amps freqs 4"]:

@@ -409,9 +409,9 @@ def retune(
     check_system(system)
     check_steady_state_device(system, "retune")
     band = _band(system, omegas)
-    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), dtype=band.dtype)
+    amps = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(band.dtype)
     check_retune_options(max_steps, tol, retune_settings)
-    bands = jnp.broadcast_to(band, amps.shape + band.shape)
+    bands = np.broadcast_to(np.asarray(band), amps.shape + band.shape)
     result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
                              max_steps=max_steps, tol=tol, retune_settings=retune_settings,
                              progress=progress)
@@ -441,23 +441,14 @@ def optimal_tunings(
     frequencies `bands[i]`, every lane in one batch. `check_omegas` of the result is one
     check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
-    amps = jnp.asarray(amplitudes)
-    k_ref, c_ref = den_hartog_tuning(systems.host_mass, systems.host_stiffness, systems.inertance)
-    # Strongly typed, as every later design is: one program serves every stage.
-    k0 = jnp.asarray(systems.tid_stiffness, amps.dtype)
-    c0 = jnp.asarray(systems.tid_damping, amps.dtype)
-    # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
-    # variables and would never be left.
-    u = design_of_tuning(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
-    iterations = jnp.zeros(amps.shape, dtype=int)
+    amps = jax.device_put(np.asarray(amplitudes))
     sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
-    fine = _on_check_grid(bands, refinement)
+    k_ref, c_ref, k0, c0, u, hessian_inv = _initial_design(systems, amps)
+    iterations = np.zeros(amps.shape, dtype=int)
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
-    states = scaled_states(start, systems.host_stiffness)
-    orbits = (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
-              jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
-    hessian_inv = jnp.broadcast_to(jnp.eye(2, dtype=amps.dtype), amps.shape + (2, 2))
+    orbits = _initial_orbits(start, systems, k0, c0)
+    initial_states = orbits[1]
     for stage, sharpness in enumerate(sharpnesses, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = (tol if stage == len(sharpnesses)
@@ -472,35 +463,71 @@ def optimal_tunings(
         u, steps, ok, orbits, hessian_inv = sharded_batch(
             lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
             orbits, hessian_inv)
-        iterations = iterations + steps
+        iterations = iterations + np.asarray(steps)
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
-            f"{int(jnp.sum(ok))}/{amps.size} lanes converged, "
-            f"{int(jnp.max(steps))} iterations at most")
-    k, c = tuning_of_design(u.T, k_ref, c_ref)
-    # Both designs in one batch, every steady state shot from its design's orbits on the
-    # design grid (interpolated in between) and verified afresh.
-    _, final_states, _, _ = orbits
-    warm = _on_check_grid(jnp.concatenate([states, final_states]), refinement)
-    both_systems = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), systems,
-                                with_tuning(systems, k, c))
-    both = lane_response(both_systems, jnp.concatenate([amps, amps]),
-                         jnp.concatenate([fine, fine]), settings, warm)
+            f"{int(np.sum(ok))}/{amps.size} lanes converged, "
+            f"{int(np.max(steps))} iterations at most")
+    k, c, both_systems, both_amplitudes, fine, warm = _check_batch(
+        systems, amps, bands, u, k_ref, c_ref, initial_states, orbits[1], refinement)
+    both = lane_response(both_systems, both_amplitudes, fine, settings, warm)
     found = response_peaks(both_systems, both, settings)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref,
                              _below_breakaway(systems, amps, bands))
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
-        f"{amps.size} lanes: {int(jnp.sum(result.converged))}/{amps.size} ok")
+        f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
     return result
+
+
+@eqx.filter_jit
+def _initial_design(systems: TIDSystem, amplitudes):
+    """Den Hartog's tuning of each lane (the design variables' reference), the initial
+    tuning, its design variables and BFGS's first inverse Hessian (the identity)."""
+    k_ref, c_ref = den_hartog_tuning(systems.host_mass, systems.host_stiffness,
+                                     systems.inertance)
+    # Strongly typed, as every later design is: one program serves every stage.
+    k0 = jnp.asarray(systems.tid_stiffness, amplitudes.dtype)
+    c0 = jnp.asarray(systems.tid_damping, amplitudes.dtype)
+    # Start no lower than 5% of Den Hartog's damping: c = 0 is stationary in the design
+    # variables and would never be left.
+    u = design_of_tuning(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
+    eye = jnp.eye(2, dtype=amplitudes.dtype)
+    return k_ref, c_ref, k0, c0, u, jnp.broadcast_to(eye, amplitudes.shape + (2, 2))
+
+
+@eqx.filter_jit
+def _initial_orbits(start: FrequencyResponse, systems: TIDSystem, k0, c0):
+    """The first stage's warm start: the initial tuning, and per frequency its orbit's
+    scaled state, monodromy matrix and (zero) state derivatives."""
+    states = scaled_states(start, systems.host_stiffness)
+    return (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
+            jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
+
+
+@eqx.filter_jit
+def _check_batch(systems: TIDSystem, amplitudes, bands, u, k_ref, c_ref, initial_states,
+                 final_states, refinement: int):
+    """The retuned tuning (k, c) of the design variables `u`, and the check of the initial
+    and retuned designs as one batch of lanes: the systems, amplitudes and check grids,
+    every steady state shot from its design's orbits on the design grid (interpolated in
+    between)."""
+    k, c = tuning_of_design(u.T, k_ref, c_ref)
+    warm = _on_check_grid(jnp.concatenate([initial_states, final_states]), refinement)
+    both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), systems,
+                        with_tuning(systems, k, c))
+    fine = _on_check_grid(bands, refinement)
+    return (k, c, both, jnp.concatenate([amplitudes, amplitudes]),
+            jnp.concatenate([fine, fine]), warm)
 
 
 def _below_breakaway(systems: TIDSystem, amplitudes, bands):
     """Whether each lane's amplitude is below its system's smallest breakaway amplitude
     over its band (`breakaway_amplitude`): the inerter then never slips."""
     minimum = [
-        float(breakaway_amplitude(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
+        float(breakaway_amplitude(jax.tree.map(lambda a: np.asarray(a)[i], systems),
+                                  np.asarray(bands)[i]).minimum)
         for i in range(amplitudes.shape[0])
     ]
-    return jnp.asarray(np.asarray(amplitudes) < np.asarray(minimum))
+    return np.asarray(amplitudes) < np.asarray(minimum)
 
 
 @eqx.filter_jit
