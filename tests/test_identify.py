@@ -221,4 +221,4 @@ def test_cli_carries_a_compliant_device_with_its_terminal_mass_to_retune(tmp_pat
     # a terminal mass that is no mass is refused before anything is read or fitted
     status, _, stderr = run(["identify", path, "--terminal-mass", "-1", "--out",
                              tmp_path / "bad"])
-    assert status == 2 and "--terminal-mass must be a non-negative" in stderr
+    assert status == 2 and "terminal_mass must be finite and non-negative" in stderr

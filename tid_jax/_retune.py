@@ -34,6 +34,7 @@ from ._peaks import (
 )
 from ._response import (
     FrequencyResponse,
+    _on_host,
     batched,
     lane_response,
     point_response,
@@ -522,9 +523,9 @@ def _check_batch(systems: TIDSystem, amplitudes, bands, u, k_ref, c_ref, initial
 def _below_breakaway(systems: TIDSystem, amplitudes, bands):
     """Whether each lane's amplitude is below its system's smallest breakaway amplitude
     over its band (`breakaway_amplitude`): the inerter then never slips."""
+    systems, bands = _on_host((systems, bands))
     minimum = [
-        float(breakaway_amplitude(jax.tree.map(lambda a: np.asarray(a)[i], systems),
-                                  np.asarray(bands)[i]).minimum)
+        float(breakaway_amplitude(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
         for i in range(amplitudes.shape[0])
     ]
     return np.asarray(amplitudes) < np.asarray(minimum)

@@ -16,6 +16,7 @@ from ._common import (
     CLIError,
     Shown,
     _add_output_arguments,
+    _number,
     _Output,
     shown,
     table,
@@ -122,16 +123,14 @@ def _read_records(path: str) -> list[InerterRecord]:
 
 
 def _run_identify(args) -> int:
-    if not (math.isfinite(args.terminal_mass) and args.terminal_mass >= 0):
-        raise CLIError(f"--terminal-mass must be a non-negative number of kg, got "
-                       f"{args.terminal_mass:g}")
+    terminal_mass = _number("terminal_mass", args.terminal_mass, "non-negative")
     records = _read_records(args.records)
     output = _Output(args)
     output.say(f"identifying the {args.model} model from {len(records)} record(s), "
                f"{sum(r.time.size for r in records)} samples")
     models = MODELS[: MODELS.index(args.model) + 1]
     with output.steps(len(models)) as step:
-        fit = identify_inerter(records, model=args.model, terminal_mass=args.terminal_mass,
+        fit = identify_inerter(records, model=args.model, terminal_mass=terminal_mass,
                                progress=step)
 
     names = list(fit.parameters)
@@ -154,7 +153,7 @@ def _run_identify(args) -> int:
                                  title=f"inerter identified, {args.model} model"),
         output.path("identify.png"),
     )
-    device = _config_device(estimates, args.terminal_mass)
+    device = _config_device(estimates, terminal_mass)
     left_out = [n for n in names if n not in device]
     comment = (f"The inerter identified by `{PROG} identify` ({args.model} model, tid_jax "
                f"{__version__});\nuse it with {PROG} retune --config THIS_FILE")
@@ -170,7 +169,7 @@ def _run_identify(args) -> int:
         "version": __version__,
         "records_file": args.records,
         "model": args.model,
-        "terminal_mass": args.terminal_mass,
+        "terminal_mass": terminal_mass,
         "records": [dict(name=label, samples=int(r.time.size), rms_N=float(rms))
                     for label, r, rms in zip(labels, records, fit.rms, strict=True)],
         "parameters": estimates,
