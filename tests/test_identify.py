@@ -202,9 +202,10 @@ def test_cli_carries_a_compliant_device_with_its_terminal_mass_to_retune(tmp_pat
     device = dict(COMPLIANT_DEVICE, terminal_mass=2.0)
     path = tmp_path / "records.csv"
     _write_records(path, synthetic_records(noise=NOISE, seed=0, loaded=True, **device))
-    status, _, stderr = run(["identify", path, "--model", "compliant", "--terminal-mass", "2",
-                             "--out", tmp_path / "out", "--quiet"])
+    status, stdout, stderr = run(["identify", path, "--model", "compliant", "--terminal-mass",
+                                  "2", "--out", tmp_path / "out", "--quiet"])
     assert status == 0, stderr
+    assert "terminal_mass held at 2 kg" in stdout
     data = json.loads((tmp_path / "out" / "identify.json").read_text())
     for name, value in data["parameters"].items():
         assert abs(value - device[name]) < 3 * data["standard_errors"][name], name

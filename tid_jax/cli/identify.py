@@ -184,7 +184,8 @@ def _run_identify(args) -> int:
     }
     write_json(json_path, data)
 
-    return output.finish(data, _table(names, estimates, errors, compared, labels, fit))
+    return output.finish(data, _table(names, estimates, errors, compared, labels, fit,
+                                      terminal_mass))
 
 
 def _config_device(estimates: dict, terminal_mass: float) -> dict:
@@ -233,11 +234,14 @@ COMPARISON_TABLE = (
 )
 
 
-def _table(names, estimates, errors, compared, labels, fit) -> str:
-    """The estimates, the comparison of the nested models and the residuals."""
+def _table(names, estimates, errors, compared, labels, fit, terminal_mass) -> str:
+    """The estimates (and the terminal mass held, if any), the comparison of the nested
+    models and the residuals."""
     text = table(ESTIMATES_TABLE, [
         dict(parameter=n, estimate=estimates[n], standard_error=errors[n], unit=PARAMETER_UNITS[n])
         for n in names])
+    if terminal_mass > 0:
+        text += f"\nterminal_mass held at {terminal_mass:g} kg (given, not fitted)"
     text += "\n\n" + table(COMPARISON_TABLE, [dict(row, first=i == 0)
                                                for i, row in enumerate(compared)])
     text += "\n\n" + "\n".join(f"{label}: residual RMS {float(rms):.4g} N"
