@@ -15,13 +15,13 @@ from ._checks import check_grid, check_system
 from ._peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
+    STENCIL_POINTS,
     bracket,
     grid_peak,
     interpolated,
     located_peak,
     newton_peak,
     stencil,
-    stencil_points,
     top_peaks,
     true_peaks,
 )
@@ -101,8 +101,8 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
         return (np.asarray(solved.x_max).reshape(at.shape),
                 np.all(np.asarray(solved.converged), axis=-1))
 
-    for step in range(PEAK_NEWTON_STEPS):
-        at, warm = _stencils(centre, interior, states, omegas, stencil_points(step))
+    for _ in range(PEAK_NEWTON_STEPS):
+        at, warm = _stencils(centre, interior, states, omegas, STENCIL_POINTS)
         values, ok = solve(at, warm)
         converged &= ok
         estimate, centre = _newton_steps(values, at, lower, upper, interior)
@@ -242,8 +242,8 @@ def peak_response(
 def _peak_response(system, amplitude, omegas, host, settings):
     xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
     if host:
-        def solve(step, at):
-            del step
+        def solve(at, last):
+            del last
             z0 = interpolated(states, omegas, at)
             x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
                 system, amplitude, at, settings, z0)

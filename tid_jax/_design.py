@@ -17,7 +17,6 @@ from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
 from ._linear import den_hartog_tuning
 from ._peaks import (
-    PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
     grid_peak,
     interpolated,
@@ -129,9 +128,9 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     states = jax.lax.stop_gradient(states)
 
     def located(values):
-        def solve(step, at):
+        def solve(at, last):
             # Only the peak (the response at the last Newton iterate) is differentiated.
-            t = theta if step == PEAK_NEWTON_STEPS else jax.lax.stop_gradient(theta)
+            t = theta if last else jax.lax.stop_gradient(theta)
             x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
                 _changed_system(system, t, scale), t[-1], at, settings,
                 interpolated(states, omegas, at))

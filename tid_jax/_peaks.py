@@ -5,24 +5,20 @@ from jaxtyping import Array, Bool, Float, Int
 # The peak of a response over frequency is the maximum of a smooth function sampled on a
 # grid. A grid peak is refined by the parabola through the largest sample and its
 # neighbours; the true peak (the maximum in continuous frequency) by Newton steps on the
-# slope of the response, each from a stencil of frequencies PEAK_STEP (relative) apart
-# around the last estimate (the slope and curvature by central differences), and is the
-# response at the last iterate. The last step's stencil has five frequencies, so that the
-# slope's error is fourth order in the step, and the response at the iterate differs from
-# the peak by the square of the iterate's distance from it. Only that response needs
-# derivatives: those of the peak are the response's at its frequency (the envelope
-# theorem), so the stencils are solved without them.
+# slope of the response, each from a stencil of STENCIL_POINTS frequencies PEAK_STEP
+# (relative) apart around the last estimate (the slope and curvature by central
+# differences, the slope's error fourth order in the step), and is the response at the
+# last iterate, which differs from the peak by the square of the iterate's distance from
+# it. Only that response needs derivatives: those of the peak are the response's at its
+# frequency (the envelope theorem), so the stencils are solved without them. Every step
+# has the same stencil, so that a compiled program holds one copy of its solves (a loop).
 PEAK_STEP = 2e-3
+STENCIL_POINTS = 5
 # Newton steps from the grid's parabola vertex: each squares the relative distance to the
 # peak (in units of the peak's width). The peak's derivatives are first order in that
 # distance: after two steps they were 1e-3 off differences of re-located peaks on the
 # paper's system (21 frequencies), after three within 1e-4.
 PEAK_NEWTON_STEPS = 3
-
-
-def stencil_points(step: int) -> int:
-    """Frequencies in the stencil of Newton step `step`: three, and five for the last."""
-    return 5 if step == PEAK_NEWTON_STEPS - 1 else 3
 
 
 # Local maxima located in continuous frequency per response: the two resonance peaks of a
@@ -130,7 +126,7 @@ _DIFFERENCES = {
 
 
 def stencil(centre: Float[Array, " peaks"], interior: Bool[Array, " peaks"],
-            points: int = 3):
+            points: int = STENCIL_POINTS):
     """`points` (3 or 5) frequencies `PEAK_STEP` (relative) apart around each `centre`;
     the centre repeated where the peak is at a band end (not `interior`)."""
     step = jnp.where(interior, PEAK_STEP * centre, 0.0)
@@ -186,18 +182,21 @@ def true_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], s
                count: int):
     """The `count` highest local maxima of a response sampled as `values` on the grid
     `omegas` (`top_peaks`), each located in continuous frequency by `PEAK_NEWTON_STEPS`
-    Newton steps (`newton_peak`): `solve(step, at)` gives the response at the frequencies
-    `at` (peaks x points): for `step < PEAK_NEWTON_STEPS` the stencil of Newton step `step`
-    (`stencil_points(step)` points, no derivatives needed), for `step ==
-    PEAK_NEWTON_STEPS` the last iterate (one point: the peak, with derivatives). Returns
-    the grid indices, the peaks, their frequencies and which are local maxima (band ends
-    included)."""
+    Newton steps (`newton_peak`, a loop): `solve(at, last)` gives the response at the
+    frequencies `at` (peaks x points): for `last` False a step's stencil (no derivatives
+    needed), for `last` True the last iterate (one point: the peak, with derivatives).
+    Returns the grid indices, the peaks, their frequencies and which are local maxima
+    (band ends included)."""
     index, centre, valid = top_peaks(values, omegas, count)
     lower, upper, interior = bracket(index, omegas)
-    for step in range(PEAK_NEWTON_STEPS):
-        at = stencil(jax.lax.stop_gradient(centre), interior, stencil_points(step))
-        estimate, centre = newton_peak(solve(step, at), at, lower, upper, interior)
+
+    def step(_, carry):
+        at = stencil(jax.lax.stop_gradient(carry[1]), interior)
+        return newton_peak(solve(at, False), at, lower, upper, interior)
+
+    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre))
+    estimate, centre = jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
     # The frequency is a fixed point of the derivatives (the envelope theorem).
     centre = jax.lax.stop_gradient(centre)
-    peak = located_peak(estimate, solve(PEAK_NEWTON_STEPS, centre[:, None])[:, 0])
+    peak = located_peak(estimate, solve(centre[:, None], True)[:, 0])
     return index, peak, centre, valid

@@ -182,23 +182,21 @@ def batched(system: TIDSystem, count: int) -> TIDSystem:
                         system)
 
 
-# Batches are solved in blocks of at most BLOCK points, each padded to a power of two of at
-# least `SolverSettings.chunk` points (SMALL_BLOCK points for the smallest batches, which
-# would mostly integrate padding), so that batches of every size share a few compiled
-# programs.
+# Batches are solved in blocks of BLOCK points, the last one padded (padding costs next
+# to nothing: the work queue and the chunks of `map_batch` skip it), and the smallest
+# batches, which would mostly integrate padding, in one block of SMALL_BLOCK points: so
+# that batches of every size share two compiled programs.
 BLOCK = 512
 SMALL_BLOCK = 8
 
 
-def _block_sizes(count: int, chunk: int):
+def _block_sizes(count: int):
     """(start, stop, padded size) of the blocks of a batch of `count` points: as few as
     hold `BLOCK` points each, of equal sizes."""
     blocks = -(-count // BLOCK)
     for i in range(blocks):
         start, stop = i * count // blocks, (i + 1) * count // blocks
-        size = stop - start
-        yield start, stop, SMALL_BLOCK if size <= SMALL_BLOCK else max(
-            chunk, 1 << (size - 1).bit_length())
+        yield start, stop, SMALL_BLOCK if stop - start <= SMALL_BLOCK else BLOCK
 
 
 def _on_host(tree):
@@ -218,7 +216,7 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     if warm is None:
         warm = np.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
     outs = []
-    for start, stop, size in _block_sizes(count, settings.chunk):
+    for start, stop, size in _block_sizes(count):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = np.arange(start, start + size) < stop
         part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))

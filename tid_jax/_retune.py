@@ -29,7 +29,6 @@ from ._peaks import (
     newton_peak,
     smooth_log_peak,
     stencil,
-    stencil_points,
     top_peaks,
 )
 from ._response import (
@@ -260,10 +259,12 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
         nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
         return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
 
-    for step in range(PEAK_NEWTON_STEPS):
-        at = stencil(centre, interior, stencil_points(step))
-        _, values = on_stencil(settle, at)
-        estimate, centre = newton_peak(values, at, lower, upper, interior)
+    def newton_step(_, carry):
+        at = stencil(carry[1], interior)
+        return newton_peak(on_stencil(settle, at)[1], at, lower, upper, interior)
+
+    estimate, centre = jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, newton_step,
+                                         (jnp.full_like(centre, jnp.nan), centre))
 
     def full(omega, z0, monodromy):
         orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
