@@ -36,9 +36,8 @@ def main() -> None:
     start = time.perf_counter()
     # The optimum at every amplitude, all in one batch.
     best = tj.best_tunings(system, amplitudes, omegas=omegas)
-    results = []
-    for amplitude in amplitudes:
-        result = tj.sensitivities(system, amplitude, omegas=omegas, best=best)
+    results = tj.amplitude_sensitivities(system, amplitudes, omegas=omegas, best=best)
+    for amplitude, result in zip(amplitudes, results, strict=True):
         optimum = result.optimum
         print(
             f"A = {amplitude:6g} N: x/(A/K) {float(result.host_peak) * stiffness / amplitude:.3f}; "
@@ -48,7 +47,6 @@ def main() -> None:
             f"({time.perf_counter() - start:.0f} s)",
             flush=True,
         )
-        results.append(result)
 
     parameters = results[0].parameters
     header = [

@@ -106,6 +106,9 @@ from ._sensitivity import (
     Sensitivities as Sensitivities,
 )
 from ._sensitivity import (
+    amplitude_sensitivities as amplitude_sensitivities,
+)
+from ._sensitivity import (
     sensitivities as sensitivities,
 )
 from ._settings import SolverSettings as SolverSettings

@@ -393,29 +393,39 @@ class Evaluation(NamedTuple):
         return all(curves.converged for curves in self.centres())
 
 
-def evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> Evaluation:
-    """Curves at the design u and its stencil for every scenario (shooting from `z_inits`,
-    one state array per scenario), and the terms of the smooth maxima: each scenario's log
-    host peaks less its offset, and its log inerter peaks."""
-    designs = _stencil(u, central)
-    points = []
-    for scenario, z in zip(scenarios, z_inits, strict=True):
-        points += [
-            (ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z) for v in designs
-        ]
-    curves = ctx.evaluate(points)
-    n = len(designs)
-    stencils = [curves[i : i + n] for i in range(0, len(curves), n)]
-    host, stroke = [], []
-    for scenario, stencil in zip(scenarios, stencils, strict=True):
-        terms = coordinates(ctx, designs[0], stencil, "x")
-        host.append(terms._replace(values=terms.values - scenario.offset))
-        stroke.append(coordinates(ctx, designs[0], stencil, "y"))
+def evaluate_designs(ctx, designs, *, central=False) -> list[Evaluation]:
+    """An `Evaluation` at each of `designs`, `(u, scenarios, z_inits)`: the curves at the
+    design u and its stencil for every scenario (shooting from `z_inits`, one state array
+    per scenario) and the terms of the smooth maxima (each scenario's log host peaks less
+    its offset, and its log inerter peaks). Every point of every design is solved in one
+    batch."""
+    points, stencils = [], []
+    for u, scenarios, z_inits in designs:
+        us = _stencil(u, central)
+        stencils.append(us)
+        for scenario, z in zip(scenarios, z_inits, strict=True):
+            points += [(ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z)
+                       for v in us]
+    curves = iter(ctx.evaluate(points))
 
     def join(parts):
         return Terms(*(np.concatenate(field) for field in zip(*parts, strict=True)))
 
-    return Evaluation(designs[0], stencils, join(host), join(stroke))
+    evaluations = []
+    for (_, scenarios, _), us in zip(designs, stencils, strict=True):
+        per_scenario = [[next(curves) for _ in us] for _ in scenarios]
+        host, stroke = [], []
+        for scenario, stencil in zip(scenarios, per_scenario, strict=True):
+            terms = coordinates(ctx, us[0], stencil, "x")
+            host.append(terms._replace(values=terms.values - scenario.offset))
+            stroke.append(coordinates(ctx, us[0], stencil, "y"))
+        evaluations.append(Evaluation(us[0], per_scenario, join(host), join(stroke)))
+    return evaluations
+
+
+def evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> Evaluation:
+    """The `Evaluation` at the one design u (see `evaluate_designs`)."""
+    return evaluate_designs(ctx, [(u, scenarios, z_inits)], central=central)[0]
 
 
 def cold_start(ctx: Context, u, scenarios) -> list[np.ndarray]:

@@ -17,8 +17,9 @@ from ._design import (
     best_tunings,
     check_amplitude,
     check_best,
+    check_distinct,
     coordinates,
-    evaluate_design,
+    evaluate_designs,
     smooth_max,
 )
 from ._retune import RetuneSettings, check_retune_options
@@ -133,38 +134,51 @@ class Sensitivities(eqx.Module):
         }
 
 
-def _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness):
-    """The evaluation (central stencil) at the optimum of the smooth log peak of `retune`
-    (of its last stage's `sharpness`) near u, its smooth maximum, gradient and
-    derivatives: at most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0,
-    where the damping is at its bound)."""
-    final = evaluate_design(ctx, u, [scenario], [z_init], central=True)
-    model = Model(*smooth_max(final.host_terms, sharpness))
-    free = slice(0, 1) if at_bound else slice(0, 2)
+def _polished(ctx, starts, tol, sharpness):
+    """For each `(scenario, u, z_init, at_bound)` of `starts`, the evaluation (central
+    stencil) at the optimum of the smooth log peak of `retune` (of its last stage's
+    `sharpness`) near u, with its smooth maximum, gradient and derivatives (a `Model`): at
+    most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0, where the damping is
+    at its bound), each round's evaluations of every start in one batch."""
+    finals = evaluate_designs(ctx, [(u, [scenario], [z]) for scenario, u, z, _ in starts],
+                              central=True)
+    models = [Model(*smooth_max(final.host_terms, sharpness)) for final in finals]
+    moving = range(len(starts))
     for _ in range(_POLISH):
-        g, h = model.grad[free], model.curvature()[free, free]
-        if decrement(g, h) < tol:
-            break
-        step = np.zeros(2)
-        step[free] = trust_step(g, h, MAX_STEP)
-        trial = evaluate_design(ctx, final.u + step, [scenario],
-                                 [curves.states for curves in final.centres()], central=True)
-        trial_model = Model(*smooth_max(trial.host_terms, sharpness))
-        if not trial_model.value < model.value:
-            break
-        final, model = trial, trial_model
-    return final, model
+        steps = {}
+        for i in moving:
+            free = slice(0, 1) if starts[i][3] else slice(0, 2)
+            g, h = models[i].grad[free], models[i].curvature()[free, free]
+            if decrement(g, h) >= tol:
+                steps[i] = np.zeros(2)
+                steps[i][free] = trust_step(g, h, MAX_STEP)
+        trials = evaluate_designs(ctx, [
+            (finals[i].u + step, [starts[i][0]], [curves.states for curves in finals[i].centres()])
+            for i, step in steps.items()], central=True)
+        moving = []
+        for i, trial in zip(steps, trials, strict=True):
+            trial_model = Model(*smooth_max(trial.host_terms, sharpness))
+            if trial_model.value < models[i].value:
+                finals[i], models[i] = trial, trial_model
+                moving.append(i)
+    return finals, models
 
 
-def _optimum_sensitivities(ctx, scenario, theta, best: "BestTunings", index, tol, sharpness):
-    """`OptimumSensitivities` at the best tuning `best[index]`, polished (see `_polished`)
-    and differentiated through its stationarity condition: in (u0, u1), or where the
-    damping is at its bound, in u0 alone with dc*/dp = 0 (the bound stays active)."""
+def _optimum_start(ctx, scenario, best: "BestTunings", index):
+    """Where `_polished` starts from at the best tuning `best[index]`: `(scenario, u,
+    z_init, at_bound)`."""
     at_bound = bool(best.damping_at_bound[index])
     k, c = float(best.tid_stiffness[index]), float(best.tid_damping[index])
-    u = ctx.design(k, 0.0 if at_bound else c)
     z_init = ctx.cold_states(k, c, [scenario.amplitude], scenario.scale)[0]
-    final, model = _polished(ctx, scenario, u, z_init, at_bound, tol, sharpness)
+    return scenario, ctx.design(k, 0.0 if at_bound else c), z_init, at_bound
+
+
+def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, final, model,
+                           tol):
+    """`OptimumSensitivities` at the best tuning `best[index]`, polished (`final` and its
+    `model`, from `_polished`) and differentiated through its stationarity condition: in
+    (u0, u1), or where the damping is at its bound, in u0 alone with dc*/dp = 0 (the bound
+    stays active)."""
     u = final.u
     k, c = ctx.tuning(u)
     g, h_uu = model.grad, model.curvature()
@@ -268,29 +282,66 @@ def sensitivities(
 
     **Returns:** a `Sensitivities` (parameters in the order `parameters_of(system)`).
     """
+    amplitude = check_amplitude(amplitude)
+    return amplitude_sensitivities(
+        system, [amplitude], omegas=omegas, optimum=optimum, best=best, settings=settings,
+        max_steps=max_steps, tol=tol, retune_settings=retune_settings)[0]
+
+
+def amplitude_sensitivities(
+    system: TIDSystem,
+    amplitudes: ArrayLike,
+    *,
+    omegas: ArrayLike | None = None,
+    optimum: bool = True,
+    best: "BestTunings | None" = None,
+    settings: SolverSettings = SolverSettings(),
+    max_steps: int = 60,
+    tol: float = 1e-4,
+    retune_settings: RetuneSettings = RetuneSettings(),
+) -> list[Sensitivities]:
+    """`sensitivities` at each of the forcing `amplitudes` (N, distinct), the steady
+    states of every amplitude solved in the same batches (and, with `optimum=True` and no
+    `best`, the optimum of every amplitude found by one `best_tunings`). The other
+    arguments are those of `sensitivities`.
+
+    **Returns:** a list of `Sensitivities`, one per amplitude, in their order.
+    """
     check_system(system)
     check_steady_state_device(system, "sensitivities")
-    amplitude = check_amplitude(amplitude)
+    amplitudes = check_distinct("amplitudes", amplitudes)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
     check_retune_options(max_steps, tol, retune_settings)
     ctx = Context(system, band, settings, locate=True)
-    scenario = Scenario(amplitude, 1.0, 0.0)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
-    theta = ctx.theta(k, c, amplitude)
-    z_given = ctx.cold_states(k, c, [amplitude], 1.0)[0]
-    given = ctx.evaluate([(theta, 1.0, z_given)])[0]
-    log_host, d_log_host = given.top("x")
-    log_stroke, d_log_stroke = given.top("y")
-    optimal = None
+    thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
+    z_given = ctx.cold_states(k, c, amplitudes, 1.0)
+    given = ctx.evaluate([(theta, 1.0, z) for theta, z in zip(thetas, z_given, strict=True)])
+    optimal = [None] * amplitudes.size
     if optimum:
         if best is None:
-            best = best_tunings(system, [amplitude], omegas=band, settings=settings,
+            best = best_tunings(system, amplitudes, omegas=band, settings=settings,
                                 max_steps=max_steps, tol=tol, retune_settings=retune_settings)
-        index = _best_index(best, system, band, amplitude)
-        optimal = _optimum_sensitivities(ctx, scenario, theta, best, index, POLISH_TOL,
-                                         retune_settings.sharpness[-1])
+        indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
+        starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
+                  for amplitude, index in zip(amplitudes, indices, strict=True)]
+        finals, models = _polished(ctx, starts, POLISH_TOL, retune_settings.sharpness[-1])
+        optimal = [
+            _optimum_sensitivities(ctx, theta, best, index, start[3], final, model, POLISH_TOL)
+            for theta, index, start, final, model in zip(thetas, indices, starts, finals, models,
+                                                         strict=True)
+        ]
+    return [_sensitivities(ctx, theta, curves, optimal_i)
+            for theta, curves, optimal_i in zip(thetas, given, optimal, strict=True)]
+
+
+def _sensitivities(ctx, theta, given, optimal) -> Sensitivities:
+    """`Sensitivities` from the curves `given` at the parameters `theta` and the
+    `OptimumSensitivities` `optimal` (or None)."""
+    log_host, d_log_host = given.top("x")
+    log_stroke, d_log_stroke = given.top("y")
     host_peak, stroke_peak = np.exp(log_host), np.exp(log_stroke)
     return Sensitivities(
         parameters=ctx.parameters,

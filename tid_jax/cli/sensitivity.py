@@ -6,7 +6,7 @@ from .. import plot
 from .._design import PARAMETER_UNITS, best_tunings
 from .._io import write_json, write_toml
 from .._retune import RetuneSettings
-from .._sensitivity import elasticity_series, sensitivities
+from .._sensitivity import amplitude_sensitivities, elasticity_series
 from ._common import (
     Shown,
     _add_output_arguments,
@@ -93,17 +93,15 @@ def _run_sensitivity(args) -> int:
         f"{', with the retuned optimum' if optimum else ''}; {_describe(system)}"
     )
     best = None
-    results = []
     retune_steps = RetuneSettings().progress_steps() if optimum else 0
-    with output.steps(retune_steps + amplitudes.size) as step:
+    with output.steps(retune_steps + 1) as step:
         if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
             best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
                                 progress=step)
-        for i, amplitude in enumerate(amplitudes):
-            results.append(sensitivities(system, amplitude, omegas=omegas, optimum=optimum,
-                                         best=best, settings=settings))
-            step(f"amplitude {i + 1}/{amplitudes.size} (A = {amplitude:g} N) done")
+        results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
+                                          best=best, settings=settings)
+        step(f"sensitivities at {amplitudes.size} amplitude(s) done, all in one batch")
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
