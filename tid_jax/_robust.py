@@ -29,7 +29,7 @@ from ._design import (
 from ._peaks import (
     grid_peak,
 )
-from ._response import frequency_response
+from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
 from ._sqp import Model, minimise_stage, stationary
@@ -186,26 +186,32 @@ class TuningPerformance(eqx.Module):
     converged: Bool[Array, "scales amps"]
 
 
-def _scaled_system(system: TIDSystem, scale: float, k: float, c: float) -> TIDSystem:
-    return system.replace(
-        host_stiffness=float(system.host_stiffness) * scale**2, tid_stiffness=k, tid_damping=c
-    )
+def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings):
+    """Host and inerter peaks (m; on the grid, refined by parabolas, as the robust design
+    judges them) and convergence `[tunings, scales, amps]` of each tuning (k, c) of
+    `tunings`, over `omegas` (rad/s) times each scale: every steady state in one batch."""
+    tunings, scales, amplitudes = (np.asarray(a, dtype=float) for a in (tunings, scales,
+                                                                        amplitudes))
+    shape = (len(tunings), len(scales), len(amplitudes))
+    t, s, a = (g.reshape(-1) for g in np.meshgrid(np.arange(len(tunings)), scales, amplitudes,
+                                                   indexing="ij"))
+    lanes = batched(system, t.size)
+    lanes = eqx.tree_at(
+        lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping), lanes,
+        (float(system.host_stiffness) * s**2, tunings[t, 0], tunings[t, 1]))
+    grids = s[:, None] * np.asarray(omegas)[None]
+    response = lane_response(lanes, a, grids, settings)
+    on_grid = jax.vmap(grid_peak)
+    grids = jax.device_put(grids)
+    x = np.asarray(on_grid(response.x_max, grids)[0]).reshape(shape)
+    y = np.asarray(on_grid(response.y_max, grids)[0]).reshape(shape)
+    return x, y, np.all(np.asarray(response.converged), axis=-1).reshape(shape)
 
 
 def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings):
-    """Host and inerter peaks (m; on the grid, refined by parabolas, as the robust design
-    judges them) and convergence `[scales, amps]` of the tuning (k, c), over `omegas`
-    (rad/s) times each scale."""
-    x, y, ok = (np.zeros((len(scales), len(amplitudes))) for _ in range(3))
-    for i, scale in enumerate(scales):
-        grid = np.asarray(omegas) * float(scale)
-        response = frequency_response(_scaled_system(system, float(scale), k, c), grid,
-                                      np.asarray(amplitudes), settings=settings)
-        on_grid = jax.vmap(grid_peak, (0, None))
-        x[i] = on_grid(response.x_max, jnp.asarray(grid))[0]
-        y[i] = on_grid(response.y_max, jnp.asarray(grid))[0]
-        ok[i] = np.all(np.asarray(response.converged), axis=-1)
-    return x, y, ok.astype(bool)
+    """`_tuning_peaks` of the one tuning (k, c): `[scales, amps]`."""
+    return tuple(a[0] for a in _tuning_peaks(system, [(k, c)], amplitudes, scales, omegas,
+                                             settings))
 
 
 
@@ -312,10 +318,9 @@ def _robust_start(system, best: BestTunings, target, settings) -> tuple[float, f
         )
     )
     scores = []
-    for k, c in candidates:
-        x, y, _ = _peaks_per_scale(
-            system, k, c, np.asarray(best.amplitudes), scales, best.omegas, settings
-        )
+    xs, ys, _ = _tuning_peaks(system, candidates, np.asarray(best.amplitudes), scales,
+                              best.omegas, settings)
+    for x, y in zip(xs, ys, strict=True):
         worst = float(np.max(np.log(x / np.asarray(best.host_peak))))
         excess = float(np.log(np.max(y))) - target if target is not None else 0.0
         scores.append((max(excess, 0.0), worst))
