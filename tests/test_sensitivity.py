@@ -140,13 +140,14 @@ def test_optimum_at_the_damping_bound_and_at_3000_n(system):
     # On the default band. At 100 N the optimal damping is 0 (the friction damps enough):
     # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the
     # elasticities of c* are undefined; k* moves as re-optimised differences and the scaling
-    # laws say. At 3000 N, nearly linear, the optimum converges too.
+    # laws say. At 3000 N, nearly linear, the optimum converges too. Both amplitudes in
+    # one batch (`amplitude_sensitivities`), the optimum at the bound polished beside the
+    # free one.
     band = np.asarray(tj.default_omegas(system))
     amplitudes = [100.0, 3000.0]
     best = tj.best_tunings(system, amplitudes, omegas=band)
     assert bool(best.damping_at_bound[0, 0]) and not bool(best.damping_at_bound[0, 1])
-    low = tj.sensitivities(system, 100.0, omegas=band, best=best)
-    high = tj.sensitivities(system, 3000.0, omegas=band, best=best)
+    low, high = tj.amplitude_sensitivities(system, amplitudes, omegas=band, best=best)
     assert bool(high.optimum.converged) and not bool(high.optimum.damping_at_bound)
     assert np.all(np.isfinite(np.asarray(high.optimum.damping_elasticity)))
     optimum = low.optimum
@@ -203,6 +204,10 @@ def test_sensitivities_reject_bad_input(system):
         tj.sensitivities(system, 100.0, tol=-1.0)
     with pytest.raises(ValueError, match="omegas"):
         tj.sensitivities(system, 100.0, omegas=[1.0, 2.0])
+    with pytest.raises(ValueError, match="amplitudes must be distinct"):
+        tj.amplitude_sensitivities(system, [100.0, 100.0])
+    with pytest.raises(ValueError, match="amplitudes"):
+        tj.amplitude_sensitivities(system, [100.0, -1.0])
 
 
 # --- command line ----------------------------------------------------------------------
