@@ -178,24 +178,34 @@ def located_peak(estimate: Float[Array, " peaks"], value: Float[Array, " peaks"]
     return jnp.where(jnp.isfinite(estimate), value, estimate)
 
 
+def newton_iterates(solve, centre: Float[Array, " peaks"], interior: Bool[Array, " peaks"],
+                    lower, upper):
+    """`PEAK_NEWTON_STEPS` Newton steps (`newton_peak`, a loop) from the frequencies
+    `centre` towards the peaks, kept within [`lower`, `upper`]: `solve(at)` gives the
+    response at each step's `stencil` frequencies `at` (peaks x points; no derivatives
+    needed). Returns the last step's estimate of each peak and its frequency."""
+
+    def step(_, carry):
+        at = stencil(jax.lax.stop_gradient(carry[1]), interior)
+        return newton_peak(solve(at), at, lower, upper, interior)
+
+    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre))
+    return jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
+
+
 def true_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], solve,
                count: int):
     """The `count` highest local maxima of a response sampled as `values` on the grid
     `omegas` (`top_peaks`), each located in continuous frequency by `PEAK_NEWTON_STEPS`
-    Newton steps (`newton_peak`, a loop): `solve(at, last)` gives the response at the
+    Newton steps (`newton_iterates`): `solve(at, last)` gives the response at the
     frequencies `at` (peaks x points): for `last` False a step's stencil (no derivatives
     needed), for `last` True the last iterate (one point: the peak, with derivatives).
     Returns the grid indices, the peaks, their frequencies and which are local maxima
     (band ends included)."""
     index, centre, valid = top_peaks(values, omegas, count)
     lower, upper, interior = bracket(index, omegas)
-
-    def step(_, carry):
-        at = stencil(jax.lax.stop_gradient(carry[1]), interior)
-        return newton_peak(solve(at, False), at, lower, upper, interior)
-
-    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre))
-    estimate, centre = jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
+    estimate, centre = newton_iterates(lambda at: solve(at, False), centre, interior, lower,
+                                       upper)
     # The frequency is a fixed point of the derivatives (the envelope theorem).
     centre = jax.lax.stop_gradient(centre)
     peak = located_peak(estimate, solve(centre[:, None], True)[:, 0])

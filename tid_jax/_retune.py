@@ -21,14 +21,12 @@ from ._checks import (
 from ._dynamics import PARAMETERS, parameters
 from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._peaks import (
-    PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
     bracket,
     interpolated,
     located_peak,
-    newton_peak,
+    newton_iterates,
     smooth_log_peak,
-    stencil,
     top_peaks,
 )
 from ._response import (
@@ -259,12 +257,8 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
         nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
         return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
 
-    def newton_step(_, carry):
-        at = stencil(carry[1], interior)
-        return newton_peak(on_stencil(settle, at)[1], at, lower, upper, interior)
-
-    estimate, centre = jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, newton_step,
-                                         (jnp.full_like(centre, jnp.nan), centre))
+    estimate, centre = newton_iterates(lambda at: on_stencil(settle, at)[1], centre, interior,
+                                       lower, upper)
 
     def full(omega, z0, monodromy):
         orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,

@@ -193,14 +193,16 @@ def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings):
     tunings, scales, amplitudes = (np.asarray(a, dtype=float) for a in (tunings, scales,
                                                                         amplitudes))
     shape = (len(tunings), len(scales), len(amplitudes))
-    t, s, a = (g.reshape(-1) for g in np.meshgrid(np.arange(len(tunings)), scales, amplitudes,
-                                                   indexing="ij"))
-    lanes = batched(system, t.size)
+    lane_tuning, lane_scale, lane_amplitude = (
+        g.reshape(-1) for g in np.meshgrid(np.arange(len(tunings)), scales, amplitudes,
+                                           indexing="ij"))
     lanes = eqx.tree_at(
-        lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping), lanes,
-        (float(system.host_stiffness) * s**2, tunings[t, 0], tunings[t, 1]))
-    grids = s[:, None] * np.asarray(omegas)[None]
-    response = lane_response(lanes, a, grids, settings)
+        lambda lane: (lane.host_stiffness, lane.tid_stiffness, lane.tid_damping),
+        batched(system, lane_tuning.size),
+        (float(system.host_stiffness) * lane_scale**2, tunings[lane_tuning, 0],
+         tunings[lane_tuning, 1]))
+    grids = lane_scale[:, None] * np.asarray(omegas)[None]
+    response = lane_response(lanes, lane_amplitude, grids, settings)
     on_grid = jax.vmap(grid_peak)
     grids = jax.device_put(grids)
     x = np.asarray(on_grid(response.x_max, grids)[0]).reshape(shape)

@@ -152,6 +152,8 @@ def _polished(ctx, starts, tol, sharpness):
             if decrement(g, h) >= tol:
                 steps[i] = np.zeros(2)
                 steps[i][free] = trust_step(g, h, MAX_STEP)
+        if not steps:
+            break
         trials = evaluate_designs(ctx, [
             (finals[i].u + step, [starts[i][0]], [curves.states for curves in finals[i].centres()])
             for i, step in steps.items()], central=True)
