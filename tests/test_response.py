@@ -272,3 +272,55 @@ def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
     peaks = tj.peaks(system, [100.0], band, settings=settings)
     assert not bool(peaks.converged[0])
     assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))
+
+
+def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omegas, nonlinear):
+    # The batch's first Newton iterations integrate coarsely (`coarse_rtol`) until the
+    # residual is within `coarse_residual`: the orbits are those of a solve at rtol 1e-10
+    # to a periodicity residual of 1e-10 (x within 1e-5; y, which a stuck inerter makes
+    # small and weakly determined, within 1e-4 of the static displacement).
+    tight = tj.SolverSettings(rtol=1e-10, atol=1e-10, periodicity_tol=1e-10,
+                              max_newton_steps=30)
+    reference = tj.frequency_response(system, omegas, AMPLITUDES, settings=tight)
+    assert bool(jnp.all(reference.converged))
+    scale = np.asarray(AMPLITUDES)[:, None] / float(system.host_stiffness)
+    np.testing.assert_allclose(nonlinear.x_max, reference.x_max, rtol=1e-5)
+    np.testing.assert_allclose(nonlinear.y_max / scale, reference.y_max / scale, atol=1e-4)
+
+
+@pytest.mark.parametrize(("amplitude", "ratio"), [(100.0, 0.95), (200.0, 1.0), (1000.0, 1.1)])
+def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
+    # The monodromy matrix (and so the Floquet multipliers) belongs to the orbit returned,
+    # not to a coarse iterate near it: against central differences of the period map at
+    # the returned state, integrated at rtol 1e-12 (stick-slip at 100 and 200 N).
+    import jax
+
+    from tid_jax._dynamics import parameter_vector
+    from tid_jax._period import period_samples
+
+    omega = ratio * float(system.host_frequency)
+    response = tj.frequency_response(system, omega, amplitude)
+    assert bool(response.converged)
+    static = amplitude / float(system.host_stiffness)
+    z = np.asarray(response.state) / np.array([static, omega * static] * 2)
+    tight = tj.SolverSettings(rtol=1e-12, atol=1e-12, max_steps=65536)
+    p = parameter_vector(system, amplitude, omega)
+    end = jax.jit(jax.vmap(lambda z0: period_samples(z0, p, tight)[3]))
+    h = 1e-6 * max(1.0, np.max(np.abs(z)))
+    steps = h * np.eye(4)
+    fd = np.asarray(end(z + steps) - end(z - steps)).T / (2 * h)
+    np.testing.assert_allclose(np.asarray(response.monodromy), fd, rtol=1e-3,
+                               atol=1e-3 * np.max(np.abs(fd)))
+
+
+def test_coarse_settings():
+    settings = tj.SolverSettings(rtol=1e-8, atol=1e-9, coarse_rtol=1e-6)
+    coarse = settings.coarse()
+    assert (coarse.rtol, coarse.atol) == pytest.approx((1e-6, 1e-7))
+    # Never finer than the settings themselves, and off for the fallbacks.
+    assert tj.SolverSettings(rtol=1e-5).coarse().rtol == 1e-5
+    assert settings.without_coarse().coarse() == settings.without_coarse()
+    assert all(fallback.coarse() == fallback for fallback in settings.fallbacks())
+    for name in ("coarse_rtol", "coarse_residual"):
+        with pytest.raises(ValueError, match=name):
+            tj.SolverSettings(**{name: -1.0})

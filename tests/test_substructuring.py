@@ -102,10 +102,12 @@ def test_shapes_and_reference(predicted, whole):
     np.testing.assert_allclose(
         predicted.reference_y_max, np.broadcast_to(whole.y_max, (4, 3)), rtol=1e-6
     )
+    # (the errors are against the built-in reference, which agrees with the separate
+    # solve above to within the solver's tolerance)
     np.testing.assert_allclose(
         predicted.x_amplitude_error,
-        np.asarray(predicted.x_max) / np.asarray(whole.x_max) - 1,
-        atol=1e-9,
+        np.asarray(predicted.x_max) / np.asarray(predicted.reference_x_max) - 1,
+        atol=1e-12,
     )
 
 

@@ -17,7 +17,6 @@ from ._steady_state import (
     refined_peak,
     shoot_queue,
     solve_orbit,
-    verified_samples,
     y_peak,
 )
 from ._system import TIDSystem
@@ -122,32 +121,32 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
 @compiled
 def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
-    (one per point, its fields batched): Newton shooting on a work queue (`shoot_queue`,
+    (one per point, its fields batched): shooting on work queues (`shoot_queue`,
     `settings.chunk` lanes per device), from the linear steady state after
-    `settings.transient_periods` periods or, where `use_warm`, from the scaled states
-    `warm`; then one integration per orbit samples it and verifies its periodicity.
-    Points where `valid` is False (padding, after the valid ones) are skipped by the
-    queue."""
+    `settings.transient_periods` periods (integrated at `settings.coarse_rtol`) or, where
+    `use_warm`, from the scaled states `warm`; the last Newton iteration samples each
+    orbit and verifies its periodicity. Points where `valid` is False (padding) are
+    skipped."""
     settings = settings.for_system(systems)
     p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
 
     def start(q, z, warm_start):
         z = jnp.where(warm_start, z, linear_initial_state(q, settings.compliant))
-        return transient(z, q, settings, jnp.where(warm_start, 0, settings.transient_periods))
+        return transient(z, q, settings.coarse(),
+                         jnp.where(warm_start, 0, settings.transient_periods))
 
     chunk = settings.chunk
     z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), chunk, valid)
     shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, chunk, v), z0, p, valid)
-    samples, residual = map_batch(
-        lambda batch: verified_samples(*batch, settings), (shots.state, p), chunk, valid
-    )
+    samples, residual = shots.samples, shots.residual
+    monodromy = shots.monodromy
     static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * (settings.states // 2), axis=-1)
     peak = jax.vmap(refined_peak)
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
-    multipliers = jnp.linalg.eigvals(shots.monodromy)
+    multipliers = jnp.linalg.eigvals(monodromy)
     width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
         systems, amplitudes, omegas
     )
@@ -163,13 +162,13 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
         y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
-        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(shots.monodromy))),
+        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(monodromy))),
                        axis=-1) < 1,
         state=shots.state * units,
         residual=residual,
         newton_steps=shots.newton_steps,
         floquet_multipliers=multipliers,
-        monodromy=shots.monodromy,
+        monodromy=monodromy,
         stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
         transitions=transitions,
     )

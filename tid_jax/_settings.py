@@ -13,10 +13,22 @@ class SolverSettings(eqx.Module):
     - `implicit`: integrate with the implicit Kvaerno5 instead of the explicit Tsit5, for
       stiff problems (a narrow friction width against slow forcing).
     - `max_steps`: integration steps allowed per forcing period.
-    - `transient_periods`: periods integrated from the initial guess before shooting.
-    - `max_newton_steps`: Newton iterations allowed.
+    - `transient_periods`: periods integrated from the initial guess (the linear steady
+      state) before shooting; 0: Newton's iterations start from it.
+    - `max_newton_steps`: Newton iterations allowed (in a batch, as many in each of its
+      three stages below).
+    - `coarse_rtol`, `coarse_residual`: in a batch of steady states, the transient and
+      the Newton iterations integrate at rtol `coarse_rtol` (atol in proportion; never
+      more tightly than at `rtol`) until the periodicity residual is within
+      `coarse_residual` (scaled): far from the orbit, a coarse period map takes the
+      state as far per iteration at a fraction of the cost. Newton's iterations at
+      `rtol` follow until the residual is within `chord_residual`, and their last
+      monodromy matrix is the one reported.
+    - `chord_residual`: from there, chord iterations (the last Newton matrix held) take
+      the state to the orbit, each one integration without the variational equations,
+      which also samples the orbit and verifies its periodicity.
     - `periodicity_tol`: a point counts as converged only if |Phi_T(z0) - z0| is below this
-      (scaled), checked by a separate integration of the final orbit (smoothed friction;
+      (scaled), checked by the integration that samples the final orbit (smoothed friction;
       exact friction takes `exact_periodicity_tol`).
     - `samples`: points per period at which x and y are sampled; each peak is refined by a
       parabola through the three samples around it.
@@ -40,8 +52,11 @@ class SolverSettings(eqx.Module):
     rtol: float = 1e-8
     atol: float = 1e-8
     max_steps: int = 4096
-    transient_periods: int = 2
+    transient_periods: int = 0
     max_newton_steps: int = 10
+    coarse_rtol: float = 1e-6
+    coarse_residual: float = 1e-2
+    chord_residual: float = 1e-4
     periodicity_tol: float = 1e-6
     exact_periodicity_tol: float = 1e-10
     samples: int = 128
@@ -51,7 +66,8 @@ class SolverSettings(eqx.Module):
     chunk: int = 64
 
     def __check_init__(self):
-        for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol"):
+        for name in ("rtol", "atol", "periodicity_tol", "exact_periodicity_tol", "coarse_rtol",
+                     "coarse_residual", "chord_residual"):
             value = getattr(self, name)
             if not is_positive(value):
                 raise ValueError(f"SolverSettings.{name} must be a positive number, got {value!r}")
@@ -67,7 +83,7 @@ class SolverSettings(eqx.Module):
         long transient towards the attracting orbit, then more Newton iterations, first on
         integrations 100 times more accurate (Newton stalls where the integration error of
         the period map exceeds `periodicity_tol`), then with the implicit Kvaerno5 (stiff
-        friction makes an explicit integration run out of steps)."""
+        friction makes an explicit integration run out of steps); none coarse."""
         persistent = eqx.tree_at(
             lambda s: (s.transient_periods, s.max_newton_steps),
             self,
@@ -77,7 +93,19 @@ class SolverSettings(eqx.Module):
                                (self.rtol / 100, self.atol / 100))
         stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
                             (self.rtol / 10, self.atol / 10, True))
-        return accurate, stiff
+        return accurate.without_coarse(), stiff.without_coarse()
+
+    def coarse(self) -> "SolverSettings":
+        """These settings with the coarse integration tolerances (`coarse_rtol`, atol in
+        proportion), or the settings themselves where they are as coarse already."""
+        if self.coarse_rtol <= self.rtol:
+            return self
+        ratio = self.coarse_rtol / self.rtol
+        return eqx.tree_at(lambda s: (s.rtol, s.atol), self, (self.coarse_rtol, self.atol * ratio))
+
+    def without_coarse(self) -> "SolverSettings":
+        """These settings with every Newton iteration of a batch at `rtol`."""
+        return eqx.tree_at(lambda s: s.coarse_rtol, self, self.rtol)
 
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}

@@ -133,76 +133,180 @@ def _newton(z, p, settings: SolverSettings) -> _Newton:
 
 
 class Shots(eqx.Module):
-    """Newton shooting results for a batch of points (scaled units): the last iterate
-    evaluated, its monodromy matrix and residual, and the Newton iterations used. (The
-    last Newton update is not applied: the variational monodromy matrix is only as
-    accurate as the integration, and where the friction is steep an update from a point
-    already within the periodicity tolerance can leave it.)"""
+    """Shooting results for a batch of points (scaled units): the best iterate evaluated,
+    its samples over the period and residual |Phi_T(z) - z|, the monodromy matrix of the
+    last Newton iterate (within `SolverSettings.chord_residual` of the orbit) and the
+    period integrations used."""
 
     state: Float[Array, "points states"]
+    samples: "Samples"
     monodromy: Float[Array, "points states states"]
     residual: Float[Array, " points"]
     newton_steps: Int[Array, " points"]
 
 
-class _Queue(eqx.Module):
-    point: Int[Array, " slots"]  # the point each slot works on
-    z: Float[Array, "slots 4"]
+class _Lanes(eqx.Module):
+    point: Int[Array, " slots"]  # the point each lane works on
+    carry: object  # each lane's own state (a pytree with a leading axis of lanes)
     steps: Int[Array, " slots"]
     active: Bool[Array, " slots"]
-    next_point: Int[Array, ""]
-    shots: Shots
+    next_point: Int[Array, ""]  # position in `order` of the next point to take
+    out: object  # each point's record (a pytree with a leading axis of points)
+    out_steps: Int[Array, " points"]
+
+
+def _work_queue(start, step, data, order, count, slots: int, max_steps: int, out):
+    """Works through the points `order[:count]` on `slots` lanes: each lane starts a point
+    with `start(d)` (d: the point's entries of `data`, a pytree of per-point arrays) and
+    iterates `carry, done, record = step(carry, d)` until `done` or `max_steps` steps; the
+    point's last `record` is then written into `out` (and its steps into the returned
+    counts) and the lane takes the next point at once, so that no lane waits for the
+    slowest point (each iteration still runs all lanes together)."""
+    size = order.shape[0]
+    slots = min(slots, size)
+
+    def take(points):
+        return jax.tree.map(lambda a: a[points], data)
+
+    first = order[:slots]
+    lanes = _Lanes(
+        point=first,
+        carry=jax.vmap(start)(take(first)),
+        steps=jnp.zeros(slots, int),
+        active=jnp.arange(slots) < count,
+        next_point=jnp.minimum(slots, count),
+        out=out,
+        out_steps=jnp.zeros(size, int),
+    )
+
+    def body(lanes):
+        carry, done, record = jax.vmap(step)(lanes.carry, take(lanes.point))
+        steps = lanes.steps + 1
+        done = lanes.active & (done | (steps >= max_steps))
+        where = jnp.where(done, lanes.point, size)  # out of range: dropped
+        out = jax.tree.map(lambda o, r: o.at[where].set(r, mode="drop"), lanes.out, record)
+        position = lanes.next_point + jnp.cumsum(done) - 1
+        takes = done & (position < count)
+        point = jnp.where(takes, order[jnp.minimum(position, size - 1)], lanes.point)
+        fresh = jax.vmap(start)(take(point))
+
+        def pick(new, old):
+            return jnp.where(takes.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+
+        return _Lanes(
+            point=point,
+            carry=jax.tree.map(pick, fresh, carry),
+            steps=jnp.where(takes, 0, steps),
+            active=jnp.where(done, takes, lanes.active),
+            next_point=lanes.next_point + jnp.sum(done),
+            out=out,
+            out_steps=lanes.out_steps.at[where].set(steps, mode="drop"),
+        )
+
+    lanes = jax.lax.while_loop(lambda lanes: jnp.any(lanes.active), body, lanes)
+    return lanes.out, lanes.out_steps
+
+
+def _newton_phase(z0, p, settings: SolverSettings, order, count, slots, switch):
+    """Newton's iterations integrated with `settings` for the points `order[:count]`,
+    from `z0`, until the residual is within `switch`: each point's last evaluation
+    (`_Newton`, its update not applied) and the evaluations used."""
+
+    def step(z, d):
+        newton = _newton(z, d[1], settings)
+        return _limited(newton.z, newton.update), newton.residual <= switch, newton
+
+    size, n = z0.shape
+    out = _Newton(z0, jnp.zeros_like(z0), jnp.zeros((size, n, n), z0.dtype),
+                  jnp.full(size, jnp.inf, z0.dtype))
+    return _work_queue(lambda d: d[0], step, (z0, p), order, count, slots,
+                       settings.max_newton_steps, out)
+
+
+def _next_iterate(newton: _Newton, settings: SolverSettings):
+    """Where to go on from a Newton evaluation: its state if it has converged, else its
+    update applied."""
+    return jnp.where(newton.residual <= settings.periodicity_tol, newton.z,
+                     _limited(newton.z, newton.update))
+
+
+class _ChordLane(eqx.Module):
+    z: Float[Array, " states"]  # the next iterate
+    lu: tuple
+    best: Float[Array, " states"]  # the best iterate evaluated, its residual and samples
+    best_residual: Float[Array, ""]
+    best_samples: "Samples"
+    last_residual: Float[Array, ""]
+
+
+def _chord_phase(newton: _Newton, p, settings: SolverSettings, order, count, slots):
+    """Chord iterations with each point's last Newton matrix held, from where its Newton
+    iterations leave it (`_next_iterate`): each one integration without tangents, which
+    also samples the orbit and verifies it. They stop at the periodicity tolerance, or
+    once the residual falls by less than half. Each point's best iterate (`_ChordLane`)
+    and the integrations used."""
+    n = newton.z.shape[-1]
+    nan = jnp.full(settings.samples, jnp.nan, newton.z.dtype)
+    zero = jnp.zeros((), newton.z.dtype)
+    no_samples = Samples(nan, nan, nan, jnp.full(n, jnp.nan, newton.z.dtype), zero, zero)
+    inf = jnp.asarray(jnp.inf, newton.z.dtype)
+
+    def start(d):
+        last, _ = d
+        z = _next_iterate(last, settings)
+        lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(last.monodromy))
+        return _ChordLane(z, lu, z, inf, no_samples, inf)
+
+    def step(lane, d):
+        samples = Samples(*period_samples(lane.z, d[1], settings))
+        residual = _residual(samples, lane.z)
+        improved = residual < lane.best_residual
+
+        def keep(new, old):
+            return jnp.where(improved, new, old)
+
+        update = jax.scipy.linalg.lu_solve(
+            lane.lu, jnp.where(jnp.isfinite(residual), samples.z_end - lane.z, 0.0))
+        # (the first evaluation follows `last_residual` inf: it stops only if not finite)
+        done = (residual <= settings.periodicity_tol) | ~(residual < 0.5 * lane.last_residual)
+        lane = _ChordLane(
+            z=_limited(lane.z, update),
+            lu=lane.lu,
+            best=keep(lane.z, lane.best),
+            best_residual=jnp.minimum(residual, lane.best_residual),
+            best_samples=jax.tree.map(keep, samples, lane.best_samples),
+            last_residual=residual,
+        )
+        return lane, done, lane
+
+    out = jax.vmap(start)((newton, p))
+    return _work_queue(start, step, (newton, p), order, count, slots,
+                       settings.max_newton_steps, out)
 
 
 def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points params"],
                 settings: SolverSettings, slots: int,
                 valid: Bool[Array, " points"] | None = None) -> Shots:
-    """Newton shooting for every point (`z0[i]`, `p[i]`) on `slots` lanes that work through
-    the points as a queue: a lane whose point has converged (or run out of iterations)
-    takes the next point at once, so that no lane waits for the slowest point's Newton
-    iterations (each iteration still integrates all lanes together). Points where `valid`
-    is False, which must come after the valid ones, are skipped."""
+    """Periodic orbits at every point (`z0[i]`, `p[i]`), on `slots` lanes that work through
+    the points as queues (`_work_queue`), in three stages: Newton's iterations integrated
+    at the coarse `settings.coarse_rtol` until the residual is within
+    `settings.coarse_residual`; Newton's iterations at `settings.rtol` until it is within
+    `settings.chord_residual`; chord iterations with the last Newton matrix held, each
+    one integration without tangents that also samples the orbit and verifies it. The
+    best iterate evaluated is returned with its samples and residual, and the monodromy
+    matrix of the last Newton iterate. Points where `valid` is False are skipped."""
     size = z0.shape[0]
-    slots = min(slots, size)
-    count = size if valid is None else jnp.sum(valid)
-    inf = jnp.asarray(jnp.inf, z0.dtype)
-    start = _Queue(
-        point=jnp.arange(slots),
-        z=z0[:slots],
-        steps=jnp.zeros(slots, int),
-        active=jnp.arange(slots) < count,
-        next_point=jnp.minimum(slots, count),
-        shots=Shots(z0, jnp.zeros((size,) + z0.shape[-1:] * 2, z0.dtype), jnp.full(size, inf),
-                    jnp.zeros(size, int)),
-    )
-
-    def body(queue):
-        newton = jax.vmap(lambda z, q: _newton(z, q, settings))(queue.z, p[queue.point])
-        steps = queue.steps + 1
-        done = queue.active & ((newton.residual <= settings.periodicity_tol)
-                               | (steps >= settings.max_newton_steps))
-        where = jnp.where(done, queue.point, size)  # out of range: dropped
-        shots = Shots(
-            queue.shots.state.at[where].set(newton.z, mode="drop"),
-            queue.shots.monodromy.at[where].set(newton.monodromy, mode="drop"),
-            queue.shots.residual.at[where].set(newton.residual, mode="drop"),
-            queue.shots.newton_steps.at[where].set(steps, mode="drop"),
-        )
-        new_point = queue.next_point + jnp.cumsum(done) - 1
-        takes = done & (new_point < count)
-        point = jnp.where(takes, new_point, queue.point)
-        z = jnp.where(takes[:, None], z0[jnp.minimum(new_point, size - 1)],
-                      jax.vmap(_limited)(newton.z, newton.update))
-        return _Queue(
-            point=point,
-            z=z,
-            steps=jnp.where(takes, 0, steps),
-            active=jnp.where(done, takes, queue.active),
-            next_point=queue.next_point + jnp.sum(done),
-            shots=shots,
-        )
-
-    return jax.lax.while_loop(lambda queue: jnp.any(queue.active), body, start).shots
+    valid = jnp.ones(size, bool) if valid is None else valid
+    order = jnp.argsort(~valid, stable=True)
+    count = jnp.sum(valid)
+    coarse, coarse_steps = _newton_phase(z0, p, settings.coarse(), order, count, slots,
+                                         settings.coarse_residual)
+    z = jax.vmap(lambda last: _next_iterate(last, settings))(coarse)
+    newton, newton_steps = _newton_phase(z, p, settings, order, count, slots,
+                                         settings.chord_residual)
+    chord, chord_steps = _chord_phase(newton, p, settings, order, count, slots)
+    return Shots(chord.best, chord.best_samples, newton.monodromy, chord.best_residual,
+                 coarse_steps + newton_steps + chord_steps)
 
 
 def verified_samples(z: Float[Array, " states"], p: Float[Array, " params"],
