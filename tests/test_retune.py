@@ -193,15 +193,23 @@ def test_amplitude_below_breakaway_keeps_the_initial_tuning_and_says_so(system):
     # 15 N is below the paper system's breakaway amplitude over the band (22.8 N): the
     # inerter never slips, and a stiffer damper to ground only lowers the stuck peak
     # further, so the smoothed model has no TID optimum there.
+    # Such a lane is not optimised at all; the lanes beside it are retuned as on their own.
     coarse = np.linspace(0.8, 1.2, 7) * float(system.host_frequency)
     assert 15.0 < float(tj.breakaway_amplitude(system, coarse).minimum)
-    result = tj.retune(system, [15.0], omegas=coarse)
+    result = tj.retune(system, [15.0, 1000.0], omegas=coarse)
     assert int(result.status[0]) == 5 and not bool(result.converged[0])
     assert "below the breakaway amplitude" in result.status_messages()[0]
     assert float(result.tid_stiffness[0]) == float(system.tid_stiffness)
     assert float(result.tid_damping[0]) == float(system.tid_damping)
+    assert int(result.iterations[0]) == 0
     damper = system.replace(tid_damping=1.5 * float(system.tid_damping))
     assert float(tj.peaks(damper, [15.0], coarse).x_peak[0]) < 0.95 * float(result.x_peak[0])
+    alone = tj.retune(system, [1000.0], omegas=coarse)
+    assert int(result.status[1]) == int(alone.status[0])
+    assert int(result.iterations[1]) == int(alone.iterations[0])
+    for field in ("tid_stiffness", "tid_damping", "x_peak"):
+        np.testing.assert_allclose(getattr(result, field)[1], getattr(alone, field)[0],
+                                   rtol=1e-9)
 
 
 def test_bad_arguments(system):

@@ -378,8 +378,9 @@ def retune(
     orbits) on a grid `retune_settings.check_refinement` times finer; a design whose peak
     there is above the initial tuning's is replaced by the initial tuning (status
     `initial_kept`), as is the design at an amplitude below the initial tuning's breakaway
-    amplitude (`breakaway_amplitude`; status `stuck`): there the inerter never slips, and
-    the smoothed model's optimum would be an ever stiffer spring and damper to ground.
+    amplitude (`breakaway_amplitude`; status `stuck`, not optimised at all, 0
+    iterations): there the inerter never slips, and the smoothed model's optimum would be
+    an ever stiffer spring and damper to ground.
 
     **Arguments:**
 
@@ -445,6 +446,11 @@ def optimal_tunings(
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)
     initial_states = orbits[1]
+    # Below the breakaway amplitude the inerter never slips: those lanes keep the initial
+    # tuning (status `stuck`), and only the others are optimised.
+    stuck = _below_breakaway(systems, amps, bands)
+    moving = np.flatnonzero(~stuck)
+    ok = np.zeros(amps.shape, bool)
     for stage, sharpness in enumerate(sharpnesses, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = (tol if stage == len(sharpnesses)
@@ -456,19 +462,26 @@ def optimal_tunings(
             max_rejected_steps=retune_settings.max_rejected_steps,
             max_design_step=float(retune_settings.max_design_step),
         )
-        u, steps, ok, orbits, hessian_inv = sharded_batch(
-            lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
-            orbits, hessian_inv)
-        iterations = iterations + np.asarray(steps)
+        lanes = (systems, amps, bands, u, orbits, hessian_inv)
+        if moving.size < amps.size:
+            lanes = jax.tree.map(lambda a: np.asarray(a)[moving], lanes)
+        steps = np.zeros(moving.size, int)
+        if moving.size:
+            stage_out, steps, stage_ok = _stage_lanes(stage_run, *lanes)
+            stage_ok = np.asarray(stage_ok)
+            if moving.size < amps.size:
+                stage_out = _set_lanes((u, orbits, hessian_inv), moving, stage_out)
+                stage_ok = _set_lanes(ok, moving, stage_ok)
+            (u, orbits, hessian_inv), ok = stage_out, stage_ok
+        iterations[moving] += np.asarray(steps)
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
-            f"{int(np.max(steps))} iterations at most")
+            f"{int(np.max(steps, initial=0))} iterations at most")
     k, c, both_systems, both_amplitudes, fine, warm = _check_batch(
         systems, amps, bands, u, k_ref, c_ref, initial_states, orbits[1], refinement)
     both = lane_response(both_systems, both_amplitudes, fine, settings, warm)
     found = response_peaks(both_systems, both, settings)
-    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref,
-                             _below_breakaway(systems, amps, bands))
+    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
     return result
@@ -513,6 +526,27 @@ def _check_batch(systems: TIDSystem, amplitudes, bands, u, k_ref, c_ref, initial
     fine = _on_check_grid(bands, refinement)
     return (k, c, both, jnp.concatenate([amplitudes, amplitudes]),
             jnp.concatenate([fine, fine]), warm)
+
+
+def _stage_lanes(stage_run, systems, amps, bands, u, orbits, hessian_inv):
+    """One stage (`_optimise_stage`) on the lanes given: their designs, orbits and
+    inverse Hessians, then the iterations and success of each."""
+    u, steps, ok, orbits, hessian_inv = sharded_batch(
+        lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
+        orbits, hessian_inv)
+    return (u, orbits, hessian_inv), steps, ok
+
+
+def _set_lanes(values, lanes, new):
+    """`values` (arrays with a leading axis of lanes, or a pytree of them) as NumPy arrays,
+    with the entries at `lanes` replaced by `new`."""
+
+    def put(value, part):
+        value = np.array(value)
+        value[lanes] = np.asarray(part)
+        return value
+
+    return jax.tree.map(put, values, new)
 
 
 def _below_breakaway(systems: TIDSystem, amplitudes, bands):
