@@ -139,14 +139,13 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), chunk, valid)
     shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, chunk, v), z0, p, valid)
     samples, residual = shots.samples, shots.residual
-    monodromy = shots.monodromy
     static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * (settings.states // 2), axis=-1)
     peak = jax.vmap(refined_peak)
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
-    multipliers = jnp.linalg.eigvals(monodromy)
+    multipliers = jnp.linalg.eigvals(shots.monodromy)
     width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
         systems, amplitudes, omegas
     )
@@ -162,13 +161,13 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
         y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
-        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(monodromy))),
+        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(shots.monodromy))),
                        axis=-1) < 1,
         state=shots.state * units,
         residual=residual,
         newton_steps=shots.newton_steps,
         floquet_multipliers=multipliers,
-        monodromy=monodromy,
+        monodromy=shots.monodromy,
         stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
         transitions=transitions,
     )

@@ -462,17 +462,14 @@ def optimal_tunings(
             max_rejected_steps=retune_settings.max_rejected_steps,
             max_design_step=float(retune_settings.max_design_step),
         )
-        lanes = (systems, amps, bands, u, orbits, hessian_inv)
-        if moving.size < amps.size:
-            lanes = jax.tree.map(lambda a: np.asarray(a)[moving], lanes)
         steps = np.zeros(moving.size, int)
         if moving.size:
-            stage_out, steps, stage_ok = _stage_lanes(stage_run, *lanes)
-            stage_ok = np.asarray(stage_ok)
-            if moving.size < amps.size:
-                stage_out = _set_lanes((u, orbits, hessian_inv), moving, stage_out)
-                stage_ok = _set_lanes(ok, moving, stage_ok)
-            (u, orbits, hessian_inv), ok = stage_out, stage_ok
+            lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
+                                 (systems, amps, bands, u, orbits, hessian_inv))
+            new_u, steps, new_ok, new_orbits, new_hessian_inv = sharded_batch(
+                lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), *lanes)
+            u, orbits, hessian_inv, ok = _set_lanes(
+                (u, orbits, hessian_inv, ok), moving, (new_u, new_orbits, new_hessian_inv, new_ok))
         iterations[moving] += np.asarray(steps)
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
@@ -526,15 +523,6 @@ def _check_batch(systems: TIDSystem, amplitudes, bands, u, k_ref, c_ref, initial
     fine = _on_check_grid(bands, refinement)
     return (k, c, both, jnp.concatenate([amplitudes, amplitudes]),
             jnp.concatenate([fine, fine]), warm)
-
-
-def _stage_lanes(stage_run, systems, amps, bands, u, orbits, hessian_inv):
-    """One stage (`_optimise_stage`) on the lanes given: their designs, orbits and
-    inverse Hessians, then the iterations and success of each."""
-    u, steps, ok, orbits, hessian_inv = sharded_batch(
-        lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), systems, amps, bands, u,
-        orbits, hessian_inv)
-    return (u, orbits, hessian_inv), steps, ok
 
 
 def _set_lanes(values, lanes, new):

@@ -68,39 +68,73 @@ def _limited(z, update):
     return z + update * jnp.minimum(1.0, limit / jnp.maximum(size, jnp.finfo(z.dtype).tiny))
 
 
-def _chord(z0, p, settings: SolverSettings, monodromy):
-    """Chord iterations for z* = Phi_T(z*) with the fixed Jacobian `I - monodromy` (from a
-    nearby orbit): each costs one integration without tangents, which also samples x over
-    the period. Stops once the residual is within `settings.periodicity_tol` or after
-    `settings.max_newton_steps` iterations. Returns the last iterate while the residuals
-    fall, else the best one evaluated (`z0` if none is finite), and the x samples of the
-    best iterate evaluated."""
-    lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
+class _ChordLane(eqx.Module):
+    """The state of chord iterations at one point (`_chord_step`)."""
+
+    z: Float[Array, " states"]  # the next iterate
+    lu: tuple  # LU factors of the fixed Jacobian `I - monodromy`
+    best: Float[Array, " states"]  # the best iterate evaluated, its residual and samples
+    best_residual: Float[Array, ""]
+    best_samples: "Samples"
+    last_residual: Float[Array, ""]  # of the last iterate evaluated
+    improved: Bool[Array, ""]  # whether that residual was the best yet
+
+
+def _chord_lane(z0, monodromy, settings: SolverSettings) -> _ChordLane:
+    """Chord iterations about to start from `z0` with the monodromy matrix `monodromy` (of
+    a nearby orbit) held."""
+    nan = jnp.full(settings.samples, jnp.nan, z0.dtype)
+    zero = jnp.zeros((), z0.dtype)
     inf = jnp.asarray(jnp.inf, z0.dtype)
-    no_samples = jnp.full(settings.samples, jnp.nan, z0.dtype)
+    no_samples = Samples(nan, nan, nan, jnp.full(z0.shape, jnp.nan, z0.dtype), zero, zero)
+    lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
+    return _ChordLane(z0, lu, z0, inf, no_samples, inf, jnp.asarray(False))
+
+
+def _chord_step(lane: _ChordLane, p, settings: SolverSettings) -> _ChordLane:
+    """One chord iteration for z* = Phi_T(z*) with the fixed Jacobian of `lane`: one
+    integration without tangents, which also samples the orbit over the period. The next
+    iterate stays where the residual is within `settings.periodicity_tol` or not finite."""
+    samples = Samples(*period_samples(lane.z, p, settings))
+    residual = _residual(samples, lane.z)
+    improved = residual < lane.best_residual
+
+    def keep(new, old):
+        return jnp.where(improved, new, old)
+
+    ok = jnp.isfinite(residual)
+    update = jax.scipy.linalg.lu_solve(lane.lu, jnp.where(ok, samples.z_end - lane.z, 0.0))
+    stay = (residual <= settings.periodicity_tol) | ~ok
+    return _ChordLane(
+        z=jnp.where(stay, lane.z, _limited(lane.z, update)),
+        lu=lane.lu,
+        best=keep(lane.z, lane.best),
+        best_residual=jnp.minimum(residual, lane.best_residual),
+        best_samples=jax.tree.map(keep, samples, lane.best_samples),
+        last_residual=residual,
+        improved=improved,
+    )
+
+
+def _chord(z0, p, settings: SolverSettings, monodromy):
+    """Chord iterations (`_chord_step`) for z* = Phi_T(z*) with the fixed Jacobian
+    `I - monodromy` (from a nearby orbit). Stops once the residual is within
+    `settings.periodicity_tol` or after `settings.max_newton_steps` iterations. Returns
+    the last iterate while the residuals fall, else the best one evaluated (`z0` if none
+    is finite), and the x samples of the best iterate evaluated."""
 
     def cond(carry):
-        _, _, best_residual, _, _, steps = carry
-        return (best_residual > settings.periodicity_tol) & (steps < settings.max_newton_steps)
+        lane, steps = carry
+        return ((lane.best_residual > settings.periodicity_tol)
+                & (steps < settings.max_newton_steps))
 
     def body(carry):
-        z, best, best_residual, best_xs, _, steps = carry
-        xs, _, _, z_end, _, _ = period_samples(z, p, settings)
-        r = z_end - z
-        ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(z))
-        residual = jnp.where(ok, jnp.max(jnp.abs(r)), inf)
-        improved = residual < best_residual
-        best, best_residual = jnp.where(improved, z, best), jnp.minimum(residual, best_residual)
-        best_xs = jnp.where(improved, xs, best_xs)
-        converged = residual <= settings.periodicity_tol
-        step = jax.scipy.linalg.lu_solve(lu, jnp.where(ok, r, 0.0))
-        z_next = jnp.where(converged | ~ok, z, _limited(z, step))
-        return z_next, best, best_residual, best_xs, improved, steps + 1
+        lane, steps = carry
+        return _chord_step(lane, p, settings), steps + 1
 
-    z, best, _, best_xs, improved, _ = jax.lax.while_loop(
-        cond, body, (z0, z0, inf, no_samples, jnp.asarray(False), 0)
-    )
-    return jnp.where(improved & jnp.all(jnp.isfinite(z)), z, best), best_xs
+    lane, _ = jax.lax.while_loop(cond, body, (_chord_lane(z0, monodromy, settings), 0))
+    z = jnp.where(lane.improved & jnp.all(jnp.isfinite(lane.z)), lane.z, lane.best)
+    return z, lane.best_samples.xs
 
 
 def settled_state(z0, p, settings: SolverSettings, monodromy):
@@ -230,54 +264,23 @@ def _next_iterate(newton: _Newton, settings: SolverSettings):
                      _limited(newton.z, newton.update))
 
 
-class _ChordLane(eqx.Module):
-    z: Float[Array, " states"]  # the next iterate
-    lu: tuple
-    best: Float[Array, " states"]  # the best iterate evaluated, its residual and samples
-    best_residual: Float[Array, ""]
-    best_samples: "Samples"
-    last_residual: Float[Array, ""]
-
-
 def _chord_phase(newton: _Newton, p, settings: SolverSettings, order, count, slots):
-    """Chord iterations with each point's last Newton matrix held, from where its Newton
-    iterations leave it (`_next_iterate`): each one integration without tangents, which
-    also samples the orbit and verifies it. They stop at the periodicity tolerance, or
-    once the residual falls by less than half. Each point's best iterate (`_ChordLane`)
-    and the integrations used."""
-    n = newton.z.shape[-1]
-    nan = jnp.full(settings.samples, jnp.nan, newton.z.dtype)
-    zero = jnp.zeros((), newton.z.dtype)
-    no_samples = Samples(nan, nan, nan, jnp.full(n, jnp.nan, newton.z.dtype), zero, zero)
-    inf = jnp.asarray(jnp.inf, newton.z.dtype)
+    """Chord iterations (`_chord_step`) with each point's last Newton matrix held, from
+    where its Newton iterations leave it (`_next_iterate`), each one integration without
+    tangents that also samples the orbit and verifies it. They stop at the periodicity
+    tolerance, or once the residual falls by less than half. Each point's chord state
+    (`_ChordLane`, its best iterate) and the integrations used."""
 
     def start(d):
         last, _ = d
-        z = _next_iterate(last, settings)
-        lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(last.monodromy))
-        return _ChordLane(z, lu, z, inf, no_samples, inf)
+        return _chord_lane(_next_iterate(last, settings), last.monodromy, settings)
 
     def step(lane, d):
-        samples = Samples(*period_samples(lane.z, d[1], settings))
-        residual = _residual(samples, lane.z)
-        improved = residual < lane.best_residual
-
-        def keep(new, old):
-            return jnp.where(improved, new, old)
-
-        update = jax.scipy.linalg.lu_solve(
-            lane.lu, jnp.where(jnp.isfinite(residual), samples.z_end - lane.z, 0.0))
+        lane_next = _chord_step(lane, d[1], settings)
+        residual = lane_next.last_residual
         # (the first evaluation follows `last_residual` inf: it stops only if not finite)
         done = (residual <= settings.periodicity_tol) | ~(residual < 0.5 * lane.last_residual)
-        lane = _ChordLane(
-            z=_limited(lane.z, update),
-            lu=lane.lu,
-            best=keep(lane.z, lane.best),
-            best_residual=jnp.minimum(residual, lane.best_residual),
-            best_samples=jax.tree.map(keep, samples, lane.best_samples),
-            last_residual=residual,
-        )
-        return lane, done, lane
+        return lane_next, done, lane_next
 
     out = jax.vmap(start)((newton, p))
     return _work_queue(start, step, (newton, p), order, count, slots,
