@@ -1,3 +1,6 @@
+import math
+
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -311,6 +314,68 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
     fd = np.asarray(end(z + steps) - end(z - steps)).T / (2 * h)
     np.testing.assert_allclose(np.asarray(response.monodromy), fd, rtol=1e-3,
                                atol=1e-3 * np.max(np.abs(fd)))
+
+
+def _period_end(system, amplitude, omega, z, settings):
+    from tid_jax._dynamics import parameter_vector
+    from tid_jax._period import period_samples
+
+    settings = settings.for_system(system)
+    p = parameter_vector(system, amplitude, omega)
+    return np.asarray(period_samples(jnp.asarray(z), p, settings)[3])
+
+
+def _initial_state(system, amplitude, omega):
+    from tid_jax._dynamics import parameter_vector
+    from tid_jax._period import initial_state
+
+    p = parameter_vector(system, amplitude, omega)
+    return np.asarray(initial_state(p, system.compliant))
+
+
+@pytest.mark.parametrize("series_stiffness", [math.inf, 2e5])
+@pytest.mark.parametrize("ratio", [0.8, 1.0, 1.2])
+def test_initial_state_without_friction_is_the_periodic_orbit(system, series_stiffness, ratio):
+    # Without friction the equivalent linear system is the system itself: one period of
+    # the equations of motion, integrated tightly, returns the initial state.
+    free = tj.TIDSystem(1500.0, float(system.host_stiffness), float(system.host_damping),
+                        75.0, 0.0, float(system.tid_stiffness), float(system.tid_damping),
+                        1e-4, parasitic_damping=30.0, terminal_mass=2.0,
+                        series_stiffness=series_stiffness)
+    omega = ratio * float(system.host_frequency)
+    z = _initial_state(free, 200.0, omega)
+    assert z.shape == ((6,) if free.compliant else (4,))
+    tight = tj.SolverSettings(rtol=1e-12, atol=1e-12, max_steps=65536)
+    np.testing.assert_allclose(_period_end(free, 200.0, omega, z, tight), z, atol=1e-9)
+
+
+def test_initial_state_of_a_stuck_inerter_is_the_stuck_orbit(system):
+    # Friction above the holding force: the inerter stays still for the whole period of
+    # the exact Coulomb flow started from the initial state, which is periodic.
+    exact = tj.TIDSystem(1500.0, float(system.host_stiffness), float(system.host_damping),
+                         75.0, 20.0, float(system.tid_stiffness), float(system.tid_damping), 0.0)
+    omega = float(system.host_frequency)
+    z = _initial_state(exact, 10.0, omega)
+    assert z[2] == 0.0 and z[3] == 0.0
+    end = _period_end(exact, 10.0, omega, z, tj.SolverSettings())
+    np.testing.assert_allclose(end, z, atol=1e-10)
+
+
+@pytest.mark.parametrize(("amplitude", "ratio"), [(100.0, 1.0), (200.0, 0.95), (400.0, 1.05),
+                                                  (1000.0, 1.0)])
+def test_initial_state_of_a_slipping_inerter_is_near_its_orbit(system, amplitude, ratio):
+    # Where the inerter slips, the equivalent linear state (friction as the viscous
+    # damping that dissipates as much per period) starts nearer the steady state than the
+    # frictionless one does.
+    omega = ratio * float(system.host_frequency)
+    response = tj.frequency_response(system, omega, amplitude)
+    assert bool(response.converged)
+    static = amplitude / float(system.host_stiffness)
+    orbit = np.asarray(response.state) / np.array([static, omega * static] * 2)
+    free = eqx.tree_at(lambda s: s.friction_force, system, 0.0)
+    equivalent = np.max(np.abs(_initial_state(system, amplitude, omega) - orbit))
+    frictionless = np.max(np.abs(_initial_state(free, amplitude, omega) - orbit))
+    assert equivalent < 0.2 * frictionless
 
 
 def test_coarse_settings():

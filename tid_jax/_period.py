@@ -105,50 +105,69 @@ def samples_and_jacobian(z, p, settings, directions=()):
     return primal, tuple(t[..., :n] for t in tangents), tuple(t[..., n:] for t in tangents)
 
 
-def linear_initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
-    """Scaled state at phase 0 of the steady linear response: of the free (frictionless)
-    TID, or of the stuck one when the friction force exceeds the force needed to hold the
-    friction's body (the rigid device's terminal, a compliant device's mechanism) still.
-    Four states, or six for a `compliant` device."""
-    if compliant:
-        return _compliant_initial_state(p)
-    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, *_,
-     amplitude, omega) = p
-    jw = 1j * omega
-    spring = k + jw * c
-    terminal = spring / (spring + jw * parasitic - (inertance + terminal_mass) * omega**2)
-    free_x = stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
-    stuck_x = stiffness / (stiffness + k - mass * omega**2 + jw * (damping + c))
-    holding_force = jnp.abs(spring * stuck_x) * amplitude / stiffness
-    stuck = holding_force < friction
-    x_hat = jnp.where(stuck, stuck_x, free_x)
-    y_hat = jnp.where(stuck, 0.0, free_x * terminal)
-    # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
-    return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real])
-
-
-def _compliant_initial_state(p):
-    """`linear_initial_state` of a compliant device (backlash left out): the terminal's
-    dynamic stiffness to ground is that of the series spring and the mechanism in series,
-    or of the spring alone with the mechanism stuck."""
+def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
+    """Scaled state at phase 0 of the equivalent linear steady state: the friction
+    ff sgn(v) replaced by the viscous damping that dissipates as much over a period at the
+    amplitude it lets the friction's body (the rigid device's terminal, a compliant
+    device's mechanism) reach, 4 ff / (pi omega |V|) for a velocity amplitude |V| (the
+    describing function of dry friction), that amplitude found by bisection; the stuck
+    linear steady state where the friction force exceeds the force needed to hold the
+    body still. Four states, or six for a `compliant` device (backlash left out)."""
     (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, ks, _,
      _, amplitude, omega) = p
     jw = 1j * omega
     spring = k + jw * c
-    mechanism = jw * parasitic - inertance * omega**2
+    scale = amplitude / stiffness  # displacements in units of A / K
 
-    def host_and_terminal(device):
-        terminal = spring / (spring + device - terminal_mass * omega**2)  # Y / X
+    def response(friction_damping):
+        """Complex amplitudes (scaled) of x, y and the friction's body, with the friction
+        an extra viscous damping `friction_damping` on that body."""
+        body = jw * (parasitic + friction_damping)
+        if compliant:
+            mechanism = body - inertance * omega**2
+            device = ks * mechanism / (ks + mechanism)
+            terminal = spring / (spring + device - terminal_mass * omega**2)
+        else:
+            terminal = spring / (spring + body - (inertance + terminal_mass) * omega**2)
         x = stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
-        return x, x * terminal
+        y = x * terminal
+        q = y * ks / (ks + mechanism) if compliant else y
+        return x, y, q
 
-    free_x, free_y = host_and_terminal(ks * mechanism / (ks + mechanism))
-    stuck_x, stuck_y = host_and_terminal(ks)
-    stuck = jnp.abs(ks * stuck_y) * amplitude / stiffness < friction
-    x_hat = jnp.where(stuck, stuck_x, free_x)
-    y_hat = jnp.where(stuck, stuck_y, free_y)
-    q_hat = jnp.where(stuck, 0.0, free_y * ks / (ks + mechanism))
-    return jnp.stack([x_hat.imag, x_hat.real, y_hat.imag, y_hat.real, q_hat.imag, q_hat.real])
+    def equivalent_damping(log_amplitude):
+        return 4 * friction / (jnp.pi * omega * scale * jnp.exp(log_amplitude))
+
+    def slips_further(log_amplitude):
+        # whether the body moves more than assumed: the amplitude lies above
+        _, _, q = response(equivalent_damping(log_amplitude))
+        return jnp.log(jnp.abs(q)) > log_amplitude
+
+    def bisect(_, bounds):
+        low, high = bounds
+        middle = 0.5 * (low + high)
+        further = slips_further(middle)
+        return jnp.where(further, middle, low), jnp.where(further, high, middle)
+
+    # Friction only takes motion away: the frictionless amplitude bounds it from above.
+    high = jnp.log(jnp.abs(response(0.0)[2]))
+    low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
+    x, y, q = response(equivalent_damping(0.5 * (low + high)))
+    # Held still, the body feels the force of what joins it to the host.
+    if compliant:
+        stuck_terminal = spring / (spring + ks - terminal_mass * omega**2)
+        stuck_x = stiffness / (stiffness - mass * omega**2 + jw * damping
+                               + spring * (1 - stuck_terminal))
+        stuck_y = stuck_x * stuck_terminal
+        holding_force = jnp.abs(ks * stuck_y) * scale
+    else:
+        stuck_x = stiffness / (stiffness + spring - mass * omega**2 + jw * damping)
+        stuck_y = 0.0
+        holding_force = jnp.abs(spring * stuck_x) * scale
+    stuck = holding_force < friction
+    x, y = jnp.where(stuck, stuck_x, x), jnp.where(stuck, stuck_y, y)
+    # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
+    parts = [x, y] + ([jnp.where(stuck, 0.0, q)] if compliant else [])
+    return jnp.stack([part for z in parts for part in (z.imag, z.real)])
 
 
 def transient(z, p, settings: SolverSettings, periods=None):

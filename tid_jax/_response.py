@@ -9,7 +9,7 @@ from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
 from ._dynamics import parameters
-from ._period import linear_initial_state, transient
+from ._period import initial_state, transient
 from ._settings import SolverSettings
 from ._sharding import map_batch, map_parts, sharded_batch
 from ._steady_state import (
@@ -122,7 +122,7 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
 def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
     (one per point, its fields batched): shooting on work queues (`shoot_queue`,
-    `settings.chunk` lanes per device), from the linear steady state after
+    `settings.chunk` lanes per device), from the equivalent linear steady state after
     `settings.transient_periods` periods (integrated at `settings.coarse_rtol`) or, where
     `use_warm`, from the scaled states `warm`; the last Newton iteration samples each
     orbit and verifies its periodicity. Points where `valid` is False (padding) are
@@ -131,7 +131,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
 
     def start(q, z, warm_start):
-        z = jnp.where(warm_start, z, linear_initial_state(q, settings.compliant))
+        z = jnp.where(warm_start, z, initial_state(q, settings.compliant))
         return transient(z, q, settings.coarse(),
                          jnp.where(warm_start, 0, settings.transient_periods))
 
@@ -231,9 +231,9 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     systems `systems` (one per point: its fields are arrays, entry i for point i; see
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
     (e.g. the orbit of a nearby design). Points that do not converge are solved again,
-    from the linear steady state, with each of `settings.fallbacks()` in turn until they
-    do; the best attempt is kept. Each block of the batch is sharded over all JAX devices
-    (`sharded_batch`). The solutions are NumPy arrays."""
+    from the equivalent linear steady state (`_period.initial_state`), with each of
+    `settings.fallbacks()` in turn until they do; the best attempt is kept. Each block of
+    the batch is sharded over all JAX devices (`sharded_batch`). The solutions are NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     for fallback in settings.fallbacks():

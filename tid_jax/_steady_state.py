@@ -9,7 +9,7 @@ from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._peaks import parabola_top
 from ._period import (
-    linear_initial_state,
+    initial_state,
     period_samples,
     period_tangents,
     samples_and_jacobian,
@@ -476,7 +476,8 @@ def solve_orbit(
     """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`; or
     the sequence of its scalars, which lets derivatives skip the parameters that do not
     depend on the differentiated inputs), by shooting from `z_init` (scaled state;
-    default the linear steady state followed by `settings.transient_periods` periods).
+    default the equivalent linear steady state, `_period.initial_state`, followed by
+    `settings.transient_periods` periods).
     Differentiable with respect to `p` (implicit differentiation), not with respect to
     `z_init`.
 
@@ -489,7 +490,7 @@ def solve_orbit(
     scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
     p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
-        z_init = transient(linear_initial_state(p_const, settings.compliant), p_const,
+        z_init = transient(initial_state(p_const, settings.compliant), p_const,
                            settings)
     z_init = jax.lax.stop_gradient(z_init)
     if monodromy_init is not None:
