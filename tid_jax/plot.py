@@ -23,7 +23,7 @@ HOST_FREQUENCY_STYLE = dict(color="0.5", linestyle=":", linewidth=1.2)
 def save_figure(fig, path: str | os.PathLike) -> None:
     """Save `fig` as PNG atomically and close it."""
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
+        fig.savefig(tmp, format="png", dpi=130)
     plt.close(fig)
 
 
