@@ -13,8 +13,7 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
   periods; a naive vmapped diffrax transient over the same periods (all 732 points); and
   `tid_jax.frequency_response` (all 732 points in one call), with its default settings
   and looser integration tolerances (a row of its own for the fastest whose peaks all
-  match the reference within 1e-4 on all 732 points, where that beats the default), all
-  on one core (`TID_JAX_THREADS=1`) as the baselines are; then on every core;
+  match the reference within 1e-4 on all 732 points, where that beats the default);
 - time per orbit against batch size;
 - the 12-amplitude paper retune in a child process (cold, then warm), and `tid-jax
   retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
@@ -54,27 +53,8 @@ BATCH_SIZES = (1, 10, 100, 1000)
 # Looser integration tolerances tried for tid_jax at matched accuracy; the periodicity
 # tolerance follows (10 rtol, no tighter than the default).
 MATCHED_RTOLS = (1e-7, 1e-6, 1e-5)
-THREADS = "TID_JAX_THREADS"
 SYSTEM_KEYS = ("host_mass", "host_stiffness", "host_damping", "inertance", "friction_force",
                "tid_stiffness", "tid_damping")
-
-
-class threads:
-    """`$TID_JAX_THREADS` set to `count` inside the block (the host threads a batch is
-    spread over), restored after it."""
-
-    def __init__(self, count: int):
-        self.count = str(count)
-
-    def __enter__(self):
-        self.before = os.environ.get(THREADS)
-        os.environ[THREADS] = self.count
-
-    def __exit__(self, *exc):
-        if self.before is None:
-            os.environ.pop(THREADS, None)
-        else:
-            os.environ[THREADS] = self.before
 
 
 def timed(function):
@@ -276,20 +256,14 @@ def main():
     (naive_x, _), naive_s = timed(naive)
     naive_error = max_error(naive_x, reference_x)
 
-    # On one core, as the baselines: one host thread.
     surface = lambda: tj.frequency_response(system, surface_omegas, amplitudes)
-    with threads(1):
-        response, surface_cold = timed(surface)
-        surface_warm = warm_time(surface, budget_s=0)
-        tid_error = max_error(np.asarray(response.x_max).ravel(), reference_x)
-        tid_converged = int(np.sum(np.asarray(response.converged)))
-        tid_per_orbit = surface_warm / orbits
-        matched, matched_per_orbit, matched_error, matched_tried = choose_tid_settings(
-            system, surface_omegas, amplitudes, reference_x, tid_per_orbit)
-    cores = len(os.sched_getaffinity(0))
-    with threads(cores):
-        timed(surface)
-        all_cores_per_orbit = warm_time(surface, budget_s=0) / orbits
+    response, surface_cold = timed(surface)
+    surface_warm = warm_time(surface, budget_s=0)
+    tid_error = max_error(np.asarray(response.x_max).ravel(), reference_x)
+    tid_converged = int(np.sum(np.asarray(response.converged)))
+    tid_per_orbit = surface_warm / orbits
+    matched, matched_per_orbit, matched_error, matched_tried = choose_tid_settings(
+        system, surface_omegas, amplitudes, reference_x, tid_per_orbit)
 
     scaling = []
     band = (surface_omegas[0], surface_omegas[-1])
@@ -298,9 +272,8 @@ def main():
         omegas = np.linspace(*band, size // n_amp)
         amps = np.geomspace(amplitudes[0], amplitudes[-1], n_amp)
         call = lambda omegas=omegas, amps=amps: tj.frequency_response(system, omegas, amps).x_max
-        with threads(1):
-            _, cold = timed(call)
-            scaling.append((size, cold, warm_time(call, budget_s=2.0 if size < 1000 else 0)))
+        _, cold = timed(call)
+        scaling.append((size, cold, warm_time(call, budget_s=2.0 if size < 1000 else 0)))
 
     retune = cli_rows = None
     if not args.skip_retune:
@@ -325,19 +298,13 @@ def main():
         f"{naive_s / orbits * 1e3:.2f} ms | {lsoda_per_orbit / (naive_s / orbits):.0f}x | "
         f"{naive_error:.1e} |")
     say(f"| tid_jax `frequency_response`, default settings (rtol "
-        f"{tj.SolverSettings().rtol:g}; {tid_converged}/{orbits} converged), one thread | - | "
+        f"{tj.SolverSettings().rtol:g}; {tid_converged}/{orbits} converged) | - | "
         f"{orbits} | {tid_per_orbit * 1e3:.2f} ms | {lsoda_per_orbit / tid_per_orbit:.0f}x | "
         f"{tid_error:.1e} |")
     if matched is not None:
         say(f"| tid_jax `frequency_response`, tolerances matched to {MATCH:g} (rtol "
-            f"{matched.rtol:g}), one thread | - | {orbits} | {matched_per_orbit * 1e3:.2f} ms | "
+            f"{matched.rtol:g}) | - | {orbits} | {matched_per_orbit * 1e3:.2f} ms | "
             f"{lsoda_per_orbit / matched_per_orbit:.0f}x | {matched_error:.1e} |")
-    say()
-    say(f"Every row above runs on one core. With its batch spread over all {cores} cores "
-        f"(`$TID_JAX_THREADS` unset, the default), tid_jax's default settings took "
-        f"{all_cores_per_orbit * 1e3:.2f} ms of wall time per orbit "
-        f"({tid_per_orbit / all_cores_per_orbit:.2f}x its one-thread time); the serial "
-        f"baselines would gain at most {cores}x from as many processes.")
     say()
     say(f"tid_jax with looser tolerances (a row above if faster than the default within "
         f"{MATCH:g}, all converged): "

@@ -22,12 +22,6 @@ if "TID_JAX_CACHE_DIR" not in os.environ:
     os.environ["TID_JAX_CACHE_DIR"] = _session_cache
 enable_compilation_cache()
 
-# The parallel test workers (pytest-xdist) share the cores: each spreads its batches over
-# its share of them (`_sharding.host_threads`), as do the commands run as subprocesses.
-if "TID_JAX_THREADS" not in os.environ:
-    _workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-    os.environ["TID_JAX_THREADS"] = str(max(1, len(os.sched_getaffinity(0)) // _workers))
-
 
 def pytest_sessionfinish(session):
     if _session_cache is not None:

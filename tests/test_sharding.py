@@ -1,5 +1,4 @@
-"""Sharding the batch over several devices, or spreading it over host threads on one, gives
-the single-device, single-thread answer.
+"""Sharding the batch over several devices gives the single-device answer.
 
 Each case runs in a fresh subprocess, since the number of (simulated CPU) devices is fixed
 when JAX starts."""
@@ -23,7 +22,7 @@ jax.config.update("jax_enable_x64", True)
 import jax
 import numpy as np
 import tid_jax as tj
-from tid_jax._sharding import batch_sharding, host_threads, sharded_batch
+from tid_jax._sharding import batch_sharding, sharded_batch
 
 settings = tj.SolverSettings(chunk=2)
 system = tj.paper_system()
@@ -46,7 +45,6 @@ sharding = batch_sharding()
 devices_used = 1 if sharding is None else len(sharding.mesh.devices.reshape(-1))
 print(json.dumps(dict(
     devices=len(jax.devices()),
-    threads=host_threads(),
     devices_used=devices_used,
     padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
     if sharding is not None else 1,
@@ -64,9 +62,8 @@ print(json.dumps(dict(
 """
 
 
-def _start(device_count: int, threads: int = 1) -> subprocess.Popen:
+def _start(device_count: int) -> subprocess.Popen:
     env = dict(os.environ)
-    env["TID_JAX_THREADS"] = str(threads)
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={device_count}"
     env["JAX_ENABLE_X64"] = "1"
     env["JAX_PLATFORMS"] = "cpu"
@@ -84,10 +81,8 @@ def _result(process: subprocess.Popen) -> dict:
 
 @pytest.fixture(scope="module")
 def runs():
-    # All at once: each compiles on one core for most of its run. One device and one
-    # thread, four devices, one device and three threads (the batches split into parts of
-    # unequal numbers of points, padded).
-    processes = [_start(1), _start(4), _start(1, threads=3)]
+    # Both at once: each compiles on one core for most of its run.
+    processes = [_start(1), _start(4)]
     try:
         return tuple(_result(process) for process in processes)
     finally:
@@ -99,7 +94,7 @@ def runs():
 # Batches of different widths round differently (vectorised arithmetic): agreement to
 # 1e-8, far below the solver tolerances, not bit for bit.
 def test_four_devices_match_one(runs):
-    single, sharded, _ = runs
+    single, sharded = runs
     assert single["devices"] == 1 and single["devices_used"] == 1
     assert sharded["devices"] == 4 and sharded["devices_used"] == 4
     assert sharded["padded_devices"] == 4
@@ -111,7 +106,7 @@ def test_four_devices_match_one(runs):
 
 
 def test_retune_on_four_devices_matches_one(runs):
-    single, sharded, _ = runs
+    single, sharded = runs
     assert single["retune_status"] == [0, 0] and sharded["retune_status"] == [0, 0]
     assert min(single["retune_iterations"]) > 0
     # Rounding differences move the optimiser's path slightly; both runs converge to the
@@ -119,55 +114,6 @@ def test_retune_on_four_devices_matches_one(runs):
     for key in ("retune_stiffness", "retune_damping"):
         np.testing.assert_allclose(sharded[key], single[key], rtol=1e-4, atol=0)
     np.testing.assert_allclose(sharded["retune_x_peak"], single["retune_x_peak"], rtol=1e-5)
-
-
-def test_three_threads_match_one(runs):
-    single, _, threaded = runs
-    assert single["threads"] == 1 and threaded["threads"] == 3
-    assert threaded["devices"] == 1 and threaded["trimmed"] == 10
-    assert threaded["converged"] == single["converged"]
-    for key in ("x_max", "y_max"):
-        np.testing.assert_allclose(threaded[key], single[key], rtol=1e-8, atol=0)
-    # The retune's lanes run one per call on the threads: batches of other widths again.
-    assert threaded["retune_status"] == [0, 0]
-    for key in ("retune_stiffness", "retune_damping"):
-        np.testing.assert_allclose(threaded[key], single[key], rtol=1e-4, atol=0)
-    np.testing.assert_allclose(threaded["retune_x_peak"], single["retune_x_peak"], rtol=1e-5)
-
-
-@pytest.mark.parametrize(("per_call", "parts"), [(None, [[0, 3, 6, 9], [1, 4, 7], [2, 5, 8]]),
-                                                 (2, [[0, 5], [1, 6], [2, 7], [3, 8], [4, 9]])])
-def test_host_threads_take_dealt_parts_and_put_the_answer_back(monkeypatch, per_call, parts):
-    import threading
-
-    from tid_jax._sharding import sharded_batch
-
-    monkeypatch.setenv("TID_JAX_THREADS", "3")
-    calls = []
-
-    def function(a, b):
-        calls.append((np.asarray(a).tolist(), threading.current_thread()))
-        return {"sum": a + b["b"], "rows": np.stack([a, a], axis=-1)}
-
-    a = np.arange(10.0)
-    out = sharded_batch(function, a, {"b": 100.0 * a}, per_call=per_call)
-    np.testing.assert_array_equal(out["sum"], 101.0 * a)
-    np.testing.assert_array_equal(out["rows"], np.stack([a, a], axis=-1))
-    # Each part dealt in turn and padded to equal length with its last entry; no part in
-    # the calling thread.
-    length = max(len(part) for part in parts)
-    expected = sorted(part + part[-1:] * (length - len(part)) for part in parts)
-    assert sorted(values for values, _ in calls) == expected
-    assert all(thread is not threading.main_thread() for _, thread in calls)
-
-
-@pytest.mark.parametrize("value", ["0", "two", "-1", "1.5"])
-def test_bad_thread_count_is_refused(monkeypatch, value):
-    from tid_jax._sharding import host_threads
-
-    monkeypatch.setenv("TID_JAX_THREADS", value)
-    with pytest.raises(ValueError, match="TID_JAX_THREADS must be a whole number >= 1"):
-        host_threads()
 
 
 def test_map_batch_matches_vmap_and_skips_chunks_without_valid_entries():

@@ -17,7 +17,6 @@ import importlib.metadata
 import os
 import pickle
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -132,7 +131,6 @@ class _Program:
         self.function = function
         self.jitted = eqx.filter_jit(function)
         self.loaded = {}
-        self.loading = threading.Lock()  # batches run on several threads at once
         ft.update_wrapper(self, function)
 
     def __call__(self, *args, **kwargs):
@@ -146,10 +144,9 @@ class _Program:
             str(structure), str(jax.tree.structure(static)), repr(jax.tree.leaves(static)),
         ] + [f"{leaf.shape} {leaf.dtype} {getattr(leaf, 'weak_type', False)}" for leaf in leaves]
         key = hashlib.sha256("\n".join(description).encode()).hexdigest()[:32]
-        with self.loading:
-            if key not in self.loaded:
-                self.loaded[key] = self._load(folder / f"{self.function.__name__}-{key}.bin",
-                                              static, structure, leaves)
+        if key not in self.loaded:
+            self.loaded[key] = self._load(folder / f"{self.function.__name__}-{key}.bin",
+                                          static, structure, leaves)
         run, out_structure = self.loaded[key]
         if run is None:
             return self.jitted(*args, **kwargs)

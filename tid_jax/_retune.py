@@ -357,11 +357,10 @@ def retune(
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
-    The amplitudes are solved one after another (each with its frequencies batched; with
-    several JAX devices, one sequence per device in one compiled call; on one CPU device,
-    one amplitude per call on `_sharding.host_threads()` threads, each taking the next
-    amplitude as it finishes one), so that each optimiser stops as soon as it converges;
-    the checks are batched over every amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
+    All amplitudes are solved in one compiled call, one amplitude after another (each with
+    its frequencies batched; with several JAX devices, one sequence per device), so that
+    each optimiser stops as soon as it converges; the checks are batched over every
+    amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
     maximum of the local peaks (the highest located in continuous frequency, so that the
     optimum does not depend on where the grid falls) whose sharpness grows over
     `retune_settings.sharpness` (continuation), each stage a BFGS run (optimistix's, with
@@ -467,10 +466,8 @@ def optimal_tunings(
         if moving.size:
             lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
                                  (systems, amps, bands, u, orbits, hessian_inv))
-            # Lanes differ in their iterations: on host threads, each takes the next lane
-            # as soon as it is done with one.
             new_u, steps, new_ok, new_orbits, new_hessian_inv = sharded_batch(
-                lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), *lanes, per_call=1)
+                lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), *lanes)
             u, orbits, hessian_inv, ok = _set_lanes(
                 (u, orbits, hessian_inv, ok), moving, (new_u, new_orbits, new_hessian_inv, new_ok))
         iterations[moving] += np.asarray(steps)

@@ -16,15 +16,7 @@ then sees the devices of all hosts in `jax.devices()` and the batch is
 sharded over all of them. On CPU, several devices can be simulated with
 `XLA_FLAGS=--xla_force_host_platform_device_count=N` (set before importing
 JAX).
-
-On a single CPU device, which runs one program on one core, the batch is instead
-split into one part per host thread (`host_threads`: the cores this process may
-use, or `$TID_JAX_THREADS`), the entries dealt out in turn so that every part has
-a share of the hard ones, and the parts run at once, one thread each.
 """
-
-import os
-from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -52,67 +44,14 @@ def _pad(array, size: int):
     return jax.numpy.concatenate([array, jax.numpy.repeat(array[-1:], extra, axis=0)])
 
 
-THREADS_VARIABLE = "TID_JAX_THREADS"
-
-
-def host_threads() -> int:
-    """The threads that a batch on one CPU device is spread over (`sharded_batch`):
-    `$TID_JAX_THREADS` if set (a whole number >= 1; 1 runs every batch in the calling
-    thread), else the CPU cores this process may use."""
-    value = os.environ.get(THREADS_VARIABLE, "").strip()
-    if not value:
-        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
-    if not (value.isdigit() and int(value) >= 1):
-        raise ValueError(f"${THREADS_VARIABLE} must be a whole number >= 1, got {value!r}")
-    return int(value)
-
-
-def _threaded(function, batch, threads: int, per_call: int | None):
-    """`function(*batch)` on parts of the batch, `threads` at a time, one thread each, each
-    thread taking the next part as soon as its last one is done: parts of `per_call`
-    entries (default: one part per thread), part j holding the entries j, j + parts,
-    j + 2 parts, ... (padded to `per_call` by repeating its last entry, so that one
-    compiled program serves every part); the outputs are put back in the batch's order,
-    as NumPy arrays."""
-    size = jax.tree_util.tree_leaves(batch)[0].shape[0]
-    length = -(-size // threads) if per_call is None else per_call
-    parts = -(-size // length)
-    dealt = [np.arange(j, size, parts) for j in range(parts)]
-    host = jax.tree.map(np.asarray, batch)
-
-    def run(entries):
-        padded = np.concatenate([entries, np.repeat(entries[-1:], length - entries.size)])
-        out = function(*jax.tree.map(lambda a: a[padded], host))
-        return jax.tree.map(np.asarray, out)
-
-    with ThreadPoolExecutor(threads) as pool:
-        outs = list(pool.map(run, dealt))
-
-    def gather(*values):
-        out = np.empty((size,) + values[0].shape[1:], values[0].dtype)
-        for entries, value in zip(dealt, values, strict=True):
-            out[entries] = value[:entries.size]
-        return out
-
-    return jax.tree.map(gather, *outs)
-
-
-def sharded_batch(function, *batch, devices=None, per_call: int | None = None):
+def sharded_batch(function, *batch, devices=None):
     """`function(*batch)` with every array of `batch` (pytrees of arrays with the same
     leading length n) padded to a multiple of the device count and sharded over the
     devices along its leading axis; every array of the returned pytree is trimmed back to
-    its first n entries. On one CPU device, `function` runs on parts of the batch on
-    `host_threads()` threads at once (`_threaded`: parts of `per_call` entries, default
-    one part per thread; the outputs NumPy arrays), or on the whole batch where that is
-    one thread or the batch has a single entry."""
+    its first n entries. Calls `function(*batch)` unchanged on one device."""
     sharding = batch_sharding(devices)
     if sharding is None:
-        size = jax.tree_util.tree_leaves(batch)[0].shape[0]
-        threads = min(host_threads(), size)
-        if jax.default_backend() != "cpu" or threads < 2:
-            return function(*batch)
-        return _threaded(function, batch, threads, per_call)
+        return function(*batch)
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
     count = sharding.mesh.size
     padded = -(-size // count) * count
