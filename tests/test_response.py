@@ -291,6 +291,13 @@ def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omeg
     np.testing.assert_allclose(nonlinear.y_max / scale, reference.y_max / scale, atol=1e-4)
 
 
+def _scaled_orbit(response, system, amplitude, omega):
+    """The converged orbit's state at phase 0 of a one-point `response`, scaled."""
+    assert bool(response.converged)
+    static = amplitude / float(system.host_stiffness)
+    return np.asarray(response.state) / np.array([static, omega * static] * 2)
+
+
 @pytest.mark.parametrize(("amplitude", "ratio"), [(100.0, 0.95), (200.0, 1.0), (1000.0, 1.1)])
 def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
     # The monodromy matrix (and so the Floquet multipliers) belongs to the orbit returned,
@@ -303,9 +310,7 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
 
     omega = ratio * float(system.host_frequency)
     response = tj.frequency_response(system, omega, amplitude)
-    assert bool(response.converged)
-    static = amplitude / float(system.host_stiffness)
-    z = np.asarray(response.state) / np.array([static, omega * static] * 2)
+    z = _scaled_orbit(response, system, amplitude, omega)
     tight = tj.SolverSettings(rtol=1e-12, atol=1e-12, max_steps=65536)
     p = parameter_vector(system, amplitude, omega)
     end = jax.jit(jax.vmap(lambda z0: period_samples(z0, p, tight)[3]))
@@ -368,10 +373,8 @@ def test_initial_state_of_a_slipping_inerter_is_near_its_orbit(system, amplitude
     # damping that dissipates as much per period) starts nearer the steady state than the
     # frictionless one does.
     omega = ratio * float(system.host_frequency)
-    response = tj.frequency_response(system, omega, amplitude)
-    assert bool(response.converged)
-    static = amplitude / float(system.host_stiffness)
-    orbit = np.asarray(response.state) / np.array([static, omega * static] * 2)
+    orbit = _scaled_orbit(tj.frequency_response(system, omega, amplitude), system, amplitude,
+                          omega)
     free = eqx.tree_at(lambda s: s.friction_force, system, 0.0)
     equivalent = np.max(np.abs(_initial_state(system, amplitude, omega) - orbit))
     frictionless = np.max(np.abs(_initial_state(free, amplitude, omega) - orbit))

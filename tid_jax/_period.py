@@ -148,7 +148,8 @@ def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
         further = slips_further(middle)
         return jnp.where(further, middle, low), jnp.where(further, high, middle)
 
-    # Friction only takes motion away: the frictionless amplitude bounds it from above.
+    # Between the frictionless amplitude and e^-40 of it (where more damping would let
+    # the body move more, as near an antiresonance, the bisection ends at the top).
     high = jnp.log(jnp.abs(response(0.0)[2]))
     low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
     x, y, q = response(equivalent_damping(0.5 * (low + high)))
