@@ -119,6 +119,10 @@ def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
     spring = k + jw * c
     scale = amplitude / stiffness  # displacements in units of A / K
 
+    def host(terminal):
+        """x of the host with the TID's terminal moving `terminal` times as far."""
+        return stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
+
     def response(friction_damping):
         """Complex amplitudes (scaled) of x, y and the friction's body, with the friction
         an extra viscous damping `friction_damping` on that body."""
@@ -129,7 +133,7 @@ def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
             terminal = spring / (spring + device - terminal_mass * omega**2)
         else:
             terminal = spring / (spring + body - (inertance + terminal_mass) * omega**2)
-        x = stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
+        x = host(terminal)
         y = x * terminal
         q = y * ks / (ks + mechanism) if compliant else y
         return x, y, q
@@ -156,12 +160,11 @@ def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
     # Held still, the body feels the force of what joins it to the host.
     if compliant:
         stuck_terminal = spring / (spring + ks - terminal_mass * omega**2)
-        stuck_x = stiffness / (stiffness - mass * omega**2 + jw * damping
-                               + spring * (1 - stuck_terminal))
+        stuck_x = host(stuck_terminal)
         stuck_y = stuck_x * stuck_terminal
         holding_force = jnp.abs(ks * stuck_y) * scale
     else:
-        stuck_x = stiffness / (stiffness + spring - mass * omega**2 + jw * damping)
+        stuck_x = host(0.0)
         stuck_y = 0.0
         holding_force = jnp.abs(spring * stuck_x) * scale
     stuck = holding_force < friction
