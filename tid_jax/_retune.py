@@ -39,7 +39,7 @@ from ._response import (
     with_tuning,
 )
 from ._settings import SolverSettings
-from ._sharding import map_batch, sharded_batch
+from ._sharding import sharded_batch
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
@@ -217,10 +217,10 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
     lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
                       max_steps=max_steps, max_rejected_steps=max_rejected_steps)
 
-    # One amplitude after another (each vmapped over its frequencies; with several devices,
-    # one sequence per device): an amplitude's optimiser stops when it converges, and its
-    # integrations wait only for its own stiffest steady state, not for every amplitude's.
-    return map_batch(lambda args: lane(*args), (systems, amplitudes, omegas, u0, z0, h0), 1)
+    # One lane per device (`optimal_tunings` passes as many lanes as there are devices):
+    # each lane's optimiser stops when it converges, and its integrations wait only for
+    # its own stiffest steady state.
+    return jax.vmap(lane)(systems, amplitudes, omegas, u0, z0, h0)
 
 
 def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
@@ -357,30 +357,30 @@ def retune(
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
-    All amplitudes are solved in one compiled call, one amplitude after another (each with
-    its frequencies batched; with several JAX devices, one sequence per device), so that
-    each optimiser stops as soon as it converges; the checks are batched over every
-    amplitude and frequency. The non-smooth maximum over frequency is replaced by a smooth
-    maximum of the local peaks (the highest located in continuous frequency, so that the
-    optimum does not depend on where the grid falls) whose sharpness grows over
+    The amplitudes are optimised one after another (each with its frequencies batched; with
+    several JAX devices, one per device at a time) by one compiled program, whatever their
+    number, so that each optimiser stops as soon as it converges; the checks are batched
+    over every amplitude and frequency. The non-smooth maximum over frequency is replaced by
+    a smooth maximum of the local peaks (the highest located in continuous frequency, so
+    that the optimum does not depend on where the grid falls) whose sharpness grows over
     `retune_settings.sharpness` (continuation), each stage a BFGS run (optimistix's, with
-    its Newton step capped at `retune_settings.max_design_step`) warm-started from the
-    last (its design, orbits and BFGS's inverse Hessian), with gradients by implicit
+    its Newton step capped at `retune_settings.max_design_step`) warm-started from the last
+    (its design, orbits and BFGS's inverse Hessian), with gradients by implicit
     differentiation through the periodic orbits. The first stage starts from the initial
-    tuning's orbits on the design grid and the identity (in the scaled design variables).
-    At every design, each steady state is predicted to first order from the orbit of the
-    last accepted design and settled by chord iterations with the latest monodromy matrix
-    at its frequency; the `REFINED_PEAKS` highest local maxima are then located in
-    continuous frequency by Newton steps on the slope of the response (`_peaks`), and the
-    response at the last iterate is solved with tangents, which give the derivatives of
-    the true peaks and renew the monodromy matrices at their grid points. The initial and
-    retuned designs are then solved afresh (each steady state starting from the design's
-    orbits) on a grid `retune_settings.check_refinement` times finer; a design whose peak
-    there is above the initial tuning's is replaced by the initial tuning (status
-    `initial_kept`), as is the design at an amplitude below the initial tuning's breakaway
-    amplitude (`breakaway_amplitude`; status `stuck`, not optimised at all, 0
-    iterations): there the inerter never slips, and the smoothed model's optimum would be
-    an ever stiffer spring and damper to ground.
+    tuning's orbits on the design grid and the identity (in the scaled design variables). At
+    every design, each steady state is predicted to first order from the orbit of the last
+    accepted design and settled by chord iterations with the latest monodromy matrix at its
+    frequency; the `REFINED_PEAKS` highest local maxima are then located in continuous
+    frequency by Newton steps on the slope of the response (`_peaks`), and the response at
+    the last iterate is solved with tangents, which give the derivatives of the true peaks
+    and renew the monodromy matrices at their grid points. The initial and retuned designs
+    are then solved afresh (each steady state starting from the design's orbits) on a grid
+    `retune_settings.check_refinement` times finer; a design whose peak there is above the
+    initial tuning's is replaced by the initial tuning (status `initial_kept`), as is the
+    design at an amplitude below the initial tuning's breakaway amplitude
+    (`breakaway_amplitude`; status `stuck`, not optimised at all, 0 iterations): there the
+    inerter never slips, and the smoothed model's optimum would be an ever stiffer spring
+    and damper to ground.
 
     **Arguments:**
 
@@ -435,8 +435,9 @@ def optimal_tunings(
 ) -> RetuneResult:
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
     fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
-    frequencies `bands[i]`, every lane in one batch. `check_omegas` of the result is one
-    check grid per lane."""
+    frequencies `bands[i]`: the lanes are optimised one after another (one per device at
+    a time), their initial orbits and their check each solved in one batch.
+    `check_omegas` of the result is one check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
     amps = jax.device_put(np.asarray(amplitudes))
     sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
@@ -463,14 +464,19 @@ def optimal_tunings(
             max_design_step=float(retune_settings.max_design_step),
         )
         steps = np.zeros(moving.size, int)
-        if moving.size:
-            lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
+        # As many lanes per call as there are devices (one on each): one compiled program
+        # serves any number of lanes.
+        group = len(jax.devices())
+        for start in range(0, moving.size, group):
+            part = moving[start : start + group]
+            lanes = jax.tree.map(lambda a, part=part: np.asarray(a)[part],
                                  (systems, amps, bands, u, orbits, hessian_inv))
-            new_u, steps, new_ok, new_orbits, new_hessian_inv = sharded_batch(
+            new_u, new_steps, new_ok, new_orbits, new_hessian_inv = sharded_batch(
                 lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), *lanes)
             u, orbits, hessian_inv, ok = _set_lanes(
-                (u, orbits, hessian_inv, ok), moving, (new_u, new_orbits, new_hessian_inv, new_ok))
-        iterations[moving] += np.asarray(steps)
+                (u, orbits, hessian_inv, ok), part, (new_u, new_orbits, new_hessian_inv, new_ok))
+            steps[start : start + part.size] = np.asarray(new_steps)
+        iterations[moving] += steps
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
             f"{int(np.max(steps, initial=0))} iterations at most")
