@@ -131,10 +131,12 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
         def solve(at, last):
             # Only the peak (the response at the last Newton iterate) is differentiated.
             t = theta if last else jax.lax.stop_gradient(theta)
-            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
-                _changed_system(system, t, scale), t[-1], at, settings,
-                interpolated(states, omegas, at))
-            return jnp.where(ok, x, jnp.nan)
+            # Every peak's stencil in one sweep (nested vmaps would batch the solves' loops
+            # twice over when traced).
+            z_at = interpolated(states, omegas, at)
+            x, _, ok, _ = sweep(_changed_system(system, t, scale), t[-1], at.reshape(-1),
+                                settings, z_at.reshape((-1,) + z_at.shape[2:]))
+            return jnp.where(ok, x, jnp.nan).reshape(at.shape)
 
         selection = jnp.where(converged, jax.lax.stop_gradient(values), 0.0)
         index, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)

@@ -219,8 +219,13 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
 
     # One lane per device (`optimal_tunings` passes as many lanes as there are devices):
     # each lane's optimiser stops when it converges, and its integrations wait only for
-    # its own stiffest steady state.
-    return jax.vmap(lane)(systems, amplitudes, omegas, u0, z0, h0)
+    # its own stiffest steady state. A single lane is not vmapped: batching the loops of
+    # the optimiser, with the batched loops of the steady states inside, costs most of
+    # the program's tracing.
+    args = (systems, amplitudes, omegas, u0, z0, h0)
+    if amplitudes.shape[0] == 1:
+        return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
+    return jax.vmap(lane)(*args)
 
 
 def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
@@ -255,7 +260,11 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
 
     def on_stencil(f, at):
         nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
-        return jax.vmap(jax.vmap(f))(at, interpolated(states, omegas, at), nearby)
+        # One vmap over every stencil point (a nested one would batch the solves' loops
+        # twice over when traced).
+        args = (at, interpolated(states, omegas, at), nearby)
+        out = jax.vmap(f)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        return jax.tree.map(lambda a: a.reshape(at.shape + a.shape[1:]), out)
 
     estimate, centre = newton_iterates(lambda at: on_stencil(settle, at)[1], centre, interior,
                                        lower, upper)
