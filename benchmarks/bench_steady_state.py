@@ -17,8 +17,8 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
 - time per orbit against batch size;
 - the 12-amplitude paper retune in a child process (cold, then warm), and `tid-jax
   retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
-  cold and again with the compilation cache filled by the first run (`--cli-only`: this
-  table alone, written to its own block of `--readme`);
+  cold, again with the compilation cache filled by the first run, and then for two other
+  amplitudes (`--cli-only`: this table alone, written to its own block of `--readme`);
 - reach: random structures (`tests/reference/family.py`) at a friction width of 1e-4 m/s,
   each against the independent transient reference of `tests/reference/transient.py`.
 """
@@ -141,15 +141,20 @@ def retune_row(retune) -> str:
 CLI_COMMANDS = ("retune", "sensitivity", "robust")
 
 
-def run_cli(command, cache_dir, limit_s):
-    """Wall time of `tid-jax COMMAND` on the paper's defaults, end to end, in a child
-    process, with the compilation cache in `cache_dir`; None if stopped at `limit_s`."""
+# The amplitudes of the third run of each command: others than the defaults, fewer of them.
+OTHER_AMPLITUDES = ("250", "450")
+
+
+def run_cli(command, cache_dir, limit_s, extra=()):
+    """Wall time of `tid-jax COMMAND` on the paper's defaults (with the flags `extra`), end
+    to end, in a child process, with the compilation cache in `cache_dir`; None if stopped
+    at `limit_s`."""
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         try:
             done = subprocess.run(
                 [sys.executable, "-m", "tid_jax.cli", command, "--out", folder, "--quiet",
-                 "--cache-dir", cache_dir],
+                 "--cache-dir", cache_dir, *extra],
                 capture_output=True, text=True, timeout=limit_s,
             )
         except subprocess.TimeoutExpired:
@@ -161,15 +166,18 @@ def run_cli(command, cache_dir, limit_s):
 
 def cli_table(limit_s) -> list[str]:
     """`tid-jax retune`, `sensitivity` and `robust` on the paper's defaults, each with an
-    empty compilation cache and again with the cache its first run filled: table rows."""
+    empty compilation cache, again with the cache its first run filled, and then with
+    `OTHER_AMPLITUDES` (the same cache): table rows."""
+    other = " ".join(OTHER_AMPLITUDES)
     rows = ["| command (paper defaults, end to end) | first run, empty cache | "
-            "second run, cache filled |", "|---|---|---|"]
+            f"second run, cache filled | third run, `--amplitudes {other}` |",
+            "|---|---|---|---|"]
     for command in CLI_COMMANDS:
         with tempfile.TemporaryDirectory() as cache:
-            cold = run_cli(command, cache, limit_s)
-            warm = run_cli(command, cache, limit_s)
-        text = ["stopped" if wall is None else f"{wall:.0f} s" for wall in (cold, warm)]
-        rows.append(f"| `tid-jax {command}` | {text[0]} | {text[1]} |")
+            walls = [run_cli(command, cache, limit_s), run_cli(command, cache, limit_s),
+                     run_cli(command, cache, limit_s, ("--amplitudes", *OTHER_AMPLITUDES))]
+        text = ["stopped" if wall is None else f"{wall:.0f} s" for wall in walls]
+        rows.append(f"| `tid-jax {command}` | " + " | ".join(text) + " |")
     return rows
 
 
