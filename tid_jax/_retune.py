@@ -461,6 +461,7 @@ def optimal_tunings(
     stuck = _below_breakaway(systems, amps, bands)
     moving = np.flatnonzero(~stuck)
     ok = np.zeros(amps.shape, bool)
+    group = len(jax.devices())
     for stage, sharpness in enumerate(sharpnesses, start=1):
         # Stages before the last only bring the design near the optimum.
         stage_tol = (tol if stage == len(sharpnesses)
@@ -473,18 +474,21 @@ def optimal_tunings(
             max_design_step=float(retune_settings.max_design_step),
         )
         steps = np.zeros(moving.size, int)
-        # As many lanes per call as there are devices (one on each): one compiled program
-        # serves any number of lanes.
-        group = len(jax.devices())
-        for start in range(0, moving.size, group):
-            part = moving[start : start + group]
-            lanes = jax.tree.map(lambda a, part=part: np.asarray(a)[part],
+        if moving.size:
+            lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
                                  (systems, amps, bands, u, orbits, hessian_inv))
-            new_u, new_steps, new_ok, new_orbits, new_hessian_inv = sharded_batch(
-                lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w), *lanes)
+            # As many lanes per call as there are devices (one on each): one compiled
+            # program serves any number of lanes.
+            parts = [
+                sharded_batch(lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w),
+                              *jax.tree.map(lambda a, start=start: a[start : start + group],
+                                            lanes))
+                for start in range(0, moving.size, group)
+            ]
+            new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
+                lambda *values: np.concatenate([np.asarray(v) for v in values]), *parts)
             u, orbits, hessian_inv, ok = _set_lanes(
-                (u, orbits, hessian_inv, ok), part, (new_u, new_orbits, new_hessian_inv, new_ok))
-            steps[start : start + part.size] = np.asarray(new_steps)
+                (u, orbits, hessian_inv, ok), moving, (new_u, new_orbits, new_hessian_inv, new_ok))
         iterations[moving] += steps
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
