@@ -136,6 +136,30 @@ def test_optimum_sensitivity_matches_reoptimised_differences(system, band, sensi
             )
 
 
+def test_polishing_steps_keep_the_curvatures_of_their_start(system, band, monkeypatch):
+    # The polishing evaluates the optimiser's optimum with its central stencil, then each
+    # Newton step alone, with the curvatures of that stencil: the steps are far shorter
+    # than its step. The derivatives of the optimum match those with the stencil evaluated
+    # again at the polished optimum: the peak's and k*'s closely, c*'s (along its flat
+    # valley, from differences of gradients) within the 2% of the re-optimised differences
+    # above. (Measured against re-optimised differences of host mass, inertance and
+    # friction: c*'s elasticities within 0.5% either way.)
+    best = tj.best_tunings(system, [SENSITIVITY_AMPLITUDE], omegas=band)
+    kept = tj.sensitivities(system, SENSITIVITY_AMPLITUDE, omegas=band, best=best).optimum
+    monkeypatch.setattr("tid_jax._sensitivity._SAME_CURVATURES", 0.0)
+    again = tj.sensitivities(system, SENSITIVITY_AMPLITUDE, omegas=band, best=best).optimum
+    assert bool(kept.converged) and bool(again.converged)
+    # The polishing moved the optimum (else both would be one evaluation).
+    assert float(kept.tid_stiffness) != float(best.tid_stiffness[0, 0])
+    assert float(again.tid_stiffness) == float(kept.tid_stiffness)
+    assert float(again.tid_damping) == float(kept.tid_damping)
+    for name, rtol in (("host_elasticity", 1e-6), ("stiffness_elasticity", 1e-3),
+                       ("damping_elasticity", 2e-2)):
+        np.testing.assert_allclose(np.asarray(getattr(kept, name)),
+                                   np.asarray(getattr(again, name)), rtol=rtol, atol=1e-6,
+                                   err_msg=name)
+
+
 def test_optimum_at_the_damping_bound_and_at_3000_n(system):
     # On the default band. At 100 N the optimal damping is 0 (the friction damps enough):
     # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the

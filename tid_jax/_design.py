@@ -69,7 +69,7 @@ def parameters_of(system: TIDSystem) -> tuple[str, ...]:
 # each refined peak (forward while optimising, central for the final derivatives; the
 # curvature of the smooth maximum across peaks is exact). Smaller steps amplify the noise
 # of the orbit solver in the gradients, larger ones the truncation error.
-_STENCIL_STEP = 1e-3
+STENCIL_STEP = 1e-3
 UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
 _CHUNK = 3  # points per kernel call (one compiled shape for every use)
 MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
@@ -314,10 +314,19 @@ class Scenario(NamedTuple):
     offset: float  # subtracted from the log host peak: ln of the best achievable peak, or 0
 
 
-def _stencil(u, central: bool) -> list[np.ndarray]:
-    h = _STENCIL_STEP
-    steps = [[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]] if central else [[h, 0.0], [0.0, h]]
-    return [np.asarray(u, dtype=float)] + [u + np.asarray(step) for step in steps]
+# The designs at which a design u is evaluated (`_stencil`): u and its forward or central
+# neighbours in u0 and u1 (the curvatures of the refined peaks from differences of their
+# gradients), or u alone (values and gradients only).
+STENCILS = {
+    "forward": [[1.0, 0.0], [0.0, 1.0]],
+    "central": [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]],
+    "centre": [],
+}
+
+
+def _stencil(u, kind: str) -> list[np.ndarray]:
+    u = np.asarray(u, dtype=float)
+    return [u] + [u + STENCIL_STEP * np.asarray(step) for step in STENCILS[kind]]
 
 
 class Terms(NamedTuple):
@@ -333,24 +342,25 @@ class Terms(NamedTuple):
 def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms:
     """Log peaks, their gradients in the coordinates (u0, u1, parameters `Context.other`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
-    scenario, from the curves at the designs `_stencil(u, central)` (central when there
-    are five). Only the second derivatives of each refined peak come from differences."""
+    scenario, from the curves at the designs `_stencil(u, kind)` (central when there
+    are five). Only the second derivatives of each refined peak come from differences;
+    from u alone (one design) they are unknown: NaN."""
     k, _ = ctx.tuning(u)
     jac = [getattr(curves, f"jac_{response}") for curves in stencil]
     centre = jac[0]
     grad = np.concatenate(
         [k * centre[:, [_K]], 2 * ctx.c_ref * u[1] * centre[:, [_C]], centre[:, ctx.other]], axis=1
     )
-    dgrad = np.empty(grad.shape[:1] + (2,) + grad.shape[1:])
-    for i in range(2):
+    dgrad = np.full(grad.shape[:1] + (2,) + grad.shape[1:], np.nan)
+    for i in range(2 if len(stencil) > 1 else 0):
         if len(stencil) == 5:
-            d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * _STENCIL_STEP)
+            d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * STENCIL_STEP)
         else:
-            d_jac = (jac[1 + i] - centre) / _STENCIL_STEP
+            d_jac = (jac[1 + i] - centre) / STENCIL_STEP
         dgrad[:, i, 0] = k * d_jac[:, _K] + (k * centre[:, _K] if i == 0 else 0.0)
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
         dgrad[:, i, 2:] = d_jac[:, ctx.other]
-    if response == "x" and stencil[0].located.size:
+    if response == "x" and stencil[0].located.size and len(stencil) > 1:
         # A true peak's entry holds the same peak at every design of the stencil unless the
         # set of highest local maxima changed between them (its grid index jumps): then
         # its curvature is unknown and left out.
@@ -384,7 +394,7 @@ def smooth_max(candidates: Terms, sharpness):
 
 class Evaluation(NamedTuple):
     u: np.ndarray
-    stencils: list  # per scenario, the curves at `_stencil(u, central)`
+    stencils: list  # per scenario, the curves at `_stencil(u, kind)`
     host_terms: Terms  # all scenarios' terms concatenated
     stroke_terms: Terms
 
@@ -395,15 +405,16 @@ class Evaluation(NamedTuple):
         return all(curves.converged for curves in self.centres())
 
 
-def evaluate_designs(ctx, designs, *, central=False) -> list[Evaluation]:
+def evaluate_designs(ctx, designs, *, stencil="forward") -> list[Evaluation]:
     """An `Evaluation` at each of `designs`, `(u, scenarios, z_inits)`: the curves at the
-    design u and its stencil for every scenario (shooting from `z_inits`, one state array
+    design u and its `stencil` (a kind of `STENCILS`) for every scenario (shooting from
+    `z_inits`, one state array
     per scenario) and the terms of the smooth maxima (each scenario's log host peaks less
     its offset, and its log inerter peaks). Every point of every design is solved in one
     batch."""
     points, stencils = [], []
     for u, scenarios, z_inits in designs:
-        us = _stencil(u, central)
+        us = _stencil(u, stencil)
         stencils.append(us)
         for scenario, z in zip(scenarios, z_inits, strict=True):
             points += [(ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z)
@@ -425,9 +436,9 @@ def evaluate_designs(ctx, designs, *, central=False) -> list[Evaluation]:
     return evaluations
 
 
-def evaluate_design(ctx, u, scenarios, z_inits, *, central=False) -> Evaluation:
+def evaluate_design(ctx, u, scenarios, z_inits, *, stencil="forward") -> Evaluation:
     """The `Evaluation` at the one design u (see `evaluate_designs`)."""
-    return evaluate_designs(ctx, [(u, scenarios, z_inits)], central=central)[0]
+    return evaluate_designs(ctx, [(u, scenarios, z_inits)], stencil=stencil)[0]
 
 
 def cold_start(ctx: Context, u, scenarios) -> list[np.ndarray]:

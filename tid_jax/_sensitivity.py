@@ -11,6 +11,7 @@ from ._checks import check_steady_state_device, check_system
 from ._design import (
     MAX_STEP,
     NOISE_FACTOR,
+    STENCIL_STEP,
     BestTunings,
     Context,
     Scenario,
@@ -29,6 +30,9 @@ from ._system import TIDSystem
 
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
 POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the polishing
+# The polishing's steps keep the curvatures of the central stencil at their start while
+# they move less than this fraction of its step (`_design.STENCIL_STEP`).
+_SAME_CURVATURES = 0.1
 
 # --- sensitivities -------------------------------------------------------------------------
 
@@ -135,13 +139,19 @@ class Sensitivities(eqx.Module):
 
 
 def _polished(ctx, starts, tol, sharpness):
-    """For each `(scenario, u, z_init, at_bound)` of `starts`, the evaluation (central
-    stencil) at the optimum of the smooth log peak of `retune` (of its last stage's
-    `sharpness`) near u, with its smooth maximum, gradient and derivatives (a `Model`): at
-    most `_POLISH` Newton steps from u (along u0 alone, with u1 = 0, where the damping is
-    at its bound), each round's evaluations of every start in one batch."""
+    """For each `(scenario, u, z_init, at_bound)` of `starts`, the evaluation at the
+    optimum of the smooth log peak of `retune` (of its last stage's `sharpness`) near u,
+    with its smooth maximum, gradient and derivatives (a `Model`): at most `_POLISH` Newton
+    steps from u (along u0 alone, with u1 = 0, where the damping is at its bound), each
+    round's evaluations of every start in one batch. Only the start is evaluated with its
+    central stencil: the steps are far shorter than the stencil's (`STENCIL_STEP`), so
+    that the curvatures of the refined peaks from its differences hold at every step,
+    which is then evaluated alone (values and exact gradients); an optimum found further
+    away than `_SAME_CURVATURES` times the stencil's step is evaluated with its own."""
     finals = evaluate_designs(ctx, [(u, [scenario], [z]) for scenario, u, z, _ in starts],
-                              central=True)
+                              stencil="central")
+    curvatures = [final.host_terms.dgrad for final in finals]
+    located = [final.centres()[0].located for final in finals]
     models = [Model(*smooth_max(final.host_terms, sharpness)) for final in finals]
     moving = range(len(starts))
     for _ in range(_POLISH):
@@ -156,13 +166,27 @@ def _polished(ctx, starts, tol, sharpness):
             break
         trials = evaluate_designs(ctx, [
             (finals[i].u + step, [starts[i][0]], [curves.states for curves in finals[i].centres()])
-            for i, step in steps.items()], central=True)
+            for i, step in steps.items()], stencil="centre")
         moving = []
         for i, trial in zip(steps, trials, strict=True):
+            # A true peak whose grid index jumped is another peak: its curvature unknown.
+            dgrad = curvatures[i].copy()
+            changed = np.abs(trial.centres()[0].located - located[i]) > 1
+            dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
+            trial = trial._replace(host_terms=trial.host_terms._replace(dgrad=dgrad))
             trial_model = Model(*smooth_max(trial.host_terms, sharpness))
             if trial_model.value < models[i].value:
                 finals[i], models[i] = trial, trial_model
                 moving.append(i)
+    # Where the steps went further, the curvatures are evaluated again there.
+    far = [i for i, ((_, u, _, _), final) in enumerate(zip(starts, finals, strict=True))
+           if np.max(np.abs(final.u - u)) > _SAME_CURVATURES * STENCIL_STEP]
+    if far:
+        again = evaluate_designs(ctx, [(finals[i].u, [starts[i][0]],
+                                        [curves.states for curves in finals[i].centres()])
+                                       for i in far], stencil="central")
+        for i, final in zip(far, again, strict=True):
+            finals[i], models[i] = final, Model(*smooth_max(final.host_terms, sharpness))
     return finals, models
 
 
