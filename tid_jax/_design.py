@@ -408,10 +408,9 @@ class Evaluation(NamedTuple):
 def evaluate_designs(ctx, designs, *, stencil="forward") -> list[Evaluation]:
     """An `Evaluation` at each of `designs`, `(u, scenarios, z_inits)`: the curves at the
     design u and its `stencil` (a kind of `STENCILS`) for every scenario (shooting from
-    `z_inits`, one state array
-    per scenario) and the terms of the smooth maxima (each scenario's log host peaks less
-    its offset, and its log inerter peaks). Every point of every design is solved in one
-    batch."""
+    `z_inits`, one state array per scenario) and the terms of the smooth maxima (each
+    scenario's log host peaks less its offset, and its log inerter peaks). Every point of
+    every design is solved in one batch."""
     points, stencils = [], []
     for u, scenarios, z_inits in designs:
         us = _stencil(u, stencil)
