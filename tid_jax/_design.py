@@ -361,15 +361,23 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
         dgrad[:, i, 2:] = d_jac[:, ctx.other]
     if response == "x" and stencil[0].located.size and len(stencil) > 1:
-        # A true peak's entry holds the same peak at every design of the stencil unless the
-        # set of highest local maxima changed between them (its grid index jumps): then
-        # its curvature is unknown and left out.
-        located = np.stack([curves.located for curves in stencil])
-        changed = np.any(np.abs(located - located[0]) > 1, axis=0)
-        dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
+        dgrad = without_jumped_peaks(dgrad, [curves.located for curves in stencil],
+                                     stencil[0].located)
     curves = stencil[0]
     return Terms(getattr(curves, f"log_{response}"), getattr(curves, f"peak_{response}"), grad,
                  dgrad)
+
+
+def without_jumped_peaks(dgrad, located, reference) -> np.ndarray:
+    """`dgrad` (of host `Terms`) with the curvatures of the true peaks (its last rows, in
+    the order of their grid indices `reference`) left out (0) where the grid indices of
+    any design of `located` jumped from `reference` by more than one: a true peak's entry
+    holds the same peak at nearby designs unless the set of highest local maxima changed
+    between them, and then its curvature is unknown."""
+    changed = np.any(np.abs(np.atleast_2d(located) - reference) > 1, axis=0)
+    dgrad = dgrad.copy()
+    dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
+    return dgrad
 
 
 def smooth_max(candidates: Terms, sharpness):

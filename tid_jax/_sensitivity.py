@@ -22,6 +22,7 @@ from ._design import (
     coordinates,
     evaluate_designs,
     smooth_max,
+    without_jumped_peaks,
 )
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
@@ -150,8 +151,7 @@ def _polished(ctx, starts, tol, sharpness):
     away than `_SAME_CURVATURES` times the stencil's step is evaluated with its own."""
     finals = evaluate_designs(ctx, [(u, [scenario], [z]) for scenario, u, z, _ in starts],
                               stencil="central")
-    curvatures = [final.host_terms.dgrad for final in finals]
-    located = [final.centres()[0].located for final in finals]
+    first = list(finals)
     models = [Model(*smooth_max(final.host_terms, sharpness)) for final in finals]
     moving = range(len(starts))
     for _ in range(_POLISH):
@@ -169,10 +169,8 @@ def _polished(ctx, starts, tol, sharpness):
             for i, step in steps.items()], stencil="centre")
         moving = []
         for i, trial in zip(steps, trials, strict=True):
-            # A true peak whose grid index jumped is another peak: its curvature unknown.
-            dgrad = curvatures[i].copy()
-            changed = np.abs(trial.centres()[0].located - located[i]) > 1
-            dgrad[dgrad.shape[0] - changed.size:][changed] = 0.0
+            dgrad = without_jumped_peaks(first[i].host_terms.dgrad, trial.centres()[0].located,
+                                         first[i].centres()[0].located)
             trial = trial._replace(host_terms=trial.host_terms._replace(dgrad=dgrad))
             trial_model = Model(*smooth_max(trial.host_terms, sharpness))
             if trial_model.value < models[i].value:
