@@ -392,3 +392,13 @@ def test_coarse_settings():
     for name in ("coarse_rtol", "coarse_residual"):
         with pytest.raises(ValueError, match=name):
             tj.SolverSettings(**{name: -1.0})
+
+
+def test_tighter_settings():
+    settings = tj.SolverSettings(rtol=1e-8, atol=1e-9, periodicity_tol=1e-6)
+    tight = settings.tighter(10.0)
+    assert (tight.rtol, tight.atol, tight.periodicity_tol) == pytest.approx((1e-9, 1e-10, 1e-7))
+    assert tight.coarse_rtol == settings.coarse_rtol
+    # Exact friction has no integration error, and its own periodicity tolerance.
+    exact = settings.for_system(tj.paper_system().replace(friction_width=0.0))
+    assert exact.tighter(10.0) == exact

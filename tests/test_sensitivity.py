@@ -90,6 +90,20 @@ def test_elasticities_obey_scaling_laws(sensitivity):
         e = np.asarray(e)
         assert np.sum(e) == pytest.approx(1.0, abs=3e-3)
         assert e[a] + e[f] == pytest.approx(0.0, abs=3e-3)
+    # Time scaled by s (stiffnesses by s^2, dampings by s, forces by s^2 with the masses
+    # held) leaves x and y unchanged, the band and the relative friction width moving with
+    # the host frequency: sum_p (time units of p) e_p = time units of the quantity. (Not
+    # the stroke's: its peak is refined on the grid, which the derivatives hold fixed.)
+    units = {"host_stiffness": 2, "tid_stiffness": 2, "host_damping": 1, "tid_damping": 1,
+             "parasitic_damping": 1, "friction_force": 2, "amplitude": 2}
+    weights = np.array([units.get(name, 0) for name in sensitivity.parameters])
+    for e, units_of_quantity, tol in (
+        (sensitivity.host_elasticity, 0, 1e-4),
+        (optimum.host_elasticity, 0, 1e-4),
+        (optimum.stiffness_elasticity, 2, 3e-3),
+        (optimum.damping_elasticity, 1, 3e-3),
+    ):
+        assert weights @ np.asarray(e) == pytest.approx(units_of_quantity, abs=tol)
 
 
 def _reoptimised_log_differences(system, amplitude, band, name, value, rel, amplitudes=None):

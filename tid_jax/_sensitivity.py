@@ -34,6 +34,11 @@ POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the pol
 # The polishing's steps keep the curvatures of the central stencil at their start while
 # they move less than this fraction of its step (`_design.STENCIL_STEP`).
 _SAME_CURVATURES = 0.1
+# The polishing's orbits are this many times tighter (integration and periodicity) than
+# the settings': the curvatures, differences of gradients over the stencil's step,
+# multiply the orbits' errors by 1 / STENCIL_STEP. At the default settings, c*'s
+# elasticities would break its exact scaling law 2 e_K + e_C = 1 by up to 0.05.
+_POLISH_ACCURACY = 10.0
 
 # --- sensitivities -------------------------------------------------------------------------
 
@@ -57,7 +62,7 @@ class OptimumSensitivities(eqx.Module):
     - `stiffness_derivative`, `stiffness_elasticity`, `damping_derivative`,
       `damping_elasticity`: dk*/dp, dc*/dp (units of k or c per unit of p) and their
       elasticities, by implicit differentiation of the stationarity condition (elasticities
-      of c* are 0 when c* is at its bound 0).
+      of c* are NaN when c* is at its bound 0, where dc*/dp = 0).
     - `gradient_norm`: |dG/du| at the optimum, G the smooth log peak and u the design
       variables (ln k, sqrt c); `iterations`: Newton steps; `converged`: a stationary point
       was found and every steady state converged; `damping_at_bound`: c* = 0.
@@ -351,7 +356,10 @@ def amplitude_sensitivities(
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
         starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
                   for amplitude, index in zip(amplitudes, indices, strict=True)]
-        finals, models = _polished(ctx, starts, POLISH_TOL, retune_settings.sharpness[-1])
+        accurate = Context(system, band, settings.for_system(system).tighter(_POLISH_ACCURACY),
+                           locate=True)
+        finals, models = _polished(accurate, starts, POLISH_TOL,
+                                   retune_settings.sharpness[-1])
         optimal = [
             _optimum_sensitivities(ctx, theta, best, index, start[3], final, model, POLISH_TOL)
             for theta, index, start, final, model in zip(thetas, indices, starts, finals, models,

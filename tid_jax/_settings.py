@@ -103,6 +103,15 @@ class SolverSettings(eqx.Module):
         ratio = self.coarse_rtol / self.rtol
         return eqx.tree_at(lambda s: (s.rtol, s.atol), self, (self.coarse_rtol, self.atol * ratio))
 
+    def tighter(self, factor: float) -> "SolverSettings":
+        """These settings with `rtol`, `atol` and `periodicity_tol` `factor` times tighter;
+        exact friction, whose period map has no integration error, keeps its own."""
+        if self.exact_friction:
+            return self
+        return eqx.tree_at(lambda s: (s.rtol, s.atol, s.periodicity_tol), self,
+                           (self.rtol / factor, self.atol / factor,
+                            self.periodicity_tol / factor))
+
     def without_coarse(self) -> "SolverSettings":
         """These settings with every Newton iteration of a batch at `rtol`."""
         return eqx.tree_at(lambda s: s.coarse_rtol, self, self.rtol)
