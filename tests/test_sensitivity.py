@@ -1,6 +1,7 @@
 """Sensitivities of the peak response and of the optimal tuning: `tj.sensitivities`
 against finite differences, re-optimised differences and exact scaling laws."""
 
+import jax
 import numpy as np
 import pytest
 
@@ -61,6 +62,44 @@ def test_sensitivities_match_finite_differences(system, band, sensitivity):
         assert float(sensitivity.stroke_elasticity[i]) == pytest.approx(
             value * fd[1] / y0, rel=1e-4
         )
+
+
+def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
+    # The kernel takes derivatives at the samples of each response's highest candidates
+    # only; against the derivatives of every sample (jacfwd through the whole sweep), at
+    # 200 N (the stroke sticks over part of the band) and 700 N.
+    from tid_jax._band import sweep
+    from tid_jax._design import _TANGENT_CANDIDATES, Context, _changed_system, _log_candidates
+
+    settings = tj.SolverSettings().for_system(system)
+    ctx = Context(system, band, settings, locate=False)
+    k, c = float(system.tid_stiffness), float(system.tid_damping)
+    amplitudes = [200.0, 700.0]
+    z_init = ctx.cold_states(k, c, amplitudes, 1.0)
+    omegas = jax.numpy.asarray(band)
+    none = (jax.numpy.zeros(0, int), jax.numpy.zeros(0), jax.numpy.zeros(0, bool))
+
+    def every_sample(theta, z):
+        xs, ys, _, _ = sweep(_changed_system(system, theta, 1.0), theta[-1], omegas, settings, z)
+        return _log_candidates(xs, omegas, none), _log_candidates(ys, omegas, none)
+
+    for amplitude, z in zip(amplitudes, z_init, strict=True):
+        theta = ctx.theta(k, c, amplitude)
+        curves = ctx.evaluate([(theta, 1.0, z)])[0]
+        assert curves.converged
+        (log_x, mask_x), (log_y, mask_y) = every_sample(theta, z)
+        jac_x, jac_y = jax.jacfwd(lambda t, z=z: [a[0] for a in every_sample(t, z)])(theta)
+        for response, values, mask, jac in (("x", log_x, mask_x, jac_x),
+                                            ("y", log_y, mask_y, jac_y)):
+            kept = getattr(curves, f"peak_{response}")
+            # The highest candidates are kept, at most the kernel's number.
+            highest = np.argsort(np.where(mask, values, -np.inf))[::-1]
+            highest = highest[:min(_TANGENT_CANDIDATES, int(np.sum(mask)))]
+            assert np.array_equal(np.flatnonzero(kept), np.sort(highest)), response
+            np.testing.assert_allclose(getattr(curves, f"log_{response}")[kept],
+                                       np.asarray(values)[kept], rtol=0, atol=1e-7)
+            np.testing.assert_allclose(getattr(curves, f"jac_{response}")[kept],
+                                       np.asarray(jac)[kept], rtol=1e-5, atol=1e-9)
 
 
 def test_elasticities_obey_scaling_laws(sensitivity):

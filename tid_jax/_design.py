@@ -72,6 +72,8 @@ def parameters_of(system: TIDSystem) -> tuple[str, ...]:
 STENCIL_STEP = 1e-3
 UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
 _CHUNK = 3  # points per kernel call (one compiled shape for every use)
+# Grid candidates of each response per point whose derivatives are taken (`_point_curves`).
+_TANGENT_CANDIDATES = 4
 MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
 
 # The optimiser aims at a Newton decrement below `tol`; the noise of the orbit solver in the
@@ -119,12 +121,40 @@ def _changed_system(system, theta, scale):
                        list(values.values()))
 
 
+def _tangent_slots(values, omegas, located):
+    """The grid indices of the samples behind the `_TANGENT_CANDIDATES` highest grid
+    candidates of `values` over `omegas` (`_log_candidates`, without the true peaks at
+    the grid indices `located`): the three samples around each (entry i is sample i:
+    its parabola's; at a band end, the end's sample, once more, and its neighbour)."""
+    vertex, _, is_peak = parabola_vertices(values, omegas)
+    ends = jnp.ones(1, dtype=bool)
+    mask = jnp.concatenate([ends, is_peak, ends]).at[located].set(False)
+    candidates = jnp.concatenate([values[:1], vertex, values[-1:]])
+    _, entries = jax.lax.top_k(jnp.where(mask, candidates, -jnp.inf), _TANGENT_CANDIDATES)
+    return jnp.clip(entries[:, None] + jnp.arange(-1, 2), 0, values.size - 1).reshape(-1)
+
+
+def _with_tangents(has_tangent, true):
+    """Which candidate entries of `_log_candidates` have derivatives, from which samples
+    do (`has_tangent`): an interior entry's three samples, a band end's one; every true
+    peak (`true`, solved with its own derivatives)."""
+    interior = has_tangent[:-2] & has_tangent[1:-1] & has_tangent[2:]
+    return jnp.concatenate([has_tangent[:1], interior, has_tangent[-1:],
+                            jnp.ones(true[0].shape, dtype=bool)])
+
+
 def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
     `locate` (see `_log_candidates`), for the parameters `theta` (order `parameters_of(system)`),
-    with the host stiffness multiplied by `scale**2`."""
-    changed = _changed_system(system, theta, scale)
-    xs, ys, converged, states = sweep(changed, theta[-1], omegas, settings, z_init)
+    with the host stiffness multiplied by `scale**2`, and which entries carry derivatives
+    in `theta`. The orbits are solved over the grid without derivatives, then again with
+    them (shot from the grid's orbits) at the samples of each response's
+    `_TANGENT_CANDIDATES` highest grid candidates only (`_tangent_slots`): the forward-mode
+    derivatives are most of the cost of a solve. Lower grid candidates are no candidates
+    here; in a smooth maximum, each weighs less than any of those kept."""
+    held = jax.lax.stop_gradient(theta)
+    xs, ys, converged, states = sweep(_changed_system(system, held, scale), held[-1], omegas,
+                                      settings, z_init)
     states = jax.lax.stop_gradient(states)
 
     def located(values):
@@ -147,10 +177,19 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     # (see `_retune.response_peaks`).
     none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
     true_x = located(xs) if locate else none
+    slots = jnp.concatenate([_tangent_slots(xs, omegas, true_x[0]),
+                             _tangent_slots(ys, omegas, none[0])])
+    xs_at, ys_at, ok_at, _ = sweep(_changed_system(system, theta, scale), theta[-1],
+                                   omegas[slots], settings, states[slots])
+    xs, ys = xs.at[slots].set(xs_at), ys.at[slots].set(ys_at)
+    converged = converged.at[slots].set(converged[slots] & ok_at)
+    has_tangent = jnp.zeros(omegas.shape, dtype=bool).at[slots].set(True)
+    tangent_x, tangent_y = _with_tangents(has_tangent, true_x), _with_tangents(has_tangent, none)
     converged = jnp.concatenate([converged, jnp.isfinite(true_x[1]) | ~true_x[2]])
     log_x, peak_x = _log_candidates(xs, omegas, true_x)
     log_y, peak_y = _log_candidates(ys, omegas, none)
-    return (log_x, log_y), (log_x, log_y, peak_x, peak_y, converged, states, true_x[0])
+    return (log_x, log_y), (log_x, log_y, peak_x & tangent_x, peak_y & tangent_y, tangent_x,
+                            tangent_y, converged, states, true_x[0])
 
 
 @compiled
@@ -177,8 +216,9 @@ def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locat
 
 class _Curves(NamedTuple):
     """One design point (numpy): log refined values (ln m) of |x| and |y| per frequency
-    (then the true peaks of |x|, if located), their candidate masks (`_log_candidates`),
-    Jacobians `[entries, parameters]`, convergence of every orbit, the orbits' states and
+    (then the true peaks of |x|, if located), their candidate masks (`_log_candidates`,
+    the highest with derivatives: `_point_curves`), Jacobians `[entries, parameters]`
+    (NaN rows where none were taken), convergence of every orbit, the orbits' states and
     the grid indices of the true peaks."""
 
     log_x: np.ndarray
@@ -273,10 +313,12 @@ class Context:
                 jnp.asarray(z_init),
                 self.locate,
             )
-            jac_x, jac_y = np.asarray(jac_x), np.asarray(jac_y)
+            jac_x, jac_y = np.array(jac_x), np.array(jac_y)
             aux = [np.asarray(a) for a in aux]
+            # Entries without derivatives (`_point_curves`) are no candidates: NaN rows.
+            jac_x[~aux[4]], jac_y[~aux[5]] = np.nan, np.nan
             for i in range(used):
-                log_x, log_y, peak_x, peak_y, converged, states, located = (
+                log_x, log_y, peak_x, peak_y, _, _, converged, states, located = (
                     a[i] for a in aux
                 )
                 results.append(
@@ -360,6 +402,10 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
         dgrad[:, i, 0] = k * d_jac[:, _K] + (k * centre[:, _K] if i == 0 else 0.0)
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, _C] + (centre[:, _C] if i == 1 else 0.0))
         dgrad[:, i, 2:] = d_jac[:, ctx.other]
+    if len(stencil) > 1:
+        # An entry whose derivatives a neighbour did not take (`_point_curves`): its
+        # curvature is unknown.
+        dgrad[np.isnan(dgrad) & np.isfinite(grad)[:, None, :]] = 0.0
     if response == "x" and stencil[0].located.size and len(stencil) > 1:
         dgrad = without_jumped_peaks(dgrad, [curves.located for curves in stencil],
                                      stencil[0].located)
