@@ -289,7 +289,8 @@ def sensitivities(
     holding `amplitude`, or else from `best_tunings` with `max_steps`, `tol` and
     `retune_settings`), polished by at most `_POLISH` Newton steps on the same objective
     (the smooth maximum of `retune_settings.sharpness[-1]`, aiming at a Newton decrement
-    below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`), then differentiated
+    below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`; its orbits solved
+    `_POLISH_ACCURACY` times tighter than `settings`), then differentiated
     through its stationarity condition rather than re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
     The parameters are `parameters_of(system)`: the physical fields of the steady-state
