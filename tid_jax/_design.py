@@ -121,16 +121,14 @@ def _changed_system(system, theta, scale):
                        list(values.values()))
 
 
-def _tangent_slots(values, omegas, located):
+def _tangent_slots(values, omegas, true):
     """The grid indices of the samples behind the `_TANGENT_CANDIDATES` highest grid
-    candidates of `values` over `omegas` (`_log_candidates`, without the true peaks at
-    the grid indices `located`): the three samples around each (entry i is sample i:
-    its parabola's; at a band end, the end's sample, once more, and its neighbour)."""
-    vertex, _, is_peak = parabola_vertices(values, omegas)
-    ends = jnp.ones(1, dtype=bool)
-    mask = jnp.concatenate([ends, is_peak, ends]).at[located].set(False)
-    candidates = jnp.concatenate([values[:1], vertex, values[-1:]])
-    _, entries = jax.lax.top_k(jnp.where(mask, candidates, -jnp.inf), _TANGENT_CANDIDATES)
+    candidates of `values` over `omegas` (`_log_candidates`, with the true peaks `true`):
+    the three samples around each (entry i is sample i: its parabola's; at a band end,
+    the end's sample, once more, and its neighbour)."""
+    logs, mask = _log_candidates(values, omegas, true)
+    grid = slice(0, values.size)
+    _, entries = jax.lax.top_k(jnp.where(mask[grid], logs[grid], -jnp.inf), _TANGENT_CANDIDATES)
     return jnp.clip(entries[:, None] + jnp.arange(-1, 2), 0, values.size - 1).reshape(-1)
 
 
@@ -177,8 +175,7 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     # (see `_retune.response_peaks`).
     none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
     true_x = located(xs) if locate else none
-    slots = jnp.concatenate([_tangent_slots(xs, omegas, true_x[0]),
-                             _tangent_slots(ys, omegas, none[0])])
+    slots = jnp.concatenate([_tangent_slots(xs, omegas, true_x), _tangent_slots(ys, omegas, none)])
     xs_at, ys_at, ok_at, _ = sweep(_changed_system(system, theta, scale), theta[-1],
                                    omegas[slots], settings, states[slots])
     xs, ys = xs.at[slots].set(xs_at), ys.at[slots].set(ys_at)
@@ -406,9 +403,9 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
         # An entry whose derivatives a neighbour did not take (`_point_curves`): its
         # curvature is unknown.
         dgrad[np.isnan(dgrad) & np.isfinite(grad)[:, None, :]] = 0.0
-    if response == "x" and stencil[0].located.size and len(stencil) > 1:
-        dgrad = without_jumped_peaks(dgrad, [curves.located for curves in stencil],
-                                     stencil[0].located)
+        if response == "x" and stencil[0].located.size:
+            dgrad = without_jumped_peaks(dgrad, [curves.located for curves in stencil],
+                                         stencil[0].located)
     curves = stencil[0]
     return Terms(getattr(curves, f"log_{response}"), getattr(curves, f"peak_{response}"), grad,
                  dgrad)
