@@ -21,6 +21,9 @@ if "TID_JAX_CACHE_DIR" not in os.environ:
     _session_cache = tempfile.mkdtemp(prefix="tid_jax_test_cache_")
     os.environ["TID_JAX_CACHE_DIR"] = _session_cache
 enable_compilation_cache()
+# The test workers (pytest-xdist) already take every core: no worker processes of the
+# library's own (`_workers`), unless a test asks for them.
+os.environ.setdefault("TID_JAX_WORKERS", "1")
 
 
 def pytest_sessionfinish(session):

@@ -278,3 +278,17 @@ def test_check_grid_orbits_interpolate_between_design_points():
         fine = np.arange((n - 1) * r + 1) / r
         np.testing.assert_allclose(np.asarray(z[0]),
                                    np.stack([fine, 2 * fine, -fine, fine + 1], -1))
+
+def test_worker_processes_retune_as_this_process_alone(system, band, monkeypatch):
+    # The amplitudes dealt out to this process and a worker process (which loads the same
+    # compiled programs from the cache): the same designs as one process optimising them
+    # one after another.
+    amplitudes = [300.0, 1500.0, 3000.0]
+    monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "1")
+    alone = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
+    monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "2")
+    shared = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
+    assert len(tj._workers._pool) == 1
+    for name in ("tid_stiffness", "tid_damping", "x_peak", "iterations", "status"):
+        np.testing.assert_allclose(getattr(shared, name), getattr(alone, name), rtol=1e-12,
+                                   err_msg=name)

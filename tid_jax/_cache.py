@@ -85,6 +85,12 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     return folder
 
 
+def cache_folder() -> Path | None:
+    """The folder of the compilation cache if `enable_compilation_cache` turned it on in
+    this process, else `None`."""
+    return None if _programs_folder is None else _programs_folder.parent
+
+
 def _used(path: Path) -> None:
     """Mark the kept program at `path` as in use (not stale)."""
     try:

@@ -43,6 +43,7 @@ from ._sharding import sharded_batch
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
+from ._workers import run_lanes, start_workers
 
 
 class RetuneSettings(eqx.Module):
@@ -226,6 +227,17 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
     if amplitudes.shape[0] == 1:
         return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
     return jax.vmap(lane)(*args)
+
+
+def _stage_lanes(lanes, options: dict):
+    """One stage (`_optimise_stage`) of the lanes `(systems, amplitudes, bands, designs,
+    orbits, inverse Hessians)` (NumPy arrays, sharded over the devices), its results as
+    NumPy arrays: a task of `run_lanes`."""
+    options = dict(options, sharpness=jnp.asarray(options["sharpness"]),
+                   tol=jnp.asarray(options["tol"]))
+    out = sharded_batch(lambda s, a, w, u, z, h: _optimise_stage(s, a, u, z, h, w, **options),
+                        *lanes)
+    return jax.tree.map(np.asarray, out)
 
 
 def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
@@ -452,6 +464,9 @@ def optimal_tunings(
     sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
     k_ref, c_ref, k0, c0, u, hessian_inv = _initial_design(systems, amps)
     iterations = np.zeros(amps.shape, dtype=int)
+    # Several CPU cores: worker processes for the stages below, started now so that they
+    # load while the initial tuning is solved.
+    start_workers(amps.size)
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)
@@ -466,10 +481,9 @@ def optimal_tunings(
         # Stages before the last only bring the design near the optimum.
         stage_tol = (tol if stage == len(sharpnesses)
                      else max(tol, retune_settings.continuation_tol))
-        stage_run = ft.partial(
-            _optimise_stage, sharpness=jnp.asarray(float(sharpness)), settings=settings,
-            max_steps=max_steps, tol=jnp.asarray(stage_tol),
-            design_newton_steps=retune_settings.design_newton_steps,
+        options = dict(
+            sharpness=float(sharpness), settings=settings, max_steps=max_steps,
+            tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
             max_rejected_steps=retune_settings.max_rejected_steps,
             max_design_step=float(retune_settings.max_design_step),
         )
@@ -477,16 +491,14 @@ def optimal_tunings(
         if moving.size:
             lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
                                  (systems, amps, bands, u, orbits, hessian_inv))
-            # As many lanes per call as there are devices (one on each): one compiled
-            # program serves any number of lanes.
-            parts = [
-                sharded_batch(lambda s, a, w, u, z, h: stage_run(s, a, u, z, h, w),
-                              *jax.tree.map(lambda a, start=start: a[start : start + group],
-                                            lanes))
+            # As many lanes per call as there are devices (one on each), one call per core
+            # at a time on a CPU: one compiled program serves any number of lanes.
+            parts = run_lanes(_stage_lanes, [
+                (jax.tree.map(lambda a, start=start: a[start : start + group], lanes), options)
                 for start in range(0, moving.size, group)
-            ]
+            ])
             new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
-                lambda *values: np.concatenate([np.asarray(v) for v in values]), *parts)
+                lambda *values: np.concatenate(values), *parts)
             u, orbits, hessian_inv, ok = _set_lanes(
                 (u, orbits, hessian_inv, ok), moving, (new_u, new_orbits, new_hessian_inv, new_ok))
         iterations[moving] += steps

@@ -11,12 +11,14 @@ status 2.
 """
 
 import argparse
+import os
 import sys
 
 import jax
 
 from .. import __version__
 from .._cache import enable_compilation_cache
+from .._workers import WORKERS_ENVIRONMENT_VARIABLE
 from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser
 from .frf import FRF_COLUMNS as FRF_COLUMNS
 from .frf import _add_frf_parser, _run_frf
@@ -70,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if not args.no_cache:
             enable_compilation_cache(args.cache_dir)
+        if args.workers is not None:
+            if args.workers < 1:
+                raise CLIError(f"--workers must be at least 1, got {args.workers}")
+            os.environ[WORKERS_ENVIRONMENT_VARIABLE] = str(args.workers)
         return _COMMANDS[args.command][1](args)
     except (CLIError, ValueError, OSError) as error:
         print(f"{PROG}: error: {_one_line(error)}", file=sys.stderr)

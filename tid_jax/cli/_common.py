@@ -37,6 +37,7 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
+from .._workers import WORKERS_ENVIRONMENT_VARIABLE
 
 PROG = "tid-jax"
 EXIT_ERROR = 2
@@ -190,6 +191,15 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         dest="no_cache",
         action="store_true",
         help=f"compile afresh and save nothing (also: {CACHE_ENVIRONMENT_VARIABLE}=off)",
+    )
+    processes = parser.add_argument_group("processes")
+    processes.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"processes that share the optimised amplitudes on a CPU, this one included "
+        f"(default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: this "
+        "process alone)",
     )
 
 

@@ -1,0 +1,58 @@
+import math
+import os
+import time
+
+import pytest
+
+from tid_jax import _workers
+from tid_jax._workers import WORKERS_ENVIRONMENT_VARIABLE, process_count, run_lanes
+
+
+def _slow_pid(seconds):
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def _die_outside(pid):
+    """Ends the process running it unless it is the process `pid`."""
+    if os.getpid() != pid:
+        os._exit(3)
+    return "done here"
+
+
+@pytest.fixture
+def two_processes(monkeypatch):
+    monkeypatch.setenv(WORKERS_ENVIRONMENT_VARIABLE, "2")
+
+
+def test_lanes_are_shared_with_a_worker_process_and_returned_in_order(two_processes):
+    assert process_count(8) == 2
+    assert process_count(1) == 1
+    # Slow enough that the worker, once started, takes some of them.
+    pids = run_lanes(_slow_pid, [(0.5,)] * 12)
+    assert len(pids) == 12
+    assert os.getpid() in pids
+    assert len(set(pids)) == 2
+    assert run_lanes(pow, [(2, i) for i in range(9)]) == [2**i for i in range(9)]
+
+
+def test_an_error_in_a_worker_is_raised_here(two_processes):
+    with pytest.raises(ValueError, match="math domain error"):
+        run_lanes(math.sqrt, [(4.0,), (9.0,), (-1.0,), (16.0,)])
+    # The workers still serve later calls.
+    assert run_lanes(math.sqrt, [(4.0,), (9.0,)]) == [2.0, 3.0]
+
+
+def test_tasks_of_a_worker_that_died_are_done_here(two_processes):
+    here = os.getpid()
+    assert run_lanes(_die_outside, [(here,)] * 4) == ["done here"] * 4
+    # A new worker replaces it.
+    assert run_lanes(math.sqrt, [(4.0,), (9.0,)]) == [2.0, 3.0]
+    assert all(worker.alive() for worker in _workers._pool)
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "two", ""])
+def test_bad_worker_count_is_refused_with_its_name(monkeypatch, value):
+    monkeypatch.setenv(WORKERS_ENVIRONMENT_VARIABLE, value)
+    with pytest.raises(ValueError, match=WORKERS_ENVIRONMENT_VARIABLE):
+        process_count(4)

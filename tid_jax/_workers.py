@@ -1,0 +1,232 @@
+"""Independent lanes solved at once in worker processes, one per CPU core.
+
+XLA runs each program on one core of a CPU, and the retune's lanes (one amplitude or
+scenario each, optimised independently) are solved one after another on one device. On a
+CPU with several cores, `run_lanes` deals them out to this process and to worker
+processes, each taking the next lane as it finishes one.
+Processes, not threads: two threads of one process executing XLA's CPU programs at once
+can deadlock in its runtime. The workers start when first needed and serve every later
+call of this process; they compute as this process does (the same precision and the same
+compilation cache, which they load their programs from) and end with it.
+
+The number of processes is `$TID_JAX_WORKERS` (1: no workers), else the CPU cores this
+process may use; off the CPU or with several devices there are no workers (the lanes are
+sharded over the devices instead, `_sharding`).
+"""
+
+import atexit
+import os
+import pickle
+import subprocess
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import equinox._errors
+import jax
+
+from ._cache import cache_folder, enable_compilation_cache
+
+WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
+
+_pool: list["_Worker"] = []
+
+
+def process_count(lanes: int) -> int:
+    """The processes (this one and its workers) that `run_lanes` uses for `lanes` lanes.
+
+    **Arguments:** `lanes`, the number of lanes; `$TID_JAX_WORKERS` is read.
+
+    **Returns:** `$TID_JAX_WORKERS` if set, else the CPU cores available to this process,
+    at most `lanes`; 1 off the CPU or with several JAX devices.
+
+    **Raises:** `ValueError` if `$TID_JAX_WORKERS` is not a whole number >= 1.
+    """
+    value = os.environ.get(WORKERS_ENVIRONMENT_VARIABLE)
+    if value is None:
+        count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+    else:
+        try:
+            count = int(value)
+        except ValueError:
+            count = 0
+        if count < 1:
+            raise ValueError(f"${WORKERS_ENVIRONMENT_VARIABLE} must be a whole number of "
+                             f"processes >= 1 (1: no worker processes), got {value!r}")
+    if jax.default_backend() != "cpu" or len(jax.devices()) > 1:
+        return 1
+    return max(1, min(count, lanes))
+
+
+def start_workers(lanes: int) -> None:
+    """Start the worker processes that `run_lanes` will use for `lanes` lanes, so that
+    they load while this process computes."""
+    _workers(process_count(lanes) - 1)
+
+
+def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
+    """`[function(*task) for task in tasks]`, the tasks dealt out to this process and its
+    workers (`process_count(len(tasks))` processes in all), each taking the next as it
+    finishes one.
+
+    `function` must be a module-level function of this package (it is sent to the workers
+    by name), and its arguments and results picklable (NumPy arrays, not JAX arrays). An
+    error raised by `function` is raised here (the one of the first such task); a task
+    whose worker died is done in this process.
+    """
+    tasks = list(tasks)
+    workers = _workers(process_count(len(tasks)) - 1)
+    if not workers:
+        return [function(*task) for task in tasks]
+    results: list = [None] * len(tasks)
+    errors: dict[int, BaseException] = {}
+    left = list(range(len(tasks)))[::-1]
+    lock = threading.Lock()
+
+    def take():
+        with lock:
+            return left.pop() if left and not errors else None
+
+    def serve(worker: "_Worker"):
+        while (i := take()) is not None:
+            try:
+                results[i] = worker.run(function, tasks[i])
+            except _WorkerLost:
+                with lock:
+                    left.append(i)
+                return
+            except Exception as error:
+                errors[i] = error
+
+    threads = [threading.Thread(target=serve, args=(worker,), daemon=True)
+               for worker in workers]
+    for thread in threads:
+        thread.start()
+    while (i := take()) is not None:
+        try:
+            results[i] = function(*tasks[i])
+        except Exception as error:
+            errors[i] = error
+    for thread in threads:
+        thread.join()
+    # Tasks of workers that died after this process ran out of its own.
+    while (i := take()) is not None:
+        results[i] = function(*tasks[i])
+    if errors:
+        raise errors[min(errors)]
+    return results
+
+
+class _WorkerLost(Exception):
+    """The worker process ended (killed, or out of memory) before it answered."""
+
+
+class _Worker:
+    """A worker process and the pipes to it: it receives `(function, args)` pickled and
+    answers `("ok", result)` or `("error", exception)`."""
+
+    def __init__(self):
+        package_root = str(Path(__file__).resolve().parent.parent)
+        path = os.environ.get("PYTHONPATH")
+        env = dict(
+            os.environ,
+            # As this process computes (JAX reads these when imported).
+            JAX_ENABLE_X64=str(bool(jax.config.jax_enable_x64)),
+            EQX_ON_ERROR=equinox._errors.EQX_ON_ERROR,
+            JAX_PLATFORMS="cpu",
+            # This package from where this process has it, and no workers of its own.
+            PYTHONPATH=package_root + (os.pathsep + path if path else ""),
+            **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
+        )
+        serve = f"from {__name__} import _serve; _serve()"
+        self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        folder = cache_folder()
+        self._send(None if folder is None else str(folder))
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def _send(self, message) -> None:
+        try:
+            pickle.dump(message, self.process.stdin)
+            self.process.stdin.flush()
+        except (BrokenPipeError, OSError):
+            raise _WorkerLost from None
+
+    def run(self, function: Callable, args: tuple):
+        self._send((function, args))
+        try:
+            outcome, value = pickle.load(self.process.stdout)
+        except (EOFError, OSError, pickle.UnpicklingError):
+            raise _WorkerLost from None
+        if outcome == "error":
+            raise value
+        return value
+
+    def stop(self) -> None:
+        """End the worker: closing its input ends its loop; a worker that does not end
+        within 5 s is killed."""
+        try:
+            self.process.stdin.close()
+        except OSError:
+            pass
+        try:
+            self.process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self.process.stdout.close()
+
+
+def _workers(count: int) -> list[_Worker]:
+    """`count` running workers, started as needed and kept for later calls."""
+    for worker in [worker for worker in _pool if not worker.alive()]:
+        worker.stop()
+        _pool.remove(worker)
+    while len(_pool) < count:
+        _pool.append(_Worker())
+    return _pool[:max(count, 0)]
+
+
+@atexit.register
+def _stop_workers() -> None:
+    for worker in _pool:
+        worker.stop()
+    _pool.clear()
+
+
+def _answer(function, args):
+    """What a worker sends back for `function(*args)`: an exception that cannot be sent
+    becomes a `RuntimeError` with its message."""
+    try:
+        outcome = ("ok", function(*args))
+    except Exception as error:
+        outcome = ("error", error)
+    try:
+        return pickle.dumps(outcome)
+    except Exception:
+        error = outcome[1] if outcome[0] == "error" else None
+        message = (f"{type(error).__name__}: {error}" if error is not None
+                   else f"the result of {function.__qualname__} cannot be sent back")
+        return pickle.dumps(("error", RuntimeError(message)))
+
+
+def _serve() -> None:
+    """A worker's loop: tasks from stdin, answers on the original stdout (whatever else
+    prints to stdout goes to stderr)."""
+    answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    tasks = sys.stdin.buffer
+    folder = pickle.load(tasks)
+    if folder is not None:
+        enable_compilation_cache(folder)
+    while True:
+        try:
+            function, args = pickle.load(tasks)
+        except EOFError:
+            return
+        answers.write(_answer(function, args))
+        answers.flush()
