@@ -43,7 +43,7 @@ from ._sharding import sharded_batch
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
-from ._workers import run_lanes, start_workers
+from ._workers import process_count, run_lanes, start_workers
 
 
 class RetuneSettings(eqx.Module):
@@ -238,6 +238,13 @@ def _stage_lanes(lanes, options: dict):
     out = sharded_batch(lambda s, a, w, u, z, h: _optimise_stage(s, a, u, z, h, w, **options),
                         *lanes)
     return jax.tree.map(np.asarray, out)
+
+
+def _check_lanes(systems, amplitudes, omegas, warm, settings):
+    """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
+    its `response_peaks`, as NumPy arrays: a task of `run_lanes`."""
+    response = lane_response(systems, amplitudes, omegas, settings, warm)
+    return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
 
 
 def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
@@ -507,8 +514,17 @@ def optimal_tunings(
             f"{int(np.max(steps, initial=0))} iterations at most")
     k, c, both_systems, both_amplitudes, fine, warm = _check_batch(
         systems, amps, bands, u, k_ref, c_ref, initial_states, orbits[1], refinement)
-    both = lane_response(both_systems, both_amplitudes, fine, settings, warm)
-    found = response_peaks(both_systems, both, settings)
+    # One share of the lanes per process (`run_lanes`), dealt out in turn: the initial and
+    # retuned designs alike to each.
+    lanes = both_amplitudes.shape[0]
+    shares = [np.arange(lanes)[i::process_count(lanes)] for i in range(process_count(lanes))]
+    parts = run_lanes(_check_lanes, [
+        (*jax.tree.map(lambda a, share=share: np.asarray(a)[share],
+                       (both_systems, both_amplitudes, fine, warm)), settings)
+        for share in shares
+    ])
+    order = np.argsort(np.concatenate(shares))
+    both, found = jax.tree.map(lambda *values: np.concatenate(values)[order], *parts)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")

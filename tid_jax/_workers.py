@@ -96,6 +96,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
             except _WorkerLost:
                 with lock:
                     left.append(i)
+                worker.stop()  # so that the next call starts another
                 return
             except Exception as error:
                 errors[i] = error

@@ -15,6 +15,7 @@ import matplotlib.ticker as ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._io import atomic_path  # noqa: E402
+from ._workers import run_lanes  # noqa: E402
 
 LINEAR_STYLE = dict(color="black", linestyle="--", linewidth=2.0, label="linear TID (no friction)")
 HOST_FREQUENCY_STYLE = dict(color="0.5", linestyle=":", linewidth=1.2)
@@ -25,6 +26,17 @@ def save_figure(fig, path: str | os.PathLike) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=130)
     plt.close(fig)
+
+
+def save_figures(figures) -> None:
+    """Draw and save each of `figures`, `(plot_function, args, kwargs, path)`, as
+    `save_figure(plot_function(*args, **kwargs), path)`: at once in worker processes on
+    several CPU cores (`_workers.run_lanes`; the arguments NumPy arrays)."""
+    run_lanes(_draw_and_save, [tuple(figure) for figure in figures])
+
+
+def _draw_and_save(plot_function, args, kwargs, path) -> None:
+    save_figure(plot_function(*args, **kwargs), path)
 
 
 def _amplitude_colours(amplitudes):

@@ -137,21 +137,18 @@ def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit
     k_ratio = np.asarray(result.tid_stiffness) / k_dh
     c_ratio = np.asarray(result.tid_damping) / c_dh
     linear_hz, x_linear, _ = _linear_curves(system, frequencies_hz)
-    plot.save_figure(
-        plot.plot_retune_responses(
+    plot.save_figures([
+        (plot.plot_retune_responses, (
             np.asarray(result.check_omegas) / (2 * math.pi),
             amplitudes,
             np.asarray(result.x_response_initial) / static[:, None],
             np.asarray(result.x_response) / static[:, None],
             k_ratio,
             c_ratio,
-            linear=(linear_hz, x_linear),
-            host_frequency_hz=_host_frequency_hz(system),
-        ),
-        output.path("retune_frequency_response.png"),
-    )
-    plot.save_figure(
-        plot.plot_retune_summary(
+        ), dict(linear=(linear_hz, np.asarray(x_linear)),
+                host_frequency_hz=_host_frequency_hz(system)),
+         output.path("retune_frequency_response.png")),
+        (plot.plot_retune_summary, (
             amplitudes,
             k_ratio,
             c_ratio,
@@ -159,11 +156,9 @@ def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit
             np.asarray(result.x_peak) / static,
             np.asarray(result.y_peak_initial),
             np.asarray(result.y_peak),
-            stroke_limit=stroke_limit,
-            converged=np.asarray(result.converged),
-        ),
-        output.path("retune_summary.png"),
-    )
+        ), dict(stroke_limit=stroke_limit, converged=np.asarray(result.converged)),
+         output.path("retune_summary.png")),
+    ])
 
 
 def _table(records, system, stroke_limit) -> str:
