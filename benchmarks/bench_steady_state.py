@@ -15,7 +15,9 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
   and looser integration tolerances (a row of its own for the fastest whose peaks all
   match the reference within 1e-4 on all 732 points, where that beats the default);
 - time per orbit against batch size;
-- the 12-amplitude paper retune in a child process (cold, then warm), and `tid-jax
+- the 12-amplitude paper retune in a child process (cold, then warm) on its defaults (one
+  process per CPU core) and, side by side, in one process and with exact friction; and
+  `tid-jax
   retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
   cold, again with the compilation cache filled by the first run, and then for two other
   amplitudes (`--cli-only`: this table alone, written to its own block of `--readme`);
@@ -99,17 +101,28 @@ def choose_tid_settings(system, omegas, amplitudes, reference, default_seconds):
     return (*best, tried)
 
 
-def run_retune_child(limit_s):
-    """The 12-amplitude paper retune on 61 frequencies in a child process: cold (import
-    and compilation included, no compilation cache), then warm. Returns the wall times and
-    the number of amplitudes with status ok, or None if stopped at `limit_s`."""
+# The paper retune's variants, side by side: (label, friction_width argument of
+# `paper_system`, processes); the first is the defaults.
+RETUNE_VARIANTS = (
+    ("defaults (relative friction width), one process per CPU core", "", None),
+    ("defaults, one process (`TID_JAX_WORKERS=1`)", "", "1"),
+    ("exact friction (`friction_width=0`), one process per CPU core", "friction_width=0.0",
+     None),
+)
+
+
+def run_retune_child(limit_s, system_arguments="", workers=None):
+    """The 12-amplitude paper retune on 61 frequencies in a child process (the system
+    `paper_system(system_arguments)`, `workers` processes, default one per core): cold
+    (import and compilation included, no compilation cache), then warm. Returns the wall
+    times and the number of amplitudes with status ok, or None if stopped at `limit_s`."""
     code = f"""
 import json, time
 start = time.perf_counter()
 import jax
 jax.config.update("jax_enable_x64", True)
 import tid_jax as tj
-system = tj.paper_system()
+system = tj.paper_system({system_arguments})
 omegas = tj.default_omegas(system, {DEFAULT_FREQUENCIES})
 run = lambda: jax.block_until_ready(tj.retune(system, tj.PAPER_AMPLITUDES, omegas=omegas))
 result = run()
@@ -119,9 +132,12 @@ run()
 print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
                       ok=int(result.converged.sum()))))
 """
+    env = dict(os.environ)
+    if workers is not None:
+        env["TID_JAX_WORKERS"] = workers
     try:
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                              timeout=limit_s)
+                              timeout=limit_s, env=env)
     except subprocess.TimeoutExpired:
         return None
     if done.returncode != 0:
@@ -129,16 +145,24 @@ print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def retune_row(retune) -> str:
-    """The paper retune's timings (`run_retune_child`) as a line of text."""
-    text = ("stopped" if retune is None else
-            f"{retune['cold']:.0f} s cold (import and compilation included), "
-            f"{retune['warm']:.1f} s warm; {retune['ok']}/12 status ok")
-    return (f"Paper retune (`tj.retune`, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies, "
-            f"default friction width): {text}.")
+def retune_rows(limit_s) -> list[str]:
+    """The paper retune's timings (`run_retune_child`) for each of `RETUNE_VARIANTS`, run
+    one after the other: table rows."""
+    rows = [f"| paper retune (`tj.retune`, 12 amplitudes x {DEFAULT_FREQUENCIES} frequencies, "
+            "child process) | cold (import and compilation) | warm (same process) | "
+            "status ok |", "|---|---|---|---|"]
+    for label, arguments, workers in RETUNE_VARIANTS:
+        retune = run_retune_child(limit_s, arguments, workers)
+        text = (["stopped"] * 3 if retune is None else
+                [f"{retune['cold']:.0f} s", f"{retune['warm']:.1f} s", f"{retune['ok']}/12"])
+        rows.append(f"| {label} | " + " | ".join(text) + " |")
+    return rows
 
 
-CLI_COMMANDS = ("retune", "sensitivity", "robust")
+# (command, flags): each on the paper's defaults, and the retune side by side in one
+# process.
+CLI_COMMANDS = (("retune", ()), ("retune", ("--workers", "1")), ("sensitivity", ()),
+                ("robust", ()))
 
 
 # The amplitudes of the third run of each command: others than the defaults, fewer of them.
@@ -172,12 +196,14 @@ def cli_table(limit_s) -> list[str]:
     rows = ["| command (paper defaults, end to end) | first run, empty cache | "
             f"second run, cache filled | third run, `--amplitudes {other}` |",
             "|---|---|---|---|"]
-    for command in CLI_COMMANDS:
+    for command, flags in CLI_COMMANDS:
         with tempfile.TemporaryDirectory() as cache:
-            walls = [run_cli(command, cache, limit_s), run_cli(command, cache, limit_s),
-                     run_cli(command, cache, limit_s, ("--amplitudes", *OTHER_AMPLITUDES))]
+            walls = [run_cli(command, cache, limit_s, flags),
+                     run_cli(command, cache, limit_s, flags),
+                     run_cli(command, cache, limit_s,
+                             (*flags, "--amplitudes", *OTHER_AMPLITUDES))]
         text = ["stopped" if wall is None else f"{wall:.0f} s" for wall in walls]
-        rows.append(f"| `tid-jax {command}` | " + " | ".join(text) + " |")
+        rows.append(f"| `tid-jax {' '.join((command, *flags))}` | " + " | ".join(text) + " |")
     return rows
 
 
@@ -221,7 +247,7 @@ def main():
     args = parser.parse_args()
     if args.cli_only:
         lines = [f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, JAX "
-                 f"{jax.__version__}.", "", retune_row(run_retune_child(TIME_LIMIT_S)), ""]
+                 f"{jax.__version__}.", "", *retune_rows(TIME_LIMIT_S), ""]
         lines += cli_table(TIME_LIMIT_S)
         print("\n".join(lines))
         if args.readme:
@@ -285,7 +311,7 @@ def main():
 
     retune = cli_rows = None
     if not args.skip_retune:
-        retune = run_retune_child(TIME_LIMIT_S)
+        retune = retune_rows(TIME_LIMIT_S)
         cli_rows = cli_table(TIME_LIMIT_S)
     reached = reach(args.reach, 0) if args.reach else None
 
@@ -328,7 +354,8 @@ def main():
         say(f"| {size} | {cold:.2f} s | {warm:.3f} s | {warm / size * 1e3:.2f} ms |")
     if not args.skip_retune:
         say()
-        say(retune_row(retune))
+        for row in retune:
+            say(row)
         say()
         for row in cli_rows:
             say(row)
