@@ -56,3 +56,13 @@ def test_bad_worker_count_is_refused_with_its_name(monkeypatch, value):
     monkeypatch.setenv(WORKERS_ENVIRONMENT_VARIABLE, value)
     with pytest.raises(ValueError, match=WORKERS_ENVIRONMENT_VARIABLE):
         process_count(4)
+
+
+def test_a_compiling_task_runs_here_first_and_new_workers_wait_for_it(two_processes):
+    started = time.perf_counter()
+    pids = run_lanes(_slow_pid, [(0.5,)] * 3, compiles=True)
+    # This process took the last task first; a worker new to the function waited for it
+    # (0.5 s) before taking its first, so three tasks took at least two rounds.
+    assert pids[-1] == os.getpid()
+    assert time.perf_counter() - started >= 1.0
+    assert len(pids) == 3

@@ -503,7 +503,7 @@ def optimal_tunings(
             parts = run_lanes(_stage_lanes, [
                 (jax.tree.map(lambda a, start=start: a[start : start + group], lanes), options)
                 for start in range(0, moving.size, group)
-            ])
+            ], compiles=True)
             new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
                 lambda *values: np.concatenate(values), *parts)
             u, orbits, hessian_inv, ok = _set_lanes(
@@ -522,7 +522,7 @@ def optimal_tunings(
         (*jax.tree.map(lambda a, share=share: np.asarray(a)[share],
                        (both_systems, both_amplitudes, fine, warm)), settings)
         for share in shares
-    ])
+    ], compiles=True)
     order = np.argsort(np.concatenate(shares))
     both, found = jax.tree.map(lambda *values: np.concatenate(values)[order], *parts)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)

@@ -66,7 +66,7 @@ def start_workers(lanes: int) -> None:
     _workers(process_count(lanes) - 1)
 
 
-def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
+def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = False) -> list:
     """`[function(*task) for task in tasks]`, the tasks dealt out to this process and its
     workers (`process_count(len(tasks))` processes in all), each taking the next as it
     finishes one.
@@ -74,7 +74,11 @@ def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
     `function` must be a module-level function of this package (it is sent to the workers
     by name), and its arguments and results picklable (NumPy arrays, not JAX arrays). An
     error raised by `function` is raised here (the one of the first such task); a task
-    whose worker died is done in this process.
+    whose worker died is done in this process. With `compiles`, `function` runs a compiled
+    program that a worker running it for the first time would compile too: this process
+    runs the last task first, compiling the program (or loading it from the compilation
+    cache), and such a worker waits for it, then loads the program from the cache instead
+    of compiling it again at the same time.
     """
     tasks = list(tasks)
     workers = _workers(process_count(len(tasks)) - 1)
@@ -84,15 +88,20 @@ def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
     errors: dict[int, BaseException] = {}
     left = list(range(len(tasks)))[::-1]
     lock = threading.Lock()
+    compiled_here = threading.Event()
+    name = f"{function.__module__}.{function.__qualname__}"
 
-    def take():
+    def take(last=False):
         with lock:
-            return left.pop() if left and not errors else None
+            return left.pop(0 if last else -1) if left and not errors else None
 
     def serve(worker: "_Worker"):
+        if compiles and name not in worker.ran:
+            compiled_here.wait()
         while (i := take()) is not None:
             try:
                 results[i] = worker.run(function, tasks[i])
+                worker.ran.add(name)
             except _WorkerLost:
                 with lock:
                     left.append(i)
@@ -105,11 +114,15 @@ def run_lanes(function: Callable, tasks: Sequence[tuple]) -> list:
                for worker in workers]
     for thread in threads:
         thread.start()
-    while (i := take()) is not None:
+    first = True
+    while (i := take(last=compiles and first)) is not None:
         try:
             results[i] = function(*tasks[i])
         except Exception as error:
             errors[i] = error
+        first = False
+        compiled_here.set()
+    compiled_here.set()
     for thread in threads:
         thread.join()
     # Tasks of workers that died after this process ran out of its own.
@@ -142,6 +155,7 @@ class _Worker:
             **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
         )
         serve = f"from {__name__} import _serve; _serve()"
+        self.ran: set[str] = set()  # the functions it has run (their programs loaded)
         self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         folder = cache_folder()
