@@ -517,7 +517,8 @@ def optimal_tunings(
     # One share of the lanes per process (`run_lanes`), dealt out in turn: the initial and
     # retuned designs alike to each.
     lanes = both_amplitudes.shape[0]
-    shares = [np.arange(lanes)[i::process_count(lanes)] for i in range(process_count(lanes))]
+    count = process_count(lanes)
+    shares = [np.arange(lanes)[i::count] for i in range(count)]
     parts = run_lanes(_check_lanes, [
         (*jax.tree.map(lambda a, share=share: np.asarray(a)[share],
                        (both_systems, both_amplitudes, fine, warm)), settings)
