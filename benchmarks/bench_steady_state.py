@@ -17,8 +17,7 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
 - time per orbit against batch size;
 - the 12-amplitude paper retune in a child process (cold, then warm) on its defaults (one
   process per CPU core) and, side by side, in one process and with exact friction; and
-  `tid-jax
-  retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
+  `tid-jax retune`, `tid-jax sensitivity` and `tid-jax robust` end to end on the paper's defaults,
   cold, again with the compilation cache filled by the first run, and then for two other
   amplitudes (`--cli-only`: this table alone, written to its own block of `--readme`);
 - reach: random structures (`tests/reference/family.py`) at a friction width of 1e-4 m/s,

@@ -110,19 +110,21 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
             except Exception as error:
                 errors[i] = error
 
-    threads = [threading.Thread(target=serve, args=(worker,), daemon=True)
-               for worker in workers]
-    for thread in threads:
-        thread.start()
-    first = True
-    while (i := take(last=compiles and first)) is not None:
+    def run_here(i: int):
         try:
             results[i] = function(*tasks[i])
         except Exception as error:
             errors[i] = error
-        first = False
-        compiled_here.set()
+
+    threads = [threading.Thread(target=serve, args=(worker,), daemon=True)
+               for worker in workers]
+    for thread in threads:
+        thread.start()
+    if compiles and (i := take(last=True)) is not None:
+        run_here(i)
     compiled_here.set()
+    while (i := take()) is not None:
+        run_here(i)
     for thread in threads:
         thread.join()
     # Tasks of workers that died after this process ran out of its own.
