@@ -141,6 +141,23 @@ def _with_tangents(has_tangent, true):
                             jnp.ones(true[0].shape, dtype=bool)])
 
 
+class _PointOutputs(NamedTuple):
+    """One point's outputs of `_point_curves` beside the log values it differentiates: log
+    values of |x| and |y| (`_log_candidates`), their candidate masks, which entries carry
+    derivatives, convergence of every entry, the grid's orbit states and the grid indices
+    of the host's true peaks."""
+
+    log_x: Array
+    log_y: Array
+    peak_x: Array
+    peak_y: Array
+    tangent_x: Array
+    tangent_y: Array
+    converged: Array
+    states: Array
+    located: Array
+
+
 def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
     `locate` (see `_log_candidates`), for the parameters `theta` (order `parameters_of(system)`),
@@ -185,8 +202,8 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     converged = jnp.concatenate([converged, jnp.isfinite(true_x[1]) | ~true_x[2]])
     log_x, peak_x = _log_candidates(xs, omegas, true_x)
     log_y, peak_y = _log_candidates(ys, omegas, none)
-    return (log_x, log_y), (log_x, log_y, peak_x & tangent_x, peak_y & tangent_y, tangent_x,
-                            tangent_y, converged, states, true_x[0])
+    return (log_x, log_y), _PointOutputs(log_x, log_y, peak_x & tangent_x, peak_y & tangent_y,
+                                         tangent_x, tangent_y, converged, states, true_x[0])
 
 
 @compiled
@@ -311,26 +328,14 @@ class Context:
                 self.locate,
             )
             jac_x, jac_y = np.array(jac_x), np.array(jac_y)
-            aux = [np.asarray(a) for a in aux]
+            out = jax.tree.map(np.asarray, aux)
             # Entries without derivatives (`_point_curves`) are no candidates: NaN rows.
-            jac_x[~aux[4]], jac_y[~aux[5]] = np.nan, np.nan
-            for i in range(used):
-                log_x, log_y, peak_x, peak_y, _, _, converged, states, located = (
-                    a[i] for a in aux
-                )
-                results.append(
-                    _Curves(
-                        log_x,
-                        log_y,
-                        peak_x,
-                        peak_y,
-                        jac_x[i],
-                        jac_y[i],
-                        bool(np.all(converged)),
-                        states,
-                        located,
-                    )
-                )
+            jac_x[~out.tangent_x], jac_y[~out.tangent_y] = np.nan, np.nan
+            results += [
+                _Curves(out.log_x[i], out.log_y[i], out.peak_x[i], out.peak_y[i], jac_x[i],
+                        jac_y[i], bool(np.all(out.converged[i])), out.states[i], out.located[i])
+                for i in range(used)
+            ]
         return results
 
     def cold_states(self, k, c, amplitudes, scale) -> np.ndarray:
@@ -451,6 +456,11 @@ class Evaluation(NamedTuple):
 
     def centres(self) -> list[_Curves]:
         return [stencil[0] for stencil in self.stencils]
+
+    def states(self) -> list:
+        """Per scenario, the orbits' states at the design itself: where the next
+        design's shooting starts."""
+        return [curves.states for curves in self.centres()]
 
     def converged(self) -> bool:
         return all(curves.converged for curves in self.centres())

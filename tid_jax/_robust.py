@@ -139,8 +139,7 @@ def _minimise(
             return _Minimum(current, f, c, steps, False)
 
         def evaluate(u, accepted, sharpness=sharpness):
-            trial = evaluate_design(
-                ctx, u, scenarios, [curves.states for curves in accepted.centres()])
+            trial = evaluate_design(ctx, u, scenarios, accepted.states())
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
             return trial, t_f, t_c, trial.converged()
 
@@ -421,7 +420,7 @@ def robust_tune(
             break
         target -= np.log(max_stroke / limit) + margin
         say(f"stroke {max_stroke:.5g} m over the limit on the check grid: aiming lower")
-        states = [curves.states for curves in minimum.evaluation.centres()]
+        states = minimum.evaluation.states()
         minimum = _minimise(ctx, scenarios, minimum.evaluation.u, stroke_log_limit=target,
                             z_inits=states, stages=robust_settings.sharpness[-1:], **options)
         steps += minimum.steps

@@ -170,7 +170,7 @@ def _polished(ctx, starts, tol, sharpness):
         if not steps:
             break
         trials = evaluate_designs(ctx, [
-            (finals[i].u + step, [starts[i][0]], [curves.states for curves in finals[i].centres()])
+            (finals[i].u + step, [starts[i][0]], finals[i].states())
             for i, step in steps.items()], stencil="centre")
         moving = []
         for i, trial in zip(steps, trials, strict=True):
@@ -185,8 +185,7 @@ def _polished(ctx, starts, tol, sharpness):
     far = [i for i, ((_, u, _, _), final) in enumerate(zip(starts, finals, strict=True))
            if np.max(np.abs(final.u - u)) > _SAME_CURVATURES * STENCIL_STEP]
     if far:
-        again = evaluate_designs(ctx, [(finals[i].u, [starts[i][0]],
-                                        [curves.states for curves in finals[i].centres()])
+        again = evaluate_designs(ctx, [(finals[i].u, [starts[i][0]], finals[i].states())
                                        for i in far], stencil="central")
         for i, final in zip(far, again, strict=True):
             finals[i], models[i] = final, Model(*smooth_max(final.host_terms, sharpness))
