@@ -129,7 +129,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
         thread.join()
     # Tasks of workers that died after this process ran out of its own.
     while (i := take()) is not None:
-        results[i] = function(*tasks[i])
+        run_here(i)
     if errors:
         raise errors[min(errors)]
     return results
