@@ -29,6 +29,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._dynamics import linear_part
+from ._eigen import eigensystem
 
 MAX_SEGMENTS = 24  # segments per period; an orbit that needs more is reported as failed
 _ROOT_ITERATIONS = 60  # safeguarded Newton iterations allowed per event
@@ -80,17 +81,6 @@ def _forcing(p):
     return jnp.stack([zero, stiffness / (mass * omega**2), zero, zero])
 
 
-def _eig(matrix):
-    """Eigenvalues and right eigenvectors, differentiable: the motion depends on the
-    eigenvectors only through `vectors diag(.) vectors^-1`, which does not depend on their
-    normalisation, and the modes' eigenvalues are distinct (a damped oscillator's
-    complex pair, or two real ones off critical damping)."""
-    eigenvalues, vectors = jax.lax.linalg.eig(
-        matrix, compute_left_eigenvectors=False, enable_eigvec_derivs=True
-    )
-    return eigenvalues, vectors
-
-
 def _modes(p, grid) -> tuple[_Mode, _Mode]:
     """The slipping mode (both signs share it) and the stuck mode, whose homogeneous part
     moves only the host (the terminal's rows are zero), with their powers over the
@@ -99,11 +89,14 @@ def _modes(p, grid) -> tuple[_Mode, _Mode]:
     matrix = _slip_matrix(p)
     forcing = _forcing(p).astype(complex)
     eye = jnp.eye(4, dtype=complex)
-    eigenvalues, vectors = _eig(matrix)
+    # The motion depends on the eigenvectors only through `vectors diag(.) vectors^-1`,
+    # whatever their normalisation, and the modes' eigenvalues are distinct (a damped
+    # oscillator's complex pair, or two real ones off critical damping).
+    eigenvalues, vectors = eigensystem(matrix)
     slip = _Mode(vectors, jnp.linalg.inv(vectors), eigenvalues,
                  jnp.linalg.solve(1j * eye - matrix, -1j * forcing), powers(eigenvalues))
     host = matrix[:2, :2]
-    host_values, host_vectors = _eig(host)
+    host_values, host_vectors = eigensystem(host)
 
     def embed(block, rest):
         return jnp.zeros((4, 4), complex).at[:2, :2].set(block).at[2:, 2:].set(rest)

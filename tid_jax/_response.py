@@ -9,6 +9,7 @@ from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
 from ._dynamics import parameters
+from ._eigen import eigenvalues
 from ._period import initial_state, transient
 from ._settings import SolverSettings
 from ._sharding import map_batch, map_parts, sharded_batch
@@ -145,7 +146,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
-    multipliers = jnp.linalg.eigvals(shots.monodromy)
+    multipliers = eigenvalues(shots.monodromy)
     width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
         systems, amplitudes, omegas
     )
@@ -161,7 +162,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
         y_max=jnp.where(converged, y_peaks * static, jnp.nan),
         converged=converged,
-        stable=jnp.max(jnp.abs(jnp.linalg.eigvals(jax.vmap(moving_part)(shots.monodromy))),
+        stable=jnp.max(jnp.abs(eigenvalues(jax.vmap(moving_part)(shots.monodromy))),
                        axis=-1) < 1,
         state=shots.state * units,
         residual=residual,

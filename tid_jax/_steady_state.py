@@ -7,6 +7,7 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
+from ._eigen import eigenvalues
 from ._peaks import parabola_top
 from ._period import (
     initial_state,
@@ -513,7 +514,7 @@ def solve_orbit(
         y_events=orbit.samples.y_events,
         monodromy=monodromy,
         state_derivatives=state_derivatives,
-        floquet_multipliers=jnp.linalg.eigvals(monodromy),
+        floquet_multipliers=eigenvalues(monodromy),
         residual=residual,
         newton_steps=steps,
         converged=converged,
