@@ -103,10 +103,10 @@ def choose_tid_settings(system, omegas, amplitudes, reference, default_seconds):
 # The paper retune's variants, side by side: (label, friction_width argument of
 # `paper_system`, processes); the first is the defaults.
 RETUNE_VARIANTS = (
-    ("defaults (relative friction width), one process per CPU core", "", None),
+    ("defaults (exact friction), one process per CPU core", "", None),
     ("defaults, one process (`TID_JAX_WORKERS=1`)", "", "1"),
-    ("exact friction (`friction_width=0`), one process per CPU core", "friction_width=0.0",
-     None),
+    ("relative friction width (`friction_width=None`), one process per CPU core",
+     "friction_width=None", None),
 )
 
 

@@ -46,7 +46,7 @@ def main() -> None:
     from tid_jax import plot
     from tid_jax._io import write_csv
 
-    paper = tj.paper_system()
+    paper = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     k_dh, c_dh = float(paper.tid_stiffness), float(paper.tid_damping)
     amplitudes = np.asarray(AMPLITUDES)
     static = amplitudes / float(paper.host_stiffness)

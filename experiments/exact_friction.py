@@ -45,7 +45,7 @@ def main() -> None:
     from tid_jax import plot
     from tid_jax._io import write_csv
 
-    smooth = tj.paper_system()
+    smooth = tj.paper_system(friction_width=None)
     exact = smooth.replace(friction_width=0.0)
     k_dh, c_dh = float(smooth.tid_stiffness), float(smooth.tid_damping)
     amplitudes = np.asarray(tj.PAPER_AMPLITUDES)

@@ -24,7 +24,7 @@ def main() -> None:
     from tid_jax import plot
     from tid_jax._io import write_csv
 
-    system = tj.paper_system()
+    system = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     omegas = np.asarray(tj.default_omegas(system, args.n_frequencies))
     amplitudes = np.asarray(tj.PAPER_AMPLITUDES)
     response = tj.frequency_response(system, omegas, amplitudes)

@@ -36,7 +36,7 @@ def main() -> None:
     from tid_jax import plot
     from tid_jax._io import write_csv
 
-    system = tj.paper_system()
+    system = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     amplitudes = np.asarray(tj.PAPER_AMPLITUDES)
     static = amplitudes / float(system.host_stiffness)
 

@@ -45,7 +45,7 @@ def main() -> None:
     def say(message):
         print(f"[{time.perf_counter() - start:5.0f} s] {message}", flush=True)
 
-    system = tj.paper_system()
+    system = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     amplitudes = np.asarray(args.amplitudes or tj.PAPER_AMPLITUDES, dtype=float)
     omegas = tj.default_omegas(system, args.n_frequencies)
     k_dh, c_dh = float(system.tid_stiffness), float(system.tid_damping)

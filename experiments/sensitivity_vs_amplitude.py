@@ -28,7 +28,7 @@ def main() -> None:
     from tid_jax._io import write_csv
     from tid_jax._sensitivity import elasticity_series
 
-    system = tj.paper_system()
+    system = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     amplitudes = np.asarray(args.amplitudes or tj.PAPER_AMPLITUDES, dtype=float)
     omegas = tj.default_omegas(system, args.n_frequencies)
     k_dh, c_dh = float(system.tid_stiffness), float(system.tid_damping)

@@ -105,7 +105,7 @@ def test_frf_json_on_stdout_is_the_saved_json_and_rebuilds_the_system(frf_run):
     printed = json.loads(stdout)
     assert printed == json.loads((out / "frf.json").read_text())
     assert printed["version"] == tj.__version__
-    assert printed["solver"] == tj.SolverSettings().to_dict()
+    assert printed["solver"] == tj.SolverSettings().for_system(tj.paper_system()).to_dict()
     system = tj.TIDSystem(**printed["system"])
     assert system.to_dict() == tj.paper_system().to_dict()
     assert printed["system"] == tj.paper_system().to_dict()
@@ -249,7 +249,7 @@ def test_retune_csv_and_json_agree_with_the_system(retune_run):
     assert tuple(header) == RETUNE_COLUMNS
     data = json.loads((out / "retune.json").read_text())
     assert data["version"] == tj.__version__
-    assert data["solver"] == tj.SolverSettings().to_dict()
+    assert data["solver"] == tj.SolverSettings().for_system(tj.paper_system()).to_dict()
     assert data["inputs"]["host_mass"] == 2000.0
     system = tj.TIDSystem(**data["system"])
     assert system.host_mass == 2000.0 and system.inertance == 100.0
@@ -320,6 +320,11 @@ BAD_TOML = 'host_mass = 1500\nfriction_force = "twenty\n'
         (["frf"], "inertance = 75.0\n[inerter]\ninertance = 70.0\n",
          "'inertance' is given both at the top level and in [inerter]"),
         (["frf"], "[inerter]\nbacklash = -1e-4\n", "backlash must be finite and non-negative"),
+        (["frf", "--friction-width", "wide"], None,
+         "argument --friction-width: must be a number (m/s) or 'relative', got 'wide'"),
+        (["frf"], "friction_width = 'wide'\n", "friction_width must be a number, got 'wide'"),
+        (["frf", "--friction-width", "-0.0001"], None,
+         "friction_width must be finite and non-negative, got -0.0001"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, argv, config, expected):
@@ -355,6 +360,29 @@ def test_device_terms_from_config_and_flags(tmp_path):
     assert float(system.host_mass) == 2000.0 and float(system.inertance) == 60.0
     assert float(system.friction_force) == 15.0 and float(system.series_stiffness) == 3e5
     assert system.compliant and float(system.backlash) == 1e-4
+
+
+def test_friction_width_defaults_and_the_relative_width(tmp_path):
+    from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
+
+    args = type("Args", (), {key: None for key in INPUT_KEYS})()
+    args.config = None
+    # a rigid device: exact Coulomb friction by default
+    system = _system(_inputs(args))
+    assert system.exact_friction and float(system.friction_width) == 0.0
+    args.friction_width = "relative"
+    system = _system(_inputs(args))
+    assert system.friction_width is None and not system.exact_friction
+    args.friction_width = 1e-4
+    assert float(_system(_inputs(args)).friction_width) == 1e-4
+    # the same from a config file; a compliant device's default is the relative width
+    args.friction_width = None
+    args.config = str(tmp_path / "width.toml")
+    (tmp_path / "width.toml").write_text("[inerter]\nfriction_width = 'relative'\n")
+    assert _system(_inputs(args)).friction_width is None
+    (tmp_path / "width.toml").write_text("terminal_mass = 2.0\nseries_stiffness = 3e5\n")
+    system = _system(_inputs(args))
+    assert system.compliant and system.friction_width is None
 
 
 def test_missing_config_file(tmp_path):

@@ -52,6 +52,21 @@ def _compare(system, omegas, amplitudes):
     return response
 
 
+def test_exact_friction_is_the_default_of_a_rigid_device_only():
+    values = {name: float(getattr(PAPER, name)) for name in
+              ("host_mass", "host_stiffness", "host_damping", "inertance", "friction_force",
+               "tid_stiffness", "tid_damping")}
+    rigid = tj.TIDSystem(**values)
+    assert rigid.exact_friction and float(rigid.friction_width) == 0.0
+    assert tj.paper_system().exact_friction
+    # a compliant device's solver needs smoothed friction: its default is the relative width
+    compliant = tj.TIDSystem(**values, series_stiffness=1e6, terminal_mass=1.0)
+    assert compliant.friction_width is None and not compliant.exact_friction
+    made_compliant = PAPER.replace(series_stiffness=1e6, terminal_mass=1.0)
+    assert made_compliant.friction_width is None and not made_compliant.exact_friction
+    assert PAPER.replace(series_stiffness=1e6, friction_width=1e-4).friction_width == 1e-4
+
+
 def test_real_time_substructuring_asks_for_smoothed_friction():
     with pytest.raises(ValueError, match="needs smoothed friction"):
         tj.simulate_substructuring(PAPER, 8 * math.pi, 300.0)
@@ -59,7 +74,7 @@ def test_real_time_substructuring_asks_for_smoothed_friction():
 
 def test_exact_friction_is_selected_by_zero_width():
     assert PAPER.exact_friction
-    assert not tj.paper_system().exact_friction
+    assert not tj.paper_system(friction_width=None).exact_friction
     assert PAPER.replace(tid_stiffness=4e4).exact_friction
     assert not PAPER.replace(friction_width=1e-4).exact_friction
     with pytest.raises(ValueError, match="friction_width must be 0"):

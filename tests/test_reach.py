@@ -52,8 +52,7 @@ def test_relative_width_follows_the_static_velocity():
     omega = float(system.host_frequency)
     expected = 0.02 * omega * 300.0 / float(system.host_stiffness)
     assert float(system.width_at(300.0, omega)) == pytest.approx(expected, rel=1e-12)
-    # The relative width is the default; a number fixes the width.
-    assert tj.paper_system().friction_width is None
+    # A number fixes the width.
     assert float(tj.paper_system(friction_width=1e-4).width_at(300.0, omega)) == 1e-4
 
 

@@ -17,6 +17,13 @@ REFERENCE_RATIOS = [0.85, 0.9, 0.95, 1.0, 1.05, 1.1]
 
 
 @pytest.fixture(scope="module")
+def system():
+    """The paper's system with the smoothed friction at the relative width (the
+    integrated model these tests are about; exact friction is `test_coulomb`'s)."""
+    return tj.paper_system(friction_width=None)
+
+
+@pytest.fixture(scope="module")
 def omegas(system):
     return RATIOS * float(system.host_frequency)
 

@@ -168,7 +168,9 @@ def test_cli_robust_writes_the_design(tmp_path, capsys, band, robust_free):
     from tid_jax import cli
 
     argv = ["robust", "--amplitudes", *map(str, ROBUST_AMPLITUDES), "--n-frequencies",
-            str(len(band)), "--no-stroke-limit", "--quiet", "--out", str(tmp_path)]
+            str(len(band)), "--no-stroke-limit",
+            "--friction-width", "relative",  # the fixture's model
+            "--quiet", "--out", str(tmp_path)]
     assert cli.main(argv) == 0
     lines = capsys.readouterr().out.splitlines()
     data = json.loads((tmp_path / "robust.json").read_text())

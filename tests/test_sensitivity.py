@@ -301,6 +301,8 @@ def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, band, sensitivity):
             "--n-frequencies",
             str(len(band)),
             "--no-optimum",
+            "--friction-width",
+            "relative",  # the fixture's model
             "--quiet",
             "--out",
             str(tmp_path),

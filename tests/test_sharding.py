@@ -25,7 +25,7 @@ import tid_jax as tj
 from tid_jax._sharding import batch_sharding, sharded_batch
 
 settings = tj.SolverSettings(chunk=2)
-system = tj.paper_system()
+system = tj.paper_system(friction_width=None)
 omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
 response = tj.frequency_response(system, omegas, [100.0, 400.0], settings=settings)
 retuned = tj.retune(system, [200.0, 600.0], omegas=np.linspace(0.8, 1.2, 9) * float(

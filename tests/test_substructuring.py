@@ -15,7 +15,7 @@ import pytest
 import tid_jax as tj
 from tid_jax.cli import RTDS_COLUMNS, main
 
-SYSTEM = tj.paper_system()
+SYSTEM = tj.paper_system(friction_width=None)  # the test needs smoothed friction
 FRICTIONLESS = SYSTEM.replace(friction_force=0.0)
 B = float(SYSTEM.inertance)
 A = 200.0  # N
@@ -401,6 +401,7 @@ def test_cli_rtds_table_and_files(tmp_path, whole):
     assert np.max(relative(column["y_test_m"], whole.y_max)) < 0.02
     data = json.loads((tmp_path / "rtds.json").read_text())
     assert data["test"]["guessed_inertance_kg"] == pytest.approx(0.8 * B)
+    assert data["system"]["friction_width"] is None  # the relative width, not exact friction
     assert (tmp_path / "rtds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -432,6 +433,7 @@ def test_cli_rtds_takes_the_whole_device(tmp_path):
         (["--frequency-hz", "4", "--band-hz", "3", "5"], "--frequency-hz"),
         (["--frequency-hz", "400"], "omega"),
         (["--amplitude", "0"], "amplitudes"),
+        (["--friction-width", "0"], "needs smoothed friction"),
     ],
 )
 def test_cli_rtds_bad_input_is_one_line(tmp_path, argv, word):

@@ -125,6 +125,9 @@ from ._substructuring import (
     substructuring_stability as substructuring_stability,
 )
 from ._system import (
+    DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
+)
+from ._system import (
     PAPER_AMPLITUDES as PAPER_AMPLITUDES,
 )
 from ._system import (

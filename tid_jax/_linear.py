@@ -7,6 +7,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ._checks import check_grid, check_system
 from ._system import (
+    DEFAULT_FRICTION_WIDTH,
     PAPER_FRICTION_FORCE,
     PAPER_HOST_DAMPING_RATIO,
     PAPER_HOST_FREQUENCY_HZ,
@@ -61,7 +62,7 @@ def den_hartog_tuning(
 def paper_system(
     *,
     friction_force: float = PAPER_FRICTION_FORCE,
-    friction_width: float | None = None,
+    friction_width: float | None = DEFAULT_FRICTION_WIDTH,
 ) -> TIDSystem:
     """The paper's system (section 4.1): M = 1500 kg, 4 Hz host, 2% host damping,
     b = 75 kg (mu = 0.05), ff = 20 N, with Den Hartog `tid_stiffness`/`tid_damping`
@@ -70,8 +71,8 @@ def paper_system(
     **Arguments:**
 
     - `friction_force`: ff, N (default the paper's 20 N).
-    - `friction_width`: velocity scale of the smoothed friction sign, m/s; None (default)
-      takes the relative width, 0 exact Coulomb friction (`TIDSystem`).
+    - `friction_width`: 0 (default) for exact Coulomb friction, or the velocity scale of
+      the smoothed friction sign, m/s, or None for the relative width (`TIDSystem`).
 
     **Returns:** a `TIDSystem`.
     """

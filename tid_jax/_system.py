@@ -14,10 +14,22 @@ PAPER_FRICTION_FORCE = 20.0  # N
 PAPER_AMPLITUDES = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0,
                     1500.0, 3000.0)  # N
 PAPER_STROKE = 0.07  # m, inerter stroke limit (+-)
-# The relative friction width (`friction_width=None`, the default), per forcing point:
+# The relative friction width (`friction_width=None`, the default of a compliant device),
+# per forcing point:
 # this ratio times the velocity amplitude omega A / K of the static displacement
 # (`TIDSystem.width_at`).
 FRICTION_WIDTH_RATIO = 0.02
+
+
+class _DefaultWidth:
+    """The default `friction_width`: exact Coulomb friction (0) for a rigid device, the
+    relative width (None) for a compliant one, whose solver needs the friction smoothed."""
+
+    def __repr__(self):
+        return "DEFAULT_FRICTION_WIDTH"
+
+
+DEFAULT_FRICTION_WIDTH = _DefaultWidth()
 
 # (field name, allowed) with allowed "positive" (> 0) or "non-negative" (>= 0).
 _FIELD_RULES = (
@@ -130,8 +142,9 @@ class TIDSystem(eqx.Module):
     - `friction_force`: ff, N (0 gives the ideal linear TID).
     - `tid_stiffness`: k, N/m.
     - `tid_damping`: c, N s/m.
-    - `friction_width`: the velocity scale `width` of the smoothed sign, m/s, or `None`
-      (the default) to take it relative to each forcing point's motion:
+    - `friction_width`: 0 for exact Coulomb friction (the default for a rigid device), the
+      velocity scale `width` of the smoothed sign, m/s, or `None` (the default for a
+      compliant device) to take it relative to each forcing point's motion:
       `FRICTION_WIDTH_RATIO` (0.02) times omega A / K, the velocity amplitude of the
       static displacement (`width_at`). Over structures of 0.1-10 Hz and 1e2-1e7 kg,
       mass ratios 0.005-0.2, any tuning and friction up to 0.6 A, the relative width
@@ -164,7 +177,7 @@ class TIDSystem(eqx.Module):
         friction_force: ArrayLike,
         tid_stiffness: ArrayLike,
         tid_damping: ArrayLike,
-        friction_width: ArrayLike | None = None,
+        friction_width: ArrayLike | None = DEFAULT_FRICTION_WIDTH,
         *,
         parasitic_damping: ArrayLike = 0.0,
         terminal_mass: ArrayLike = 0.0,
@@ -175,8 +188,10 @@ class TIDSystem(eqx.Module):
         if series_stiffness is None:
             values["series_stiffness"] = math.inf
         # decided on the value given: arrays made here are traced inside `jax.jit`
-        self.exact_friction = _is_exact(friction_width)
         self.compliant = _is_compliant(values["series_stiffness"])
+        if friction_width is DEFAULT_FRICTION_WIDTH:
+            values["friction_width"] = None if self.compliant else 0.0
+        self.exact_friction = _is_exact(values["friction_width"])
         for name, allowed in _FIELD_RULES:
             value = values[name]
             if allowed == "non-negative or None":
@@ -219,7 +234,9 @@ class TIDSystem(eqx.Module):
         return FRICTION_WIDTH_RATIO * jnp.asarray(omega) * amplitude / self.host_stiffness
 
     def replace(self, **changes) -> "TIDSystem":
-        """A copy with some fields changed (validated like the constructor)."""
+        """A copy with some fields changed (validated like the constructor). Exact
+        friction that is not changed stays exact while the device stays rigid, and becomes
+        the relative width (the default) where a change makes it compliant."""
         unknown = sorted(set(changes) - set(FIELD_NAMES))
         if unknown:
             raise ValueError(
@@ -228,7 +245,8 @@ class TIDSystem(eqx.Module):
         if self.rigid:
             values["series_stiffness"] = math.inf  # the model, even where it is traced
         if self.exact_friction:
-            values["friction_width"] = 0.0  # the model, even where the width is traced
+            # the model, even where the width is traced
+            values["friction_width"] = DEFAULT_FRICTION_WIDTH if self.rigid else 0.0
         values.update(changes)
         return TIDSystem(**values)
 

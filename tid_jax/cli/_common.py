@@ -27,6 +27,7 @@ from .._linear import (
 )
 from .._settings import SolverSettings
 from .._system import (
+    DEFAULT_FRICTION_WIDTH,
     DEVICE_TERMS,
     PAPER_AMPLITUDES,
     PAPER_FRICTION_FORCE,
@@ -54,7 +55,8 @@ PHYSICAL_INPUTS = (
     ("inertance", "kg", "inertance b of the inerter", "positive"),
     ("friction_force", "N", "dry friction force ff of the inerter (0: ideal TID)", "non-negative"),
     ("friction_width", "m/s", "velocity scale of the smoothed friction sign; 0: exact "
-     "Coulomb friction with sticking (default: 0.02 omega A/K at each forcing point)",
+     "Coulomb friction with sticking (the default of a rigid device); 'relative': 0.02 "
+     "omega A/K at each forcing point (the default of a compliant device)",
      "non-negative"),
     ("tid_stiffness", "N/m", "TID spring stiffness k (default: Den Hartog)", "positive"),
     ("tid_damping", "N s/m", "TID damping c (default: Den Hartog)", "non-negative"),
@@ -69,6 +71,9 @@ PHYSICAL_INPUTS = (
      "series_stiffness)", "non-negative"),
     ("stroke_limit", "m", "inerter stroke limit, +-", "positive"),
 )
+# The `friction_width` that takes the width relative to each forcing point's motion
+# (`TIDSystem`'s None).
+RELATIVE_WIDTH = "relative"
 GRID_INPUTS = ("amplitudes", "band_hz", "n_frequencies")
 INPUT_KEYS = tuple(key for key, *_ in PHYSICAL_INPUTS) + GRID_INPUTS
 SOLVER_TABLE = "solver"
@@ -120,11 +125,21 @@ def _add_structure_arguments(parser: argparse.ArgumentParser, config_help: str) 
         group.add_argument(
             f"--{key.replace('_', '-')}",
             dest=key,
-            type=float,
+            type=_width_flag if key == "friction_width" else float,
             metavar="RATIO" if unit == "-" else unit,
             help=f"{description} [{unit}]"
             + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
         )
+
+
+def _width_flag(text: str) -> float | str:
+    if text == RELATIVE_WIDTH:
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a number (m/s) or {RELATIVE_WIDTH!r}, got {text!r}") from None
 
 
 def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
@@ -273,7 +288,7 @@ def _inputs(args) -> dict:
             del inputs[first]
     inputs = {key: inputs[key] for key in INPUT_KEYS if key in inputs}
     for key, _, _, allowed in PHYSICAL_INPUTS:
-        if key in inputs:
+        if key in inputs and not (key == "friction_width" and inputs[key] == RELATIVE_WIDTH):
             inputs[key] = _number(key, inputs[key], allowed)
     amplitudes = inputs["amplitudes"]
     amplitudes = amplitudes if isinstance(amplitudes, list) else [amplitudes]
@@ -312,9 +327,14 @@ def _system(inputs: dict) -> TIDSystem:
         friction_force=inputs["friction_force"],
         tid_stiffness=inputs.get("tid_stiffness", k_dh),
         tid_damping=inputs.get("tid_damping", c_dh),
-        friction_width=inputs.get("friction_width"),
+        friction_width=_friction_width(inputs),
         **{name: inputs[name] for name in DEVICE_TERMS if name in inputs},
     )
+
+
+def _friction_width(inputs: dict) -> float | None:
+    width = inputs.get("friction_width", DEFAULT_FRICTION_WIDTH)
+    return None if width == RELATIVE_WIDTH else width
 
 
 def _settings(inputs: dict) -> SolverSettings:
