@@ -20,9 +20,10 @@ from ._peaks import (
     REFINED_PEAKS,
     grid_peak,
     interpolated,
+    located_peak,
     parabola_vertices,
+    peak_frequencies,
     smooth_log_peak,
-    true_peaks,
 )
 from ._response import batched, frequency_response, scaled_states
 from ._retune import (
@@ -121,11 +122,13 @@ def _changed_system(system, theta, scale):
                        list(values.values()))
 
 
-def _tangent_slots(values, omegas, true):
+def _tangent_slots(values, omegas, located):
     """The grid indices of the samples behind the `_TANGENT_CANDIDATES` highest grid
-    candidates of `values` over `omegas` (`_log_candidates`, with the true peaks `true`):
+    candidates of `values` over `omegas` (`_log_candidates`; no grid candidates at the
+    grid indices `located` of the true peaks):
     the three samples around each (entry i is sample i: its parabola's; at a band end,
     the end's sample, once more, and its neighbour)."""
+    true = (located, jnp.ones(located.shape, values.dtype), jnp.zeros(located.shape, bool))
     logs, mask = _log_candidates(values, omegas, true)
     grid = slice(0, values.size)
     _, entries = jax.lax.top_k(jnp.where(mask[grid], logs[grid], -jnp.inf), _TANGENT_CANDIDATES)
@@ -164,37 +167,45 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
     with the host stiffness multiplied by `scale**2`, and which entries carry derivatives
     in `theta`. The orbits are solved over the grid without derivatives, then again with
     them (shot from the grid's orbits) at the samples of each response's
-    `_TANGENT_CANDIDATES` highest grid candidates only (`_tangent_slots`): the forward-mode
-    derivatives are most of the cost of a solve. Lower grid candidates are no candidates
-    here; in a smooth maximum, each weighs less than any of those kept."""
+    `_TANGENT_CANDIDATES` highest grid candidates only (`_tangent_slots`), and at the
+    true peaks' frequencies, all in one sweep: the forward-mode derivatives are most of
+    the cost of a solve, and each traced sweep of its compilation. Lower grid candidates
+    are no candidates here; in a smooth maximum, each weighs less than any of those
+    kept."""
     held = jax.lax.stop_gradient(theta)
-    xs, ys, converged, states = sweep(_changed_system(system, held, scale), held[-1], omegas,
-                                      settings, z_init)
+    held_system = _changed_system(system, held, scale)
+    xs, ys, converged, states = sweep(held_system, held[-1], omegas, settings, z_init)
     states = jax.lax.stop_gradient(states)
 
-    def located(values):
-        def solve(at, last):
-            # Only the peak (the response at the last Newton iterate) is differentiated.
-            t = theta if last else jax.lax.stop_gradient(theta)
-            # Every peak's stencil in one sweep (nested vmaps would batch the solves' loops
-            # twice over when traced).
-            z_at = interpolated(states, omegas, at)
-            x, _, ok, _ = sweep(_changed_system(system, t, scale), t[-1], at.reshape(-1),
-                                settings, z_at.reshape((-1,) + z_at.shape[2:]))
-            return jnp.where(ok, x, jnp.nan).reshape(at.shape)
-
-        selection = jnp.where(converged, jax.lax.stop_gradient(values), 0.0)
-        index, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
-        order = jnp.argsort(index)
-        return index[order], peaks[order], valid[order]
+    def on_stencils(at):
+        # Every peak's stencil in one sweep (nested vmaps would batch the solves' loops
+        # twice over when traced), without derivatives.
+        z_at = interpolated(states, omegas, at)
+        x, _, ok, _ = sweep(held_system, held[-1], at.reshape(-1), settings,
+                            z_at.reshape((-1,) + z_at.shape[2:]))
+        return jnp.where(ok, x, jnp.nan).reshape(at.shape)
 
     # The host's peaks are located in continuous frequency, the stroke's are the grid's
     # (see `_retune.response_peaks`).
+    if locate:
+        selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
+        found = peak_frequencies(selection, omegas, on_stencils, REFINED_PEAKS)
+        index, estimate, centre, valid = (a[jnp.argsort(found[0])] for a in found)
+    else:
+        index, estimate, centre, valid = (jnp.zeros(0, int), jnp.zeros(0, xs.dtype),
+                                          jnp.zeros(0, xs.dtype), jnp.zeros(0, bool))
     none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
-    true_x = located(xs) if locate else none
-    slots = jnp.concatenate([_tangent_slots(xs, omegas, true_x), _tangent_slots(ys, omegas, none)])
-    xs_at, ys_at, ok_at, _ = sweep(_changed_system(system, theta, scale), theta[-1],
-                                   omegas[slots], settings, states[slots])
+    slots = jnp.concatenate([_tangent_slots(xs, omegas, index),
+                             _tangent_slots(ys, omegas, none[0])])
+    # With derivatives, in one sweep: the samples of those candidates, and the true peaks
+    # (the response at each located frequency, shot from the grid's orbits).
+    xs_at, ys_at, ok_at, _ = sweep(
+        _changed_system(system, theta, scale), theta[-1],
+        jnp.concatenate([omegas[slots], centre]), settings,
+        jnp.concatenate([states[slots], interpolated(states, omegas, centre)]))
+    n = slots.size
+    true_x = (index, located_peak(estimate, jnp.where(ok_at[n:], xs_at[n:], jnp.nan)), valid)
+    xs_at, ys_at, ok_at = xs_at[:n], ys_at[:n], ok_at[:n]
     xs, ys = xs.at[slots].set(xs_at), ys.at[slots].set(ys_at)
     converged = converged.at[slots].set(converged[slots] & ok_at)
     has_tangent = jnp.zeros(omegas.shape, dtype=bool).at[slots].set(True)

@@ -193,20 +193,30 @@ def newton_iterates(solve, centre: Float[Array, " peaks"], interior: Bool[Array,
     return jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
 
 
+def peak_frequencies(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], solve,
+                     count: int):
+    """The `count` highest local maxima of a response sampled as `values` on the grid
+    `omegas` (`top_peaks`), each located in continuous frequency by `PEAK_NEWTON_STEPS`
+    Newton steps (`newton_iterates`): `solve(at)` gives the response at a step's stencil
+    frequencies `at` (peaks x points; no derivatives needed). Returns the grid indices,
+    the last step's estimates, the frequencies of the peaks (a fixed point of the
+    derivatives: the envelope theorem) and which are local maxima (band ends included).
+    Each peak is the response at its frequency (`located_peak`)."""
+    index, centre, valid = top_peaks(values, omegas, count)
+    lower, upper, interior = bracket(index, omegas)
+    estimate, centre = newton_iterates(solve, centre, interior, lower, upper)
+    return index, estimate, jax.lax.stop_gradient(centre), valid
+
+
 def true_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], solve,
                count: int):
     """The `count` highest local maxima of a response sampled as `values` on the grid
-    `omegas` (`top_peaks`), each located in continuous frequency by `PEAK_NEWTON_STEPS`
-    Newton steps (`newton_iterates`): `solve(at, last)` gives the response at the
-    frequencies `at` (peaks x points): for `last` False a step's stencil (no derivatives
-    needed), for `last` True the last iterate (one point: the peak, with derivatives).
-    Returns the grid indices, the peaks, their frequencies and which are local maxima
-    (band ends included)."""
-    index, centre, valid = top_peaks(values, omegas, count)
-    lower, upper, interior = bracket(index, omegas)
-    estimate, centre = newton_iterates(lambda at: solve(at, False), centre, interior, lower,
-                                       upper)
-    # The frequency is a fixed point of the derivatives (the envelope theorem).
-    centre = jax.lax.stop_gradient(centre)
+    `omegas`, located in continuous frequency (`peak_frequencies`): `solve(at, last)`
+    gives the response at the frequencies `at` (peaks x points): for `last` False a
+    step's stencil (no derivatives needed), for `last` True the last iterate (one point:
+    the peak, with derivatives). Returns the grid indices, the peaks, their frequencies
+    and which are local maxima (band ends included)."""
+    index, estimate, centre, valid = peak_frequencies(
+        values, omegas, lambda at: solve(at, False), count)
     peak = located_peak(estimate, solve(centre[:, None], True)[:, 0])
     return index, peak, centre, valid
