@@ -273,15 +273,39 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
                                                          rel=1e-5)
 
 
+# Too few integration steps for any orbit of the paper's system.
+STARVED = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
+
+
 def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
     # An integration that runs out of steps leaves an orbit unconverged: every reduction
     # over frequency reports that band's peak as NaN, never as a finite number.
-    settings = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
+    settings = STARVED
     band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
     assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=settings)))
     peaks = tj.peaks(system, [100.0], band, settings=settings)
     assert not bool(peaks.converged[0])
     assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))
+
+
+def test_peak_response_is_compiled_once_for_every_amplitude(system, monkeypatch):
+    # The amplitude, given as a Python number, is an argument of the compiled program, not
+    # a constant of it: later amplitudes run the program of the first, traced at most once
+    # (the band and settings of the test above, whose program it may find compiled).
+    traces = []
+    sweep = tj._band.sweep
+
+    def traced_sweep(*args, **kwargs):  # runs once per tracing of the program
+        traces.append(1)
+        return sweep(*args, **kwargs)
+
+    monkeypatch.setattr(tj._band, "sweep", traced_sweep)
+    band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
+    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=STARVED)))
+    first = len(traces)
+    for amplitude in (150.0, 200.0):
+        assert np.isnan(float(tj.peak_response(system, amplitude, band, settings=STARVED)))
+    assert len(traces) == first
 
 
 def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omegas, nonlinear):
