@@ -214,12 +214,12 @@ def test_polishing_steps_keep_the_curvatures_of_their_start(system, band, monkey
 
 
 def test_optimum_at_the_damping_bound_and_at_3000_n():
-    # On the default band, with exact friction (the default). At 100 N the optimal damping is 0 (the friction damps enough):
-    # c* stays at its bound for small changes of any parameter, so dc*/dp = 0 and the
-    # elasticities of c* are undefined; k* moves as re-optimised differences and the scaling
-    # laws say. At 3000 N, nearly linear, the optimum converges too. Both amplitudes in
-    # one batch (`amplitude_sensitivities`), the optimum at the bound polished beside the
-    # free one.
+    # On the default band, with exact friction (the default). At 100 N the optimal damping
+    # is 0 (the friction damps enough): c* stays at its bound for small changes of any
+    # parameter, so dc*/dp = 0 and the elasticities of c* are undefined; k* moves as
+    # re-optimised differences and the scaling laws say. At 3000 N, nearly linear, the
+    # optimum converges too. Both amplitudes in one batch (`amplitude_sensitivities`), the
+    # optimum at the bound polished beside the free one.
     system = tj.paper_system()
     band = np.asarray(tj.default_omegas(system))
     amplitudes = [100.0, 3000.0]
