@@ -235,8 +235,8 @@ def peak_response(
         if np.ndim(amplitude) != 0:
             raise ValueError(f"amplitude must be a scalar, got shape {np.shape(amplitude)}")
     band = _band(system, omegas)
-    # An array, traced by the compiled program: a Python or NumPy scalar would be one of
-    # its static arguments, compiled anew for every amplitude.
+    # An array, traced by the compiled program: a Python number would be one of its
+    # static arguments, compiled anew for every amplitude.
     amplitude = jnp.asarray(amplitude, band.dtype)
     return _peak_response(system, amplitude, band, response == "host", settings)
 
