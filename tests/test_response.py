@@ -280,10 +280,9 @@ STARVED = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=
 def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
     # An integration that runs out of steps leaves an orbit unconverged: every reduction
     # over frequency reports that band's peak as NaN, never as a finite number.
-    settings = STARVED
     band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
-    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=settings)))
-    peaks = tj.peaks(system, [100.0], band, settings=settings)
+    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=STARVED)))
+    peaks = tj.peaks(system, [100.0], band, settings=STARVED)
     assert not bool(peaks.converged[0])
     assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))
 
