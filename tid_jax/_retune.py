@@ -60,8 +60,8 @@ class RetuneSettings(eqx.Module):
       optimiser, where every solve is warm-started; points that need more are still
       evaluated (at their last iterate), and the final design is checked with fully
       converged steady states.
-    - `max_rejected_steps`: consecutive rejected line-search steps (each halving the
-      step) after which a stage is taken as converged: no decrease is found above the
+    - `max_rejected_steps`: consecutive rejected line-search steps (each at most half the
+      last) after which a stage is taken as converged: no decrease is found above the
       noise of the objective.
     - `max_design_step`: longest optimiser step in the scaled design variables (1.0 is
       about 10% in k; see `DESIGN_SCALE`).
@@ -175,36 +175,97 @@ DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_da
 
 class _CappedNewtonDescent(optx.NewtonDescent):
     """Newton direction with its two-norm capped at `max_step` before the line search
-    scales it: where the objective is nearly linear along some direction, BFGS's
-    curvature estimate there is near zero and the plain Newton step would throw the
-    design far off, where the steady states are expensive and the objective meaningless."""
+    scales it, and the scaled step capped again: where the objective is nearly linear
+    along some direction, BFGS's curvature estimate there is near zero and the plain
+    Newton step would throw the design far off, where the steady states are expensive
+    and the objective meaningless."""
 
     max_step: float = 1.0
 
     def query(self, y, f_info, state):
         state = super().query(y, f_info, state)
-        length = optx.two_norm(state.newton)
-        tiny = jnp.finfo(length.dtype).tiny
-        factor = jnp.minimum(1.0, self.max_step / jnp.maximum(length, tiny))
-        return eqx.tree_at(lambda s: s.newton, state, factor * state.newton)
+        return eqx.tree_at(lambda s: s.newton, state, _capped(state.newton, self.max_step))
+
+    def step(self, step_size, state):
+        step, result = super().step(step_size, state)
+        return _capped(step, self.max_step), result
+
+
+def _capped(step, max_step):
+    """`step` scaled down to two-norm `max_step` if longer."""
+    length = optx.two_norm(step)
+    factor = jnp.minimum(1.0, max_step / jnp.maximum(length, jnp.finfo(length.dtype).tiny))
+    return jax.tree.map(lambda leaf: factor * leaf, step)
+
+
+class _SearchState(eqx.Module):
+    step_size: Float[Array, ""]
+
+
+class _InterpolatingArmijo(optx.AbstractSearch):
+    """Backtracking Armijo line search (as `optx.BacktrackingArmijo`) that shortens a
+    rejected step to the minimum of the parabola through the objective's values and slope
+    along it, and lengthens steps where the objective shows no curvature.
+
+    A step is accepted when the objective falls by at least `slope` times the decrease its
+    gradient predicts. A rejected step t is cut to the parabola's minimum, kept within
+    [`shortest`, 1/2] times t (halved where the objective is not finite). The first step
+    from the starting point is `first_step` times the (quasi-)Newton step: a continuation
+    stage that sharpens the smooth maximum starts from the last stage's curvature, too
+    weak across the ridge of equal peaks by about the ratio of the sharpnesses. After an
+    accepted step the next one starts at the full step; where the accepted step fell at
+    least as far as its gradient predicted (the objective is linear or concave along it,
+    and BFGS learnt no curvature from it), at twice its size, its length at most
+    `max_step`: where the objective curves down towards a distant optimum, the design
+    reaches it in a few steps instead of many equal ones."""
+
+    max_step: float
+    first_step: Float[ArrayLike, ""] = 1.0
+    slope: float = 0.1
+    shortest: float = 0.05
+
+    def init(self, y, f_info_struct):
+        return _SearchState(step_size=jnp.asarray(1.0, f_info_struct.f.dtype))
+
+    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
+        t = state.step_size
+        y_diff = jax.tree.map(lambda new, old: new - old, y_eval, y)
+        predicted = f_info.compute_grad_dot(y_diff)
+        actual = f_eval_info.as_min() - f_info.as_min()
+        accept = first_step | ((actual <= self.slope * predicted) & (predicted <= 0))
+        # Rejected: the minimum of the parabola through f(0), its slope and f(t), in units
+        # of the step tried.
+        excess = actual - predicted  # the parabola's curvature term, > 0 where rejected
+        fraction = -predicted / (2 * jnp.where(excess > 0, excess, 1.0))
+        fraction = jnp.where(jnp.isfinite(actual) & (excess > 0),
+                             jnp.clip(fraction, self.shortest, 0.5), 0.5)
+        # Accepted with no curvature seen: twice the step, no longer than `max_step`.
+        length = optx.two_norm(y_diff)
+        room = self.max_step / jnp.maximum(length, jnp.finfo(length.dtype).tiny)
+        linear = ~first_step & (predicted < 0) & (actual <= predicted)
+        longer = jnp.maximum(1.0, t * jnp.minimum(2.0, room))
+        step_size = jnp.where(first_step, self.first_step,
+                              jnp.where(accept, jnp.where(linear, longer, 1.0), fraction * t))
+        return step_size.astype(t.dtype), accept, optx.RESULTS.successful, _SearchState(step_size)
 
 
 class _BFGS(optx.AbstractBFGS):
-    """`optx.BFGS` (inverse-Hessian updates, backtracking Armijo line search) with the
-    Newton step capped (`_CappedNewtonDescent`)."""
+    """`optx.BFGS` (inverse-Hessian updates) with the Newton step capped
+    (`_CappedNewtonDescent`) and a line search that interpolates and extrapolates
+    (`_InterpolatingArmijo`)."""
 
     rtol: float
     atol: float
+    descent: optx.AbstractDescent
+    search: optx.AbstractSearch
     norm: Callable = optx.max_norm
     use_inverse: bool = True
-    descent: optx.AbstractDescent = _CappedNewtonDescent()
-    search: optx.AbstractSearch = optx.BacktrackingArmijo()
     verbose: Callable[..., None] = optx.BFGS(rtol=1.0, atol=1.0).verbose
 
 
 @compiled
-def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings, max_steps,
-                    tol, design_newton_steps, max_rejected_steps, max_design_step):
+def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
+                    max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step):
     """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
     the frequencies `omegas[i]`) from the design `u0[i]` and inverse Hessian `h0[i]` on
     the smooth log peak, shooting from the orbits `z0` of a nearby design (its tuning
@@ -214,7 +275,8 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, settings
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
     )
-    solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step))
+    solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step),
+                   search=_InterpolatingArmijo(max_step=max_design_step, first_step=first_step))
     lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
                       max_steps=max_steps, max_rejected_steps=max_rejected_steps)
 
@@ -233,8 +295,8 @@ def _stage_lanes(lanes, options: dict):
     """One stage (`_optimise_stage`) of the lanes `(systems, amplitudes, bands, designs,
     orbits, inverse Hessians)` (NumPy arrays, sharded over the devices), its results as
     NumPy arrays: a task of `run_lanes`."""
-    options = dict(options, sharpness=jnp.asarray(options["sharpness"]),
-                   tol=jnp.asarray(options["tol"]))
+    options = dict(options, **{name: jnp.asarray(options[name])
+                               for name in ("sharpness", "first_step", "tol")})
     out = sharded_batch(lambda s, a, w, u, z, h: _optimise_stage(s, a, u, z, h, w, **options),
                         *lanes)
     return jax.tree.map(np.asarray, out)
@@ -323,8 +385,8 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
     state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
     # A stage starts from the curvature that the last one learnt, not from the identity:
     # from a gradient step (about 0.1 long on the paper's system), the line search
-    # would halve its way down to the small moves that a sharper maximum asks for
-    # (1e-3 to 1e-4), one evaluation of the objective per halving.
+    # would cut its way down to the small moves that a sharper maximum asks for
+    # (1e-3 to 1e-4), one evaluation of the objective per cut.
     state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
 
     def cond(carry):
@@ -336,6 +398,10 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
         u, state, z, steps, rejected = carry
         accepted = state.num_accepted_steps
         u, state, _ = solver.step(objective, u, z, options, state, tags)
+        # A first step shortened on purpose (`_InterpolatingArmijo.first_step`) says
+        # nothing of the distance to the optimum: the stage does not end on it.
+        shortened = (accepted == 1) & (solver.search.first_step < 1)
+        state = eqx.tree_at(lambda s: s.terminate, state, state.terminate & ~shortened)
         z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
                          state.aux, z)
         rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
@@ -345,7 +411,7 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
         cond, body, (u_start, state, z_start, 0, 0)
     )
     done, result = solver.terminate(objective, u, z, options, state, tags)
-    # A line search that finds no decrease in `max_rejected_steps` halvings has reached
+    # A line search that finds no decrease in `max_rejected_steps` cuts has reached
     # the noise of the objective (steady states converged to the periodicity tolerance).
     stalled = rejected >= max_rejected_steps
     return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
@@ -392,23 +458,24 @@ def retune(
     a smooth maximum of the local peaks (the highest located in continuous frequency, so
     that the optimum does not depend on where the grid falls) whose sharpness grows over
     `retune_settings.sharpness` (continuation), each stage a BFGS run (optimistix's, with
-    its Newton step capped at `retune_settings.max_design_step`) warm-started from the last
-    (its design, orbits and BFGS's inverse Hessian), with gradients by implicit
-    differentiation through the periodic orbits. The first stage starts from the initial
-    tuning's orbits on the design grid and the identity (in the scaled design variables). At
-    every design, each steady state is predicted to first order from the orbit of the last
-    accepted design and settled by chord iterations with the latest monodromy matrix at its
-    frequency; the `REFINED_PEAKS` highest local maxima are then located in continuous
-    frequency by Newton steps on the slope of the response (`_peaks`), and the response at
-    the last iterate is solved with tangents, which give the derivatives of the true peaks
-    and renew the monodromy matrices at their grid points. The initial and retuned designs
-    are then solved afresh (each steady state starting from the design's orbits) on a grid
-    `retune_settings.check_refinement` times finer; a design whose peak there is above the
-    initial tuning's is replaced by the initial tuning (status `initial_kept`), as is the
-    design at an amplitude below the initial tuning's breakaway amplitude
-    (`breakaway_amplitude`; status `stuck`, not optimised at all, 0 iterations): there the
-    inerter never slips, and the smoothed model's optimum would be an ever stiffer spring
-    and damper to ground.
+    its steps capped at `retune_settings.max_design_step` and a line search that
+    interpolates and extrapolates) warm-started from the last (its design, orbits and BFGS's
+    inverse Hessian; its first step shortened by the ratio of the sharpnesses), with
+    gradients by implicit differentiation through the periodic orbits. The first stage
+    starts from the initial tuning's orbits on the design grid and the identity (in the
+    scaled design variables). At every design, each steady state is predicted to first order
+    from the orbit of the last accepted design and settled by chord iterations with the
+    latest monodromy matrix at its frequency; the `REFINED_PEAKS` highest local maxima are
+    then located in continuous frequency by Newton steps on the slope of the response
+    (`_peaks`), and the response at the last iterate is solved with tangents, which give the
+    derivatives of the true peaks and renew the monodromy matrices at their grid points. The
+    initial and retuned designs are then solved afresh (each steady state starting from the
+    design's orbits) on a grid `retune_settings.check_refinement` times finer; a design
+    whose peak there is above the initial tuning's is replaced by the initial tuning (status
+    `initial_kept`), as is the design at an amplitude below the initial tuning's breakaway
+    amplitude (`breakaway_amplitude`; status `stuck`, not optimised at all, 0 iterations):
+    there the inerter never slips, and the smoothed model's optimum would be an ever stiffer
+    spring and damper to ground.
 
     **Arguments:**
 
@@ -423,7 +490,7 @@ def retune(
       (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
       the stages before use `retune_settings.continuation_tol`. A stage also ends,
       converged, when its line search finds no decrease in
-      `retune_settings.max_rejected_steps` halvings.
+      `retune_settings.max_rejected_steps` cuts of its step.
     - `retune_settings`: `RetuneSettings` of the optimiser.
     - `progress`: if given, called with a one-line message as each of the
       `retune_settings.progress_steps()` steps ends (the initial tuning's steady states,
@@ -490,6 +557,9 @@ def optimal_tunings(
                      else max(tol, retune_settings.continuation_tol))
         options = dict(
             sharpness=float(sharpness), settings=settings, max_steps=max_steps,
+            # Across the ridge where two peaks are equal, the curvature grows with the
+            # sharpness: the last stage's, inherited, is that much too weak there.
+            first_step=min(1.0, sharpnesses[stage - 2] / sharpness) if stage > 1 else 1.0,
             tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
             max_rejected_steps=retune_settings.max_rejected_steps,
             max_design_step=float(retune_settings.max_design_step),
