@@ -1,6 +1,8 @@
 """Sensitivities of the peak response, at a given tuning and at the retuned optimum."""
 
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -328,11 +330,14 @@ def amplitude_sensitivities(
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
+    progress: Callable[[str], None] | None = None,
 ) -> list[Sensitivities]:
     """`sensitivities` at each of the forcing `amplitudes` (N, distinct), the steady
     states of every amplitude solved in the same batches (and, with `optimum=True` and no
-    `best`, the optimum of every amplitude found by one `best_tunings`). The other
-    arguments are those of `sensitivities`.
+    `best`, the optimum of every amplitude found by one `best_tunings`). `progress`, if
+    given, is called with a line as each step ends (those of `best_tunings` where it
+    runs, the given tuning's derivatives, the optima's). The other arguments are those of
+    `sensitivities`.
 
     **Returns:** a list of `Sensitivities`, one per amplitude, in their order.
     """
@@ -348,16 +353,23 @@ def amplitude_sensitivities(
     thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
     z_given = ctx.cold_states(k, c, amplitudes, 1.0)
     given = ctx.evaluate([(theta, 1.0, z) for theta, z in zip(thetas, z_given, strict=True)])
+    say = progress if progress is not None else (lambda message: None)
+    say(f"derivatives at the given tuning: {sum(curves.converged for curves in given)}/"
+        f"{len(given)} amplitude(s) converged")
     optimal = [None] * amplitudes.size
     if optimum:
         if best is None:
             best = best_tunings(system, amplitudes, omegas=band, settings=settings,
-                                max_steps=max_steps, tol=tol, retune_settings=retune_settings)
+                                max_steps=max_steps, tol=tol, retune_settings=retune_settings,
+                                progress=progress)
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
         starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
                   for amplitude, index in zip(amplitudes, indices, strict=True)]
-        accurate = Context(system, band, settings.for_system(system).tighter(_POLISH_ACCURACY),
-                           locate=True)
+        model = settings.for_system(system)
+        tight = model.tighter(_POLISH_ACCURACY)
+        # Exact friction has no integration error to tighten: the context of the given
+        # tuning serves (one compiled program, not two that compute the same).
+        accurate = ctx if tight == model else Context(system, band, tight, locate=True)
         finals, models = _polished(accurate, starts, POLISH_TOL,
                                    retune_settings.sharpness[-1])
         optimal = [
@@ -365,6 +377,8 @@ def amplitude_sensitivities(
             for theta, index, start, final, model in zip(thetas, indices, starts, finals, models,
                                                          strict=True)
         ]
+        say(f"derivatives at the retuned optima: {sum(bool(o.converged) for o in optimal)}/"
+            f"{len(optimal)} amplitude(s) converged")
     return [_sensitivities(ctx, theta, curves, optimal_i)
             for theta, curves, optimal_i in zip(thetas, given, optimal, strict=True)]
 

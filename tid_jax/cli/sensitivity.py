@@ -94,14 +94,13 @@ def _run_sensitivity(args) -> int:
     )
     best = None
     retune_steps = RetuneSettings().progress_steps() if optimum else 0
-    with output.steps(retune_steps + 1) as step:
+    with output.steps(retune_steps + (2 if optimum else 1)) as step:
         if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
             best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
                                 progress=step)
         results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
-                                          best=best, settings=settings)
-        step(f"sensitivities at {amplitudes.size} amplitude(s) done, all in one batch")
+                                          best=best, settings=settings, progress=step)
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
