@@ -88,5 +88,19 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def run() -> None:
+    """The `tid-jax` command: `main` on the command line's arguments, then the process
+    ends at once with its exit status. By then every file written is complete and closed;
+    the interpreter's teardown of JAX (about a second) is skipped, and the worker
+    processes (`_workers`) end as their input closes with it."""
+    status = main()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except OSError:  # a closed pipe (`tid-jax ... | head`)
+            pass
+    os._exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
