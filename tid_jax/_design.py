@@ -36,6 +36,7 @@ from ._retune import (
 )
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
+from ._workers import run_lanes
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
@@ -217,6 +218,14 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
                                          tangent_x, tangent_y, converged, states, true_x[0])
 
 
+def _evaluate_chunk(system, thetas, scales, ratio_grid, settings, z_init, locate):
+    """`_evaluate_points` on one chunk of points, NumPy arrays in and out: a task of
+    `_workers.run_lanes`."""
+    out = _evaluate_points(system, jnp.asarray(thetas), jnp.asarray(scales),
+                           jnp.asarray(ratio_grid), settings, jnp.asarray(z_init), locate)
+    return jax.tree.map(np.asarray, out)
+
+
 @compiled
 def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locate):
     """`_CHUNK` points at once, shooting from the scaled states `z_init`: for each, the log
@@ -322,24 +331,20 @@ class Context:
         return results
 
     def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
-        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call."""
-        results = []
+        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call, the
+        calls dealt out to this process and its workers (`_workers.run_lanes`)."""
+        tasks, sizes = [], []
         for start in range(0, len(points), _CHUNK):
             chunk = list(points[start : start + _CHUNK])
-            used = len(chunk)
-            chunk += [chunk[-1]] * (_CHUNK - used)
+            sizes.append(len(chunk))
+            chunk += [chunk[-1]] * (_CHUNK - len(chunk))
             thetas, scales, z_init = (np.stack([point[i] for point in chunk]) for i in range(3))
-            (jac_x, jac_y), aux = _evaluate_points(
-                self.system,
-                jnp.asarray(thetas),
-                jnp.asarray(scales, dtype=float),
-                self.ratio_grid,
-                settings,
-                jnp.asarray(z_init),
-                self.locate,
-            )
+            tasks.append((self.system, thetas, np.asarray(scales, dtype=float),
+                          np.asarray(self.ratio_grid), settings, z_init, self.locate))
+        results = []
+        for used, ((jac_x, jac_y), out) in zip(
+                sizes, run_lanes(_evaluate_chunk, tasks, compiles=True), strict=True):
             jac_x, jac_y = np.array(jac_x), np.array(jac_y)
-            out = jax.tree.map(np.asarray, aux)
             # Entries without derivatives (`_point_curves`) are no candidates: NaN rows.
             jac_x[~out.tangent_x], jac_y[~out.tangent_y] = np.nan, np.nan
             results += [

@@ -43,7 +43,7 @@ from ._sharding import sharded_batch
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
-from ._workers import process_count, run_lanes, start_workers
+from ._workers import run_lanes, run_shares, start_workers
 
 
 class RetuneSettings(eqx.Module):
@@ -304,7 +304,7 @@ def _stage_lanes(lanes, options: dict):
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
     """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
-    its `response_peaks`, as NumPy arrays: a task of `run_lanes`."""
+    its `response_peaks`, as NumPy arrays: a task of `run_shares`."""
     response = lane_response(systems, amplitudes, omegas, settings, warm)
     return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
 
@@ -584,18 +584,10 @@ def optimal_tunings(
             f"{int(np.max(steps, initial=0))} iterations at most")
     k, c, both_systems, both_amplitudes, fine, warm = _check_batch(
         systems, amps, bands, u, k_ref, c_ref, initial_states, orbits[1], refinement)
-    # One share of the lanes per process (`run_lanes`), dealt out in turn: the initial and
-    # retuned designs alike to each.
-    lanes = both_amplitudes.shape[0]
-    count = process_count(lanes)
-    shares = [np.arange(lanes)[i::count] for i in range(count)]
-    parts = run_lanes(_check_lanes, [
-        (*jax.tree.map(lambda a, share=share: np.asarray(a)[share],
-                       (both_systems, both_amplitudes, fine, warm)), settings)
-        for share in shares
-    ], compiles=True)
-    order = np.argsort(np.concatenate(shares))
-    both, found = jax.tree.map(lambda *values: np.concatenate(values)[order], *parts)
+    # One share of the lanes per process, dealt out in turn: the initial and retuned
+    # designs alike to each.
+    both, found = run_shares(_check_lanes, (both_systems, both_amplitudes, fine, warm),
+                             settings)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")

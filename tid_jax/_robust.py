@@ -35,6 +35,7 @@ from ._settings import SolverSettings
 from ._sqp import Model, minimise_stage, stationary
 from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
+from ._workers import run_shares
 
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
 _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
@@ -201,12 +202,20 @@ def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings):
         (float(system.host_stiffness) * lane_scale**2, tunings[lane_tuning, 0],
          tunings[lane_tuning, 1]))
     grids = lane_scale[:, None] * np.asarray(omegas)[None]
-    response = lane_response(lanes, lane_amplitude, grids, settings)
+    x, y, ok = run_shares(_lane_peaks, (lanes, lane_amplitude, grids), settings)
+    return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
+
+
+def _lane_peaks(lanes, amplitudes, grids, settings):
+    """The host and inerter peaks on the grid (refined by parabolas) of each lane's
+    `lane_response`, and whether every steady state of it converged, as NumPy arrays: a
+    task of `run_shares`."""
+    response = lane_response(lanes, amplitudes, grids, settings)
     on_grid = jax.vmap(grid_peak)
     grids = jax.device_put(grids)
-    x = np.asarray(on_grid(response.x_max, grids)[0]).reshape(shape)
-    y = np.asarray(on_grid(response.y_max, grids)[0]).reshape(shape)
-    return x, y, np.all(np.asarray(response.converged), axis=-1).reshape(shape)
+    return (np.asarray(on_grid(response.x_max, grids)[0]),
+            np.asarray(on_grid(response.y_max, grids)[0]),
+            np.all(np.asarray(response.converged), axis=-1))
 
 
 def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings):

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import equinox._errors
 import jax
+import numpy as np
 
 from ._cache import cache_folder, enable_compilation_cache
 
@@ -133,6 +134,22 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     if errors:
         raise errors[min(errors)]
     return results
+
+
+def run_shares(function: Callable, lanes: tuple, *args) -> tuple:
+    """`function(*lanes, *args)`, the lanes (a tuple of arrays, or pytrees of them, with
+    a leading axis of lanes) dealt out in turn to the `process_count` processes, one
+    share to each (`run_lanes` with `compiles`); `function` returns a tuple of arrays (or
+    pytrees of them) over its share's lanes, here put back together in the lanes'
+    order as NumPy arrays."""
+    count = process_count(jax.tree.leaves(lanes)[0].shape[0])
+    shares = [np.arange(jax.tree.leaves(lanes)[0].shape[0])[i::count] for i in range(count)]
+    parts = run_lanes(function, [
+        (*jax.tree.map(lambda a, share=share: np.asarray(a)[share], lanes), *args)
+        for share in shares
+    ], compiles=True)
+    order = np.argsort(np.concatenate(shares))
+    return jax.tree.map(lambda *values: np.concatenate(values)[order], *parts)
 
 
 class _WorkerLost(Exception):

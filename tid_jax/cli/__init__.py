@@ -92,7 +92,8 @@ def run() -> None:
     """The `tid-jax` command: `main` on the command line's arguments, then the process
     ends at once with its exit status. By then every file written is complete and closed;
     the interpreter's teardown of JAX (about a second) is skipped, and the worker
-    processes (`_workers`) end as their input closes with it."""
+    processes (`_workers`) end as their input closes with it. (`python -m tid_jax.cli`
+    exits as usual, for tools that act at exit: profilers, coverage.)"""
     status = main()
     for stream in (sys.stdout, sys.stderr):
         try:
@@ -103,4 +104,4 @@ def run() -> None:
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(main())
