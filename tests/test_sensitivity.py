@@ -239,7 +239,11 @@ def test_optimum_at_the_damping_bound_and_at_3000_n():
     amplitudes = [100.0, 3000.0]
     best = tj.best_tunings(system, amplitudes, omegas=band)
     assert bool(best.damping_at_bound[0, 0]) and not bool(best.damping_at_bound[0, 1])
-    low, high = tj.amplitude_sensitivities(system, amplitudes, omegas=band, best=best)
+    messages = []
+    low, high = tj.amplitude_sensitivities(system, amplitudes, omegas=band, best=best,
+                                           progress=messages.append)
+    assert messages == ["derivatives at the given tuning: 2/2 amplitude(s) converged",
+                        "derivatives at the retuned optima: 2/2 amplitude(s) converged"]
     assert bool(high.optimum.converged) and not bool(high.optimum.damping_at_bound)
     assert np.all(np.isfinite(np.asarray(high.optimum.damping_elasticity)))
     optimum = low.optimum

@@ -2,10 +2,11 @@ import math
 import os
 import time
 
+import numpy as np
 import pytest
 
 from tid_jax import _workers
-from tid_jax._workers import WORKERS_ENVIRONMENT_VARIABLE, process_count, run_lanes
+from tid_jax._workers import WORKERS_ENVIRONMENT_VARIABLE, process_count, run_lanes, run_shares
 
 
 def _slow_pid(seconds):
@@ -34,6 +35,19 @@ def test_lanes_are_shared_with_a_worker_process_and_returned_in_order(two_proces
     assert os.getpid() in pids
     assert len(set(pids)) == 2
     assert run_lanes(pow, [(2, i) for i in range(9)]) == [2**i for i in range(9)]
+
+
+def _shifted(values, pairs, offset):
+    return values + offset, {"first": pairs[:, 0]}
+
+
+def test_shares_of_lanes_come_back_in_the_lanes_order(two_processes):
+    # Two shares (lanes 0, 2, 4, 6 and 1, 3, 5), each a task; the results of both, every
+    # array of them, put back lane by lane.
+    values, pairs = np.arange(7.0), np.arange(14.0).reshape(7, 2)
+    shifted, info = run_shares(_shifted, (values, pairs), 10.0)
+    np.testing.assert_array_equal(shifted, values + 10.0)
+    np.testing.assert_array_equal(info["first"], pairs[:, 0])
 
 
 def test_an_error_in_a_worker_is_raised_here(two_processes):
