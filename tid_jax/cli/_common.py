@@ -212,7 +212,8 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         metavar="N",
-        help=f"processes that share the optimised amplitudes on a CPU, this one included "
+        help=f"processes that share the work on a CPU (the optimised amplitudes, the "
+        "batches of steady states), this one included "
         f"(default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: this "
         "process alone)",
     )
