@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 
-from tid_jax import _cache, _workers
+from tid_jax import _workers
 from tid_jax._workers import WORKERS_ENVIRONMENT_VARIABLE, process_count, run_lanes, run_shares
 
 
@@ -72,9 +72,7 @@ def test_bad_worker_count_is_refused_with_its_name(monkeypatch, value):
         process_count(4)
 
 
-def test_a_compiling_task_runs_here_first_and_new_workers_wait_for_it(two_processes,
-                                                                     monkeypatch):
-    monkeypatch.setattr(_cache, "_traced_afresh", True)  # as in a first run
+def test_a_compiling_task_runs_here_first_and_new_workers_wait_for_it(two_processes):
     started = time.perf_counter()
     pids = run_lanes(_slow_pid, [(0.5,)] * 3, compiles=True)
     # This process took the last task first; a worker new to the function waited for it
@@ -82,14 +80,3 @@ def test_a_compiling_task_runs_here_first_and_new_workers_wait_for_it(two_proces
     assert pids[-1] == os.getpid()
     assert time.perf_counter() - started >= 1.0
     assert len(pids) == 3
-
-
-def test_new_workers_load_at_once_where_every_program_was_kept(two_processes, monkeypatch,
-                                                               tmp_path):
-    # As in a second run: the cache on, no program traced afresh. A worker then takes the
-    # first task at once, this process the last.
-    monkeypatch.setattr(_cache, "_programs_folder", tmp_path)
-    monkeypatch.setattr(_cache, "_traced_afresh", False)
-    assert _cache.all_programs_kept()
-    pids = run_lanes(_slow_pid, [(0.5,)] * 2, compiles=True)
-    assert pids[1] == os.getpid() and pids[0] != os.getpid()

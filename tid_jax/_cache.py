@@ -30,9 +30,6 @@ _LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 PROGRAMS = "programs"
 
 _programs_folder: Path | None = None
-# Whether this process has traced (and so most likely compiled) a program afresh, one that
-# was not kept on disk.
-_traced_afresh = False
 # Kept programs unused for this long are deleted (those of older sources or library
 # versions, which no key can reach again), when the cache is turned on.
 STALE_DAYS = 30
@@ -92,13 +89,6 @@ def cache_folder() -> Path | None:
     """The folder of the compilation cache if `enable_compilation_cache` turned it on in
     this process, else `None`."""
     return None if _programs_folder is None else _programs_folder.parent
-
-
-def all_programs_kept() -> bool:
-    """Whether the cache is on and every program of `compiled` that this process has run
-    so far was kept on disk, none traced afresh: as in a second run on this machine,
-    whose programs are loaded, not compiled."""
-    return _programs_folder is not None and not _traced_afresh
 
 
 def _used(path: Path) -> None:
@@ -179,8 +169,6 @@ class _Program:
             _used(skip)
             return None, None
         if not path.exists():
-            global _traced_afresh
-            _traced_afresh = True
             blob = self._export(static, structure, leaves)
             if blob is None:
                 skip.touch()

@@ -27,7 +27,7 @@ import equinox._errors
 import jax
 import numpy as np
 
-from ._cache import all_programs_kept, cache_folder, enable_compilation_cache
+from ._cache import cache_folder, enable_compilation_cache
 
 WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 
@@ -79,9 +79,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     program that a worker running it for the first time would compile too: this process
     runs the last task first, compiling the program (or loading it from the compilation
     cache), and such a worker waits for it, then loads the program from the cache instead
-    of compiling it again at the same time; unless every program this process has run
-    so far was kept in the cache (`_cache.all_programs_kept`, a second run): the worker
-    then loads its own at once, while this process loads its.
+    of compiling it again at the same time.
     """
     tasks = list(tasks)
     workers = _workers(process_count(len(tasks)) - 1)
@@ -92,7 +90,6 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     left = list(range(len(tasks)))[::-1]
     lock = threading.Lock()
     compiled_here = threading.Event()
-    wait = compiles and not all_programs_kept()
     name = f"{function.__module__}.{function.__qualname__}"
 
     def take(last=False):
@@ -100,7 +97,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
             return left.pop(0 if last else -1) if left and not errors else None
 
     def serve(worker: "_Worker"):
-        if wait and name not in worker.ran:
+        if compiles and name not in worker.ran:
             compiled_here.wait()
         while (i := take()) is not None:
             try:
