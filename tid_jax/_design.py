@@ -333,14 +333,14 @@ class Context:
     def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
         """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call, the
         calls dealt out to this process and its workers (`_workers.run_lanes`)."""
-        tasks, sizes = [], []
+        tasks, sizes, ratio_grid = [], [], np.asarray(self.ratio_grid)
         for start in range(0, len(points), _CHUNK):
             chunk = list(points[start : start + _CHUNK])
             sizes.append(len(chunk))
             chunk += [chunk[-1]] * (_CHUNK - len(chunk))
             thetas, scales, z_init = (np.stack([point[i] for point in chunk]) for i in range(3))
             tasks.append((self.system, thetas, np.asarray(scales, dtype=float),
-                          np.asarray(self.ratio_grid), settings, z_init, self.locate))
+                          ratio_grid, settings, z_init, self.locate))
         results = []
         for used, ((jac_x, jac_y), out) in zip(
                 sizes, run_lanes(_evaluate_chunk, tasks, compiles=True), strict=True):

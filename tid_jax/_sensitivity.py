@@ -365,11 +365,11 @@ def amplitude_sensitivities(
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
         starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
                   for amplitude, index in zip(amplitudes, indices, strict=True)]
-        model = settings.for_system(system)
-        tight = model.tighter(_POLISH_ACCURACY)
+        given_settings = settings.for_system(system)
+        tight = given_settings.tighter(_POLISH_ACCURACY)
         # Exact friction has no integration error to tighten: the context of the given
         # tuning serves (one compiled program, not two that compute the same).
-        accurate = ctx if tight == model else Context(system, band, tight, locate=True)
+        accurate = ctx if tight == given_settings else Context(system, band, tight, locate=True)
         finals, models = _polished(accurate, starts, POLISH_TOL,
                                    retune_settings.sharpness[-1])
         optimal = [

@@ -142,8 +142,9 @@ def run_shares(function: Callable, lanes: tuple, *args) -> tuple:
     share to each (`run_lanes` with `compiles`); `function` returns a tuple of arrays (or
     pytrees of them) over its share's lanes, here put back together in the lanes'
     order as NumPy arrays."""
-    count = process_count(jax.tree.leaves(lanes)[0].shape[0])
-    shares = [np.arange(jax.tree.leaves(lanes)[0].shape[0])[i::count] for i in range(count)]
+    n = jax.tree.leaves(lanes)[0].shape[0]
+    count = process_count(n)
+    shares = [np.arange(n)[i::count] for i in range(count)]
     parts = run_lanes(function, [
         (*jax.tree.map(lambda a, share=share: np.asarray(a)[share], lanes), *args)
         for share in shares
