@@ -2,6 +2,8 @@ import math
 import os
 import time
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -72,11 +74,39 @@ def test_bad_worker_count_is_refused_with_its_name(monkeypatch, value):
         process_count(4)
 
 
-def test_a_compiling_task_runs_here_first_and_new_workers_wait_for_it(two_processes):
-    started = time.perf_counter()
-    pids = run_lanes(_slow_pid, [(0.5,)] * 3, compiles=True)
-    # This process took the last task first; a worker new to the function waited for it
-    # (0.5 s) before taking its first, so three tasks took at least two rounds.
-    assert pids[-1] == os.getpid()
-    assert time.perf_counter() - started >= 1.0
-    assert len(pids) == 3
+def _compiled_pid(seed, seconds):
+    """Compiles (or loads) a program of its own for `seed`, runs it, then sleeps
+    `seconds`: this process's id and when the program had run."""
+    jax.block_until_ready(jax.jit(_scaled, static_argnums=1)(jnp.ones(3), seed))
+    ready = time.time()
+    time.sleep(seconds)
+    return os.getpid(), ready
+
+
+def _scaled(x, seed):
+    return jnp.sin(x * seed) + seed
+
+
+def _seed():
+    return float(time.time_ns() % 10**9)  # a program no process has compiled before
+
+
+def test_a_worker_waits_to_load_a_program_this_process_compiles(two_processes):
+    run_lanes(_compiled_pid, [(_seed(), 0.2)] * 4)  # the worker running, with JAX loaded
+    (worker, worker_ready), (here, here_ready) = run_lanes(
+        _compiled_pid, [(_seed(), 1.0)] * 2, compiles=True)
+    # This process took the last task first and compiled the program; the worker, about
+    # to compile it too, waited for that task to end (its second of sleep).
+    assert here == os.getpid() != worker
+    assert worker_ready >= here_ready + 1.0
+
+
+def test_a_worker_loads_a_program_found_in_the_cache_at_once(two_processes):
+    run_lanes(_compiled_pid, [(_seed(), 0.2)] * 4)
+    seed = _seed()
+    _compiled_pid(seed, 0.0)  # compiled in this process only, and kept in the cache
+    (worker, worker_ready), (here, here_ready) = run_lanes(
+        _compiled_pid, [(seed, 2.0)] * 2, compiles=True)
+    # The worker found the program in the cache: it did not wait for this process's task.
+    assert here == os.getpid() != worker
+    assert worker_ready < here_ready + 2.0

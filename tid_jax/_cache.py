@@ -14,10 +14,12 @@ A later run on the same machine then neither traces nor compiles it again.
 import functools as ft
 import hashlib
 import importlib.metadata
+import inspect
 import os
 import pickle
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import equinox as eqx
@@ -30,6 +32,9 @@ _LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 PROGRAMS = "programs"
 
 _programs_folder: Path | None = None
+# Called before this process traces a program to keep it, or compiles one, that the cache
+# does not hold (see `before_compiling`).
+_before_compiling: Callable[[], None] | None = None
 # Kept programs unused for this long are deleted (those of older sources or library
 # versions, which no key can reach again), when the cache is turned on.
 STALE_DAYS = 30
@@ -89,6 +94,47 @@ def cache_folder() -> Path | None:
     """The folder of the compilation cache if `enable_compilation_cache` turned it on in
     this process, else `None`."""
     return None if _programs_folder is None else _programs_folder.parent
+
+
+def before_compiling(hook: Callable[[], None]) -> bool:
+    """Call `hook()` in this process each time it is about to trace a program to keep it
+    (`compiled`) or to compile a program, because the cache holds neither, and look in
+    the cache again once `hook` returns: another process may have kept the program
+    meanwhile.
+
+    **Arguments:** `hook`, a function of no arguments.
+
+    **Returns:** whether compilations can be watched (the hook of JAX's compiler, where
+    its persistent cache misses, is where this version of JAX has it); kept traces are
+    watched either way.
+    """
+    global _before_compiling
+    _before_compiling = hook
+    from jax._src import compiler
+
+    write = getattr(compiler, "_compile_and_write_cache", None)
+    read = getattr(compiler, "_cache_read", None)
+    expected = ["backend", "computation", "executable_devices", "compile_options",
+                "host_callbacks", "module_name", "cache_key"]
+    if read is None or write is None or list(inspect.signature(write).parameters) != expected:
+        return False
+    if getattr(write, "watched", False):
+        return True
+
+    def compile_and_write(backend, computation, executable_devices, compile_options,
+                          host_callbacks, module_name, cache_key):
+        if _before_compiling is not None:
+            _before_compiling()
+            executable, _ = read(module_name, cache_key, compile_options, backend,
+                                 executable_devices)
+            if executable is not None:
+                return executable
+        return write(backend, computation, executable_devices, compile_options,
+                     host_callbacks, module_name, cache_key)
+
+    compile_and_write.watched = True
+    compiler._compile_and_write_cache = compile_and_write
+    return True
 
 
 def _used(path: Path) -> None:
@@ -168,6 +214,8 @@ class _Program:
         if skip.exists():
             _used(skip)
             return None, None
+        if not path.exists() and _before_compiling is not None:
+            _before_compiling()
         if not path.exists():
             blob = self._export(static, structure, leaves)
             if blob is None:

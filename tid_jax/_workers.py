@@ -27,7 +27,7 @@ import equinox._errors
 import jax
 import numpy as np
 
-from ._cache import cache_folder, enable_compilation_cache
+from ._cache import before_compiling, cache_folder, enable_compilation_cache
 
 WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 
@@ -75,11 +75,12 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     `function` must be a module-level function of this package (it is sent to the workers
     by name), and its arguments and results picklable (NumPy arrays, not JAX arrays). An
     error raised by `function` is raised here (the one of the first such task); a task
-    whose worker died is done in this process. With `compiles`, `function` runs a compiled
-    program that a worker running it for the first time would compile too: this process
-    runs the last task first, compiling the program (or loading it from the compilation
-    cache), and such a worker waits for it, then loads the program from the cache instead
-    of compiling it again at the same time.
+    whose worker died is done in this process. With `compiles`, `function` runs compiled
+    programs that a worker may not find in the compilation cache: this process runs the
+    last task first, compiling them (or loading them from the cache), and a worker about
+    to compile a program (or trace one to keep it) waits for that task to end, then
+    loads the program from the cache if it is there by then, instead of compiling it at
+    the same time; programs found in the cache it loads at once.
     """
     tasks = list(tasks)
     workers = _workers(process_count(len(tasks)) - 1)
@@ -90,19 +91,16 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     left = list(range(len(tasks)))[::-1]
     lock = threading.Lock()
     compiled_here = threading.Event()
-    name = f"{function.__module__}.{function.__qualname__}"
 
     def take(last=False):
         with lock:
             return left.pop(0 if last else -1) if left and not errors else None
 
     def serve(worker: "_Worker"):
-        if compiles and name not in worker.ran:
-            compiled_here.wait()
         while (i := take()) is not None:
             try:
-                results[i] = worker.run(function, tasks[i])
-                worker.ran.add(name)
+                results[i] = worker.run(function, tasks[i],
+                                        compiled_here.wait if compiles else None)
             except _WorkerLost:
                 with lock:
                     left.append(i)
@@ -158,8 +156,10 @@ class _WorkerLost(Exception):
 
 
 class _Worker:
-    """A worker process and the pipes to it: it receives `(function, args)` pickled and
-    answers `("ok", result)` or `("error", exception)`."""
+    """A worker process and the pipes to it: it receives `(function, args, careful)`
+    pickled and answers `("ok", result)` or `("error", exception)`; while a careful task
+    runs, it may also ask `("wait", None)` before it compiles a program, and go on when
+    it receives `"go"`."""
 
     def __init__(self):
         package_root = str(Path(__file__).resolve().parent.parent)
@@ -175,7 +175,6 @@ class _Worker:
             **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
         )
         serve = f"from {__name__} import _serve; _serve()"
-        self.ran: set[str] = set()  # the functions it has run (their programs loaded)
         self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         folder = cache_folder()
@@ -191,12 +190,19 @@ class _Worker:
         except (BrokenPipeError, OSError):
             raise _WorkerLost from None
 
-    def run(self, function: Callable, args: tuple):
-        self._send((function, args))
-        try:
-            outcome, value = pickle.load(self.process.stdout)
-        except (EOFError, OSError, pickle.UnpicklingError):
-            raise _WorkerLost from None
+    def run(self, function: Callable, args: tuple, wait: Callable[[], object] | None = None):
+        """`function(*args)` in the worker; `wait()` (if given) is called whenever the
+        worker is about to compile, and it goes on once `wait` returns."""
+        self._send((function, args, wait is not None))
+        while True:
+            try:
+                outcome, value = pickle.load(self.process.stdout)
+            except (EOFError, OSError, pickle.UnpicklingError):
+                raise _WorkerLost from None
+            if outcome != "wait":
+                break
+            wait()
+            self._send("go")
         if outcome == "error":
             raise value
         return value
@@ -258,10 +264,22 @@ def _serve() -> None:
     folder = pickle.load(tasks)
     if folder is not None:
         enable_compilation_cache(folder)
+    careful = False
+
+    def ask():
+        # Before a compilation in a careful task: wait until this process's caller says go.
+        if careful:
+            answers.write(pickle.dumps(("wait", None)))
+            answers.flush()
+            pickle.load(tasks)  # "go"
+
+    watched = before_compiling(ask)
     while True:
         try:
-            function, args = pickle.load(tasks)
+            function, args, careful = pickle.load(tasks)
         except EOFError:
             return
+        if careful and not watched:
+            ask()  # compilations cannot be seen coming: wait once, before the task
         answers.write(_answer(function, args))
         answers.flush()
