@@ -37,13 +37,17 @@ SCRIPT = textwrap.dedent(
     if sys.argv[1] != "off":
         tj.enable_compilation_cache(sys.argv[1])
     x = jnp.linspace(-1.0, 2.0, 7)
+    kept = [plain.is_kept(x, 2, shift=0.5)]
     out = [plain(x, 2, shift=0.5), plain(x, 3, shift=0.5), plain(x, 3, shift=0.5), callback(x)]
+    kept += [plain.is_kept(x, 2, shift=0.5), plain.is_kept(x, 4, shift=0.5),
+             plain.is_kept(x[:3], 2, shift=0.5)]
     print(json.dumps({
         "traces": traces,
         "y": [[float(v) for v in o["y"]] for o in out[:3]],
         "n": [[int(v) for v in o["n"]] for o in out[:3]],
         "m": [[type(o["m"]).__name__, float(o["m"].low), float(o["m"].high)] for o in out[:3]],
         "callback": [float(v) for v in out[3]],
+        "kept": kept,
     }))
     """
 )
@@ -60,7 +64,10 @@ def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
     off = _run("off")
     # Without the cache: one trace per distinct static argument, as with `eqx.filter_jit`.
     assert off["traces"] == {"plain": 2, "callback": 1}
+    assert off["kept"] == [False] * 4  # nothing is kept without the cache
     first = _run(tmp_path)
+    # Kept once run, for those arguments only (another static value or shape is not).
+    assert first["kept"] == [False, True, False, False]
     kept = sorted(path.name for path in (tmp_path / "programs").iterdir())
     # Two programs of `plain` (powers 2 and 3); the host callback cannot be kept, and is
     # marked so that later runs do not try again.
@@ -69,6 +76,7 @@ def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
     second = _run(tmp_path)
     # The second process loads both programs: `plain` is not traced again.
     assert second["traces"] == {"plain": 0, "callback": 1}
+    assert second["kept"] == [True, True, False, False]
     for run in (first, second):
         assert run["y"] == off["y"] and run["n"] == off["n"]
         assert run["m"] == off["m"]  # a Module in the output is restored as that Module

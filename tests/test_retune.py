@@ -285,12 +285,25 @@ def test_worker_processes_retune_as_this_process_alone(system, band, monkeypatch
     # The amplitudes dealt out to this process and a worker process (which loads the same
     # compiled programs from the cache): the same designs as one process optimising them
     # one after another.
+    from tid_jax import _retune
+
+    warm_ups = []
+
+    def start_workers(lanes, warm_up=None):
+        warm_ups.append(warm_up)
+        return tj._workers.start_workers(lanes, warm_up)
+
+    monkeypatch.setattr(_retune, "start_workers", start_workers)
     amplitudes = [300.0, 1500.0, 3000.0]
     monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "1")
     alone = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
     monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "2")
     shared = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
     assert len(tj._workers._pool) == 1
+    # The stages' program, kept by the first retune, is found for the placeholder orbits
+    # of the second: no worker compiles it ahead (a warm-up is asked for only where it is
+    # not kept on disk).
+    assert warm_ups[1] is None
     for name in ("tid_stiffness", "tid_damping", "x_peak", "iterations", "status"):
         np.testing.assert_allclose(getattr(shared, name), getattr(alone, name), rtol=1e-12,
                                    err_msg=name)

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from tid_jax import _workers
-from tid_jax._workers import WORKERS_ENVIRONMENT_VARIABLE, process_count, run_lanes, run_shares
+from tid_jax._workers import (
+    WORKERS_ENVIRONMENT_VARIABLE,
+    process_count,
+    run_lanes,
+    run_shares,
+    start_workers,
+)
 
 
 def _slow_pid(seconds):
@@ -110,3 +116,31 @@ def test_a_worker_loads_a_program_found_in_the_cache_at_once(two_processes):
     # The worker found the program in the cache: it did not wait for this process's task.
     assert here == os.getpid() != worker
     assert worker_ready < here_ready + 2.0
+
+
+def test_a_warm_up_compiles_in_a_worker_and_the_next_lanes_wait_for_it(two_processes):
+    run_lanes(_compiled_pid, [(_seed(), 0.2)] * 4)
+    seed = _seed()
+    hits = []
+
+    def listen(event, **kwargs):
+        if event == "/jax/compilation_cache/cache_hits":
+            hits.append(event)
+
+    jax.monitoring.register_event_listener(listen)
+    try:
+        started = time.time()
+        start_workers(2, (_compiled_pid, (seed, 1.0)))
+        # One task: this process alone runs it, once the warm-up (its second of sleep
+        # included) has ended, and loads the program the worker compiled and kept.
+        [(here, ready)] = run_lanes(_compiled_pid, [(seed, 0.0)], compiles=True)
+    finally:
+        jax.monitoring.unregister_event_listener(listen)
+    assert here == os.getpid()
+    assert ready >= started + 1.0
+    assert hits
+
+
+def test_a_warm_up_that_fails_is_dropped(two_processes):
+    start_workers(2, (math.sqrt, (-1.0,)))
+    assert run_lanes(math.sqrt, [(4.0,), (9.0,)]) == [2.0, 3.0]

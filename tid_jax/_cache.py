@@ -189,16 +189,9 @@ class _Program:
         folder = _programs_folder
         if folder is None or len(jax.devices()) > 1 or _is_traced((args, kwargs)):
             return self.jitted(*args, **kwargs)
-        dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
-        leaves, structure = jax.tree.flatten(dynamic)
-        description = [
-            _fingerprint(), self.function.__module__, self.function.__qualname__,
-            str(structure), str(jax.tree.structure(static)), repr(jax.tree.leaves(static)),
-        ] + [f"{leaf.shape} {leaf.dtype} {getattr(leaf, 'weak_type', False)}" for leaf in leaves]
-        key = hashlib.sha256("\n".join(description).encode()).hexdigest()[:32]
+        key, static, structure, leaves = self._key(args, kwargs)
         if key not in self.loaded:
-            self.loaded[key] = self._load(folder / f"{self.function.__name__}-{key}.bin",
-                                          static, structure, leaves)
+            self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
         run, out_structure = self.loaded[key]
         if run is None:
             return self.jitted(*args, **kwargs)
@@ -206,6 +199,30 @@ class _Program:
         # earlier program are: one compilation serves both.
         leaves = jax.device_put(leaves, jax.devices()[0])
         return jax.tree.unflatten(out_structure, run(*leaves))
+
+    def _key(self, args, kwargs):
+        """The key of the program for these arguments, its static part, and the
+        structure and leaves of its arrays."""
+        dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+        leaves, structure = jax.tree.flatten(dynamic)
+        description = [
+            _fingerprint(), self.function.__module__, self.function.__qualname__,
+            str(structure), str(jax.tree.structure(static)), repr(jax.tree.leaves(static)),
+        ] + [f"{leaf.shape} {leaf.dtype} {getattr(leaf, 'weak_type', False)}" for leaf in leaves]
+        key = hashlib.sha256("\n".join(description).encode()).hexdigest()[:32]
+        return key, static, structure, leaves
+
+    def _path(self, folder: Path, key: str) -> Path:
+        return folder / f"{self.function.__name__}-{key}.bin"
+
+    def is_kept(self, *args, **kwargs) -> bool:
+        """Whether the program for these arguments is kept on disk (or loaded in this
+        process): a call then neither traces nor, as a rule, compiles it."""
+        folder = _programs_folder
+        if folder is None:
+            return False
+        key = self._key(args, kwargs)[0]
+        return key in self.loaded or self._path(folder, key).exists()
 
     def _load(self, path: Path, static, structure, leaves):
         """The kept program at `path`, else the program exported now and kept there:

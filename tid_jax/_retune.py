@@ -29,6 +29,7 @@ from ._peaks import (
     smooth_log_peak,
     top_peaks,
 )
+from ._period import initial_state
 from ._response import (
     FrequencyResponse,
     _on_host,
@@ -295,11 +296,18 @@ def _stage_lanes(lanes, options: dict):
     """One stage (`_optimise_stage`) of the lanes `(systems, amplitudes, bands, designs,
     orbits, inverse Hessians)` (NumPy arrays, sharded over the devices), its results as
     NumPy arrays: a task of `run_lanes`."""
-    options = dict(options, **{name: jnp.asarray(options[name])
-                               for name in ("sharpness", "first_step", "tol")})
-    out = sharded_batch(lambda s, a, w, u, z, h: _optimise_stage(s, a, u, z, h, w, **options),
+    out = sharded_batch(lambda *lanes: _optimise_stage(*_stage_arguments(lanes, options)),
                         *lanes)
     return jax.tree.map(np.asarray, out)
+
+
+def _stage_arguments(lanes, options: dict):
+    """The arguments of `_optimise_stage` for `_stage_lanes`."""
+    systems, amplitudes, bands, u, z, h = lanes
+    return (systems, amplitudes, u, z, h, bands, jnp.asarray(options["sharpness"]),
+            jnp.asarray(options["first_step"]), options["settings"], options["max_steps"],
+            jnp.asarray(options["tol"]), options["design_newton_steps"],
+            options["max_rejected_steps"], options["max_design_step"])
 
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
@@ -538,36 +546,34 @@ def optimal_tunings(
     sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
     k_ref, c_ref, k0, c0, u, hessian_inv = _initial_design(systems, amps)
     iterations = np.zeros(amps.shape, dtype=int)
-    # Several CPU cores: worker processes for the stages below, started now so that they
-    # load while the initial tuning is solved.
-    start_workers(amps.size)
-    start = lane_response(systems, amps, bands, settings)
-    say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
-    orbits = _initial_orbits(start, systems, k0, c0)
-    initial_states = orbits[1]
     # Below the breakaway amplitude the inerter never slips: those lanes keep the initial
     # tuning (status `stuck`), and only the others are optimised.
     stuck = _below_breakaway(systems, amps, bands)
     moving = np.flatnonzero(~stuck)
     ok = np.zeros(amps.shape, bool)
     group = len(jax.devices())
-    for stage, sharpness in enumerate(sharpnesses, start=1):
-        # Stages before the last only bring the design near the optimum.
-        stage_tol = (tol if stage == len(sharpnesses)
-                     else max(tol, retune_settings.continuation_tol))
-        options = dict(
-            sharpness=float(sharpness), settings=settings, max_steps=max_steps,
-            # Across the ridge where two peaks are equal, the curvature grows with the
-            # sharpness: the last stage's, inherited, is that much too weak there.
-            first_step=min(1.0, sharpnesses[stage - 2] / sharpness) if stage > 1 else 1.0,
-            tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
-            max_rejected_steps=retune_settings.max_rejected_steps,
-            max_design_step=float(retune_settings.max_design_step),
-        )
+    stages = [_stage_options(stage, sharpnesses, tol, settings, max_steps, retune_settings)
+              for stage in range(1, len(sharpnesses) + 1)]
+    # Several CPU cores: worker processes for the stages below, started now so that they
+    # load while the initial tuning is solved. Where the stages' program is not kept on
+    # disk, one of them compiles it meanwhile, on the first moving lane with placeholder
+    # orbits (and a tolerance that any step meets: one step).
+    warm_up = None
+    if moving.size:
+        placeholder = _placeholder_orbits(k0, c0, bands, settings)
+        lanes = _lanes_of(moving[:group], (systems, amps, bands, u, placeholder, hessian_inv))
+        options = dict(stages[0], tol=float(np.finfo(float).max))
+        if not _optimise_stage.is_kept(*_stage_arguments(lanes, options)):
+            warm_up = (_stage_lanes, (lanes, options))
+    start_workers(amps.size, warm_up)
+    start = lane_response(systems, amps, bands, settings)
+    say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
+    orbits = _initial_orbits(start, systems, k0, c0)
+    initial_states = orbits[1]
+    for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
-            lanes = jax.tree.map(lambda a: np.asarray(a)[moving],
-                                 (systems, amps, bands, u, orbits, hessian_inv))
+            lanes = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
             # As many lanes per call as there are devices (one on each), one call per core
             # at a time on a CPU: one compiled program serves any number of lanes.
             parts = run_lanes(_stage_lanes, [
@@ -592,6 +598,40 @@ def optimal_tunings(
     say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
     return result
+
+
+def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
+                   retune_settings: RetuneSettings) -> dict:
+    """The options of `_stage_lanes` at the continuation stage `stage` (from 1)."""
+    sharpness = sharpnesses[stage - 1]
+    # Stages before the last only bring the design near the optimum.
+    stage_tol = (tol if stage == len(sharpnesses)
+                 else max(tol, retune_settings.continuation_tol))
+    return dict(
+        sharpness=float(sharpness), settings=settings, max_steps=max_steps,
+        # Across the ridge where two peaks are equal, the curvature grows with the
+        # sharpness: the last stage's, inherited, is that much too weak there.
+        first_step=min(1.0, sharpnesses[stage - 2] / sharpness) if stage > 1 else 1.0,
+        tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
+        max_rejected_steps=retune_settings.max_rejected_steps,
+        max_design_step=float(retune_settings.max_design_step),
+    )
+
+
+def _lanes_of(lanes, values):
+    """The entries `lanes` of every array of `values`, as NumPy arrays."""
+    return jax.tree.map(lambda a: np.asarray(a)[lanes], values)
+
+
+def _placeholder_orbits(k0, c0, bands, settings: SolverSettings):
+    """Orbits of the shapes and types `_initial_orbits` gives, all states zero: a stage
+    on them runs the program of the stages on the real orbits."""
+    size = jax.eval_shape(lambda q: initial_state(q, settings.compliant),
+                          jax.ShapeDtypeStruct((len(PARAMETERS),), bands.dtype)).shape[0]
+    states = np.zeros(bands.shape + (size,), bands.dtype)
+    return (np.stack([np.asarray(k0), np.asarray(c0)], axis=-1), states,
+            np.zeros(states.shape + (size,), bands.dtype),
+            np.zeros(states.shape + (len(DESIGN_PARAMETERS),), bands.dtype))
 
 
 @eqx.filter_jit

@@ -61,10 +61,16 @@ def process_count(lanes: int) -> int:
     return max(1, min(count, lanes))
 
 
-def start_workers(lanes: int) -> None:
+def start_workers(lanes: int, warm_up: tuple[Callable, tuple] | None = None) -> None:
     """Start the worker processes that `run_lanes` will use for `lanes` lanes, so that
-    they load while this process computes."""
-    _workers(process_count(lanes) - 1)
+    they load while this process computes. With `warm_up = (function, task)` and the
+    compilation cache on, the first worker runs `function(*task)` meanwhile, its result
+    (or error) dropped: it compiles the programs of `function` (or loads them from the
+    cache) while this process computes something else, and `run_lanes` waits for it
+    before it deals out tasks, then finds them in the cache."""
+    workers = _workers(process_count(lanes) - 1)
+    if warm_up is not None and workers and cache_folder() is not None:
+        workers[0].warm_up(*warm_up)
 
 
 def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = False) -> list:
@@ -83,6 +89,8 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     the same time; programs found in the cache it loads at once.
     """
     tasks = list(tasks)
+    for worker in _pool:
+        worker.settle()
     workers = _workers(process_count(len(tasks)) - 1)
     if not workers:
         return [function(*task) for task in tasks]
@@ -175,6 +183,7 @@ class _Worker:
             **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
         )
         serve = f"from {__name__} import _serve; _serve()"
+        self.warming: threading.Thread | None = None  # a warm-up in progress
         self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         folder = cache_folder()
@@ -206,6 +215,25 @@ class _Worker:
         if outcome == "error":
             raise value
         return value
+
+    def warm_up(self, function: Callable, args: tuple) -> None:
+        """Start `function(*args)` in the worker, in a thread of this process, its
+        result and any error dropped (the task, run again for real, shows it)."""
+
+        def run():
+            try:
+                self.run(function, args)
+            except Exception:
+                pass
+
+        self.warming = threading.Thread(target=run, daemon=True)
+        self.warming.start()
+
+    def settle(self) -> None:
+        """Wait for the warm-up in progress, if any."""
+        if self.warming is not None:
+            self.warming.join()
+            self.warming = None
 
     def stop(self) -> None:
         """End the worker: closing its input ends its loop; a worker that does not end
