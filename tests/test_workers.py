@@ -118,6 +118,29 @@ def test_a_worker_loads_a_program_found_in_the_cache_at_once(two_processes):
     assert worker_ready < here_ready + 2.0
 
 
+def test_without_the_cache_a_worker_waits_before_its_first_compiling_task(two_processes,
+                                                                           monkeypatch):
+    _workers._stop_workers()
+    monkeypatch.setattr(_workers, "cache_folder", lambda: None)  # for the new worker
+    try:
+        run_lanes(_slow_pid, [(0.2,)] * 4)  # the worker running, with JAX loaded
+        seed = _seed()
+        done = run_lanes(_compiled_pid, [(seed, 1.0)] * 3, compiles=True)
+        # No cache to watch: the worker waited for this process's first task (the last)
+        # before it took one, then compiled the program itself.
+        here = os.getpid()
+        first = done[-1][1]
+        assert done[-1][0] == here and any(pid != here for pid, _ in done)
+        assert all(ready >= first + 1.0 for pid, ready in done if pid != here)
+        # Not at later calls of the same function: both take one at once.
+        started = time.time()
+        pids = run_lanes(_compiled_pid, [(seed, 1.0)] * 2, compiles=True)
+        assert len({pid for pid, _ in pids}) == 2
+        assert time.time() - started < 2.0
+    finally:
+        _workers._stop_workers()  # later tests get a worker with the cache
+
+
 def test_a_warm_up_compiles_in_a_worker_and_the_next_lanes_wait_for_it(two_processes):
     run_lanes(_compiled_pid, [(_seed(), 0.2)] * 4)
     seed = _seed()

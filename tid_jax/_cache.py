@@ -96,6 +96,18 @@ def cache_folder() -> Path | None:
     return None if _programs_folder is None else _programs_folder.parent
 
 
+def compiles_watchable() -> bool:
+    """Whether `before_compiling` can watch compilations: whether this version of JAX
+    has its compiler's hook where its persistent cache misses."""
+    from jax._src import compiler
+
+    write = getattr(compiler, "_compile_and_write_cache", None)
+    expected = ["backend", "computation", "executable_devices", "compile_options",
+                "host_callbacks", "module_name", "cache_key"]
+    return (hasattr(compiler, "_cache_read") and write is not None
+            and list(inspect.signature(write).parameters) == expected)
+
+
 def before_compiling(hook: Callable[[], None]) -> bool:
     """Call `hook()` in this process each time it is about to trace a program to keep it
     (`compiled`) or to compile a program, because the cache holds neither, and look in
@@ -112,12 +124,9 @@ def before_compiling(hook: Callable[[], None]) -> bool:
     _before_compiling = hook
     from jax._src import compiler
 
-    write = getattr(compiler, "_compile_and_write_cache", None)
-    read = getattr(compiler, "_cache_read", None)
-    expected = ["backend", "computation", "executable_devices", "compile_options",
-                "host_callbacks", "module_name", "cache_key"]
-    if read is None or write is None or list(inspect.signature(write).parameters) != expected:
+    if not compiles_watchable():
         return False
+    write, read = compiler._compile_and_write_cache, compiler._cache_read
     if getattr(write, "watched", False):
         return True
 

@@ -27,7 +27,12 @@ import equinox._errors
 import jax
 import numpy as np
 
-from ._cache import before_compiling, cache_folder, enable_compilation_cache
+from ._cache import (
+    before_compiling,
+    cache_folder,
+    compiles_watchable,
+    enable_compilation_cache,
+)
 
 WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 
@@ -86,7 +91,8 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     last task first, compiling them (or loading them from the cache), and a worker about
     to compile a program (or trace one to keep it) waits for that task to end, then
     loads the program from the cache if it is there by then, instead of compiling it at
-    the same time; programs found in the cache it loads at once.
+    the same time; programs found in the cache it loads at once. Without the cache, a
+    worker waits for that task before it takes its first task of `function`.
     """
     tasks = list(tasks)
     for worker in _pool:
@@ -105,10 +111,15 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
             return left.pop(0 if last else -1) if left and not errors else None
 
     def serve(worker: "_Worker"):
+        # A worker that cannot tell what it will compile (no cache to look in) waits
+        # before it takes its first task of `function`.
+        if compiles and not worker.watched and function not in worker.ran:
+            compiled_here.wait()
         while (i := take()) is not None:
             try:
                 results[i] = worker.run(function, tasks[i],
                                         compiled_here.wait if compiles else None)
+                worker.ran.add(function)
             except _WorkerLost:
                 with lock:
                     left.append(i)
@@ -184,9 +195,12 @@ class _Worker:
         )
         serve = f"from {__name__} import _serve; _serve()"
         self.warming: threading.Thread | None = None  # a warm-up in progress
+        self.ran: set[Callable] = set()  # the functions it has run (programs loaded)
+        folder = cache_folder()
+        # Whether it sees its compilations coming (and asks to wait before each).
+        self.watched = folder is not None and compiles_watchable()
         self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-        folder = cache_folder()
         self._send(None if folder is None else str(folder))
 
     def alive(self) -> bool:
@@ -301,13 +315,12 @@ def _serve() -> None:
             answers.flush()
             pickle.load(tasks)  # "go"
 
-    watched = before_compiling(ask)
+    if folder is not None:
+        before_compiling(ask)
     while True:
         try:
             function, args, careful = pickle.load(tasks)
         except EOFError:
             return
-        if careful and not watched:
-            ask()  # compilations cannot be seen coming: wait once, before the task
         answers.write(_answer(function, args))
         answers.flush()
