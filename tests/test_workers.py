@@ -167,3 +167,14 @@ def test_a_warm_up_compiles_in_a_worker_and_the_next_lanes_wait_for_it(two_proce
 def test_a_warm_up_that_fails_is_dropped(two_processes):
     start_workers(2, (math.sqrt, (-1.0,)))
     assert run_lanes(math.sqrt, [(4.0,), (9.0,)]) == [2.0, 3.0]
+
+
+def test_a_second_warm_up_waits_for_the_first(two_processes):
+    # As where a call was interrupted before its lanes: the worker answers one task at a
+    # time, so the second warm-up starts only when the first has ended.
+    run_lanes(_slow_pid, [(0.2,)] * 4)
+    started = time.perf_counter()
+    start_workers(2, (_slow_pid, (1.0,)))
+    start_workers(2, (_slow_pid, (1.0,)))
+    assert time.perf_counter() - started >= 1.0
+    assert run_lanes(math.sqrt, [(4.0,), (9.0,), (16.0,)]) == [2.0, 3.0, 4.0]

@@ -232,11 +232,14 @@ class _Worker:
 
     def warm_up(self, function: Callable, args: tuple) -> None:
         """Start `function(*args)` in the worker, in a thread of this process, its
-        result and any error dropped (the task, run again for real, shows it)."""
+        result and any error dropped (the task, run again for real, shows it), once the
+        warm-up before it (one left by an interrupted call) has ended."""
+        self.settle()
 
         def run():
             try:
                 self.run(function, args)
+                self.ran.add(function)
             except Exception:
                 pass
 
