@@ -108,27 +108,23 @@ def compiles_watchable() -> bool:
             and list(inspect.signature(write).parameters) == expected)
 
 
-def before_compiling(hook: Callable[[], None]) -> bool:
+def before_compiling(hook: Callable[[], None]) -> None:
     """Call `hook()` in this process each time it is about to trace a program to keep it
     (`compiled`) or to compile a program, because the cache holds neither, and look in
     the cache again once `hook` returns: another process may have kept the program
-    meanwhile.
+    meanwhile. Compilations are watched where `compiles_watchable()`; kept traces always.
 
     **Arguments:** `hook`, a function of no arguments.
-
-    **Returns:** whether compilations can be watched (the hook of JAX's compiler, where
-    its persistent cache misses, is where this version of JAX has it); kept traces are
-    watched either way.
     """
     global _before_compiling
     _before_compiling = hook
     from jax._src import compiler
 
     if not compiles_watchable():
-        return False
+        return
     write, read = compiler._compile_and_write_cache, compiler._cache_read
     if getattr(write, "watched", False):
-        return True
+        return
 
     def compile_and_write(backend, computation, executable_devices, compile_options,
                           host_callbacks, module_name, cache_key):
@@ -143,7 +139,6 @@ def before_compiling(hook: Callable[[], None]) -> bool:
 
     compile_and_write.watched = True
     compiler._compile_and_write_cache = compile_and_write
-    return True
 
 
 def _used(path: Path) -> None:
