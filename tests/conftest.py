@@ -31,16 +31,21 @@ def pytest_sessionfinish(session):
         shutil.rmtree(_session_cache, ignore_errors=True)
 
 
-# The modules that take longest (each compiles its own retune or robust design programs),
-# slowest first: the parallel workers (pytest-xdist, one file per worker at a time) start
-# on them, so that they finish together. Every other module follows in its usual order.
+# The modules that take longest (each compiles its own retune, robust design or device
+# programs, or integrates a reference), slowest first, as measured on two cores: the
+# parallel workers (pytest-xdist, one file per worker at a time) start on them, so that
+# they finish together. Every other module follows in its usual order.
 SLOWEST_FIRST = (
-    "test_sensitivity.py",
-    "test_sharding.py",
+    "test_device.py",
     "test_robust.py",
+    "test_sensitivity.py",
     "test_retune.py",
-    "test_cli.py",
+    "test_coulomb.py",
     "test_response.py",
+    "test_sharding.py",
+    "test_cli.py",
+    "test_identify.py",
+    "test_gradients.py",
 )
 
 

@@ -181,12 +181,11 @@ def batched(system: TIDSystem, count: int) -> TIDSystem:
                         system)
 
 
-# Batches are solved in blocks of BLOCK points, the last one padded (padding costs next
-# to nothing: the work queue and the chunks of `map_batch` skip it), and the smallest
-# batches, which would mostly integrate padding, in one block of SMALL_BLOCK points: so
-# that batches of every size share two compiled programs.
+# Batches are solved in blocks of BLOCK points, the last one padded: padding costs little
+# (the work queue and the chunks of `map_batch` skip it; a batch of a few points takes
+# about 40 ms longer than in a block of its own size on the paper's system), and batches
+# of every size share one compiled program, whichever sizes a run happens to meet first.
 BLOCK = 512
-SMALL_BLOCK = 8
 
 
 def _block_sizes(count: int):
@@ -194,8 +193,7 @@ def _block_sizes(count: int):
     hold `BLOCK` points each, of equal sizes."""
     blocks = -(-count // BLOCK)
     for i in range(blocks):
-        start, stop = i * count // blocks, (i + 1) * count // blocks
-        yield start, stop, SMALL_BLOCK if stop - start <= SMALL_BLOCK else BLOCK
+        yield i * count // blocks, (i + 1) * count // blocks, BLOCK
 
 
 def _on_host(tree):
