@@ -5,6 +5,8 @@ import sys
 import textwrap
 import time
 
+import numpy as np
+
 # Each run is a fresh process (as a second `tid-jax` run is): it counts how often the
 # decorated functions are traced, and prints their results.
 SCRIPT = textwrap.dedent(
@@ -113,3 +115,55 @@ def test_a_damaged_program_file_is_replaced(tmp_path):
     again = _run(tmp_path)
     assert again["traces"]["plain"] == 2
     assert again["y"] == _run("off")["y"]
+
+
+# `prepare` in one process; in the next, the call of the same program.
+PREPARE_SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import numpy as np
+    import tid_jax as tj
+    from tid_jax._cache import compiled
+
+    traces = []
+    events = []
+    jax.monitoring.register_event_listener(lambda event, **kwargs: events.append(event))
+
+    @compiled
+    def scaled(x, power):
+        traces.append(power)
+        return jnp.cos(x) ** power
+
+    tj.enable_compilation_cache(sys.argv[1])
+    x = jnp.linspace(0.0, 1.0, 5)
+    out = None
+    if sys.argv[2] == "prepare":
+        scaled.prepare(x, 3)
+    else:
+        out = np.asarray(scaled(x, 3)).tolist()
+    print(json.dumps({"traces": len(traces), "kept": scaled.is_kept(x, 3),
+                      "misses": events.count("/jax/compilation_cache/cache_misses"),
+                      "out": out}))
+    """
+)
+
+
+def test_a_prepared_program_is_kept_and_compiled_for_the_next_process(tmp_path):
+    def run(mode):
+        done = subprocess.run([sys.executable, "-c", PREPARE_SCRIPT, str(tmp_path), mode],
+                              capture_output=True, text=True, timeout=300, env=dict(os.environ))
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout.strip().splitlines()[-1])
+
+    prepared = run("prepare")
+    # Traced once, kept and compiled (misses of the compilation cache), not run.
+    assert prepared["traces"] == 1 and prepared["kept"] and prepared["misses"] >= 2
+    assert prepared["out"] is None
+    called = run("call")
+    # The next process neither traces nor compiles it: its executable is in the cache.
+    assert called["traces"] == 0 and called["misses"] == 0
+    np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
+                               rtol=1e-14)

@@ -170,12 +170,38 @@ def test_a_warm_up_that_fails_is_dropped(two_processes):
     assert run_lanes(math.sqrt, [(4.0,), (9.0,)]) == [2.0, 3.0]
 
 
-def test_a_second_warm_up_waits_for_the_first(two_processes):
-    # As where a call was interrupted before its lanes: the worker answers one task at a
-    # time, so the second warm-up starts only when the first has ended.
+def _started_pid(seconds):
+    started = time.time()
+    time.sleep(seconds)
+    return os.getpid(), started
+
+
+def _mark(path):
+    open(path, "w").close()
+
+
+def test_lanes_of_another_function_start_here_and_the_worker_joins_after_its_warm_up(
+        two_processes):
+    run_lanes(_slow_pid, [(0.2,)] * 4)  # the worker running
+    called = time.time()
+    start_workers(2, (_slow_pid, (2.0,)), serves=_compiled_pid)
+    done = run_lanes(_started_pid, [(0.5,)] * 8)
+    here = os.getpid()
+    # This process began at once, without waiting for the warm-up (for another function);
+    # the worker took tasks once its warm-up had ended.
+    assert min(started for pid, started in done if pid == here) < called + 1.0
+    theirs = [started for pid, started in done if pid != here]
+    assert theirs and min(theirs) >= called + 2.0
+
+
+def test_a_warm_up_while_the_worker_warms_up_is_dropped(two_processes, tmp_path):
+    # As where a call was interrupted before its lanes, or where a warm-up for a later
+    # step is under way: the worker answers one task at a time, so the second warm-up is
+    # not sent, and the call goes on at once.
     run_lanes(_slow_pid, [(0.2,)] * 4)
     started = time.perf_counter()
     start_workers(2, (_slow_pid, (1.0,)))
-    start_workers(2, (_slow_pid, (1.0,)))
-    assert time.perf_counter() - started >= 1.0
+    start_workers(2, (_mark, (tmp_path / "second",)))
+    assert time.perf_counter() - started < 0.5
     assert run_lanes(math.sqrt, [(4.0,), (9.0,), (16.0,)]) == [2.0, 3.0, 4.0]
+    assert not (tmp_path / "second").exists()

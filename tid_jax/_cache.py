@@ -228,6 +228,20 @@ class _Program:
         key = self._key(args, kwargs)[0]
         return key in self.loaded or self._path(folder, key).exists()
 
+    def prepare(self, *args, **kwargs) -> None:
+        """Trace, keep and compile the program for these arguments without running it
+        (only their shapes and static values matter): into the cache, from which
+        another process then loads it. Nothing happens while the cache is off."""
+        folder = _programs_folder
+        if folder is None or len(jax.devices()) > 1:
+            return
+        key, static, structure, leaves = self._key(args, kwargs)
+        if key not in self.loaded:
+            self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
+        run = self.loaded[key][0]
+        if run is not None:  # placed as `__call__` places them: the same executable
+            run.lower(*jax.device_put(leaves, jax.devices()[0])).compile()
+
     def _load(self, path: Path, static, structure, leaves):
         """The kept program at `path`, else the program exported now and kept there:
         `(run, out_structure)`, with `run` None if it cannot be exported."""

@@ -36,7 +36,7 @@ from ._retune import (
 )
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
-from ._workers import run_lanes
+from ._workers import run_lanes, start_workers
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
@@ -218,12 +218,22 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
                                          tangent_x, tangent_y, converged, states, true_x[0])
 
 
-def _evaluate_chunk(system, thetas, scales, ratio_grid, settings, z_init, locate):
+def _kernel_arguments(system, thetas, scales, ratio_grid, settings, z_init, locate):
+    """The arguments of `_evaluate_points` for one chunk (a task of `_evaluate_chunk`)."""
+    return (system, jnp.asarray(thetas), jnp.asarray(scales), jnp.asarray(ratio_grid),
+            settings, jnp.asarray(z_init), locate)
+
+
+def _evaluate_chunk(*task):
     """`_evaluate_points` on one chunk of points, NumPy arrays in and out: a task of
     `_workers.run_lanes`."""
-    out = _evaluate_points(system, jnp.asarray(thetas), jnp.asarray(scales),
-                           jnp.asarray(ratio_grid), settings, jnp.asarray(z_init), locate)
-    return jax.tree.map(np.asarray, out)
+    return jax.tree.map(np.asarray, _evaluate_points(*_kernel_arguments(*task)))
+
+
+def _prepare_chunk(*task):
+    """`_evaluate_points` for a chunk of the shapes of `task` traced and compiled into
+    the cache, not run: a worker's warm-up for `_evaluate_chunk`."""
+    _evaluate_points.prepare(*_kernel_arguments(*task))
 
 
 @compiled
@@ -330,9 +340,20 @@ class Context:
                     results[i] = curves
         return results
 
-    def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
-        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call, the
-        calls dealt out to this process and its workers (`_workers.run_lanes`)."""
+    def warm_up(self, points: int) -> None:
+        """Where the program of `evaluate` (for `points` points) is not kept on disk, have
+        a worker process compile it while this process goes on (`_workers`): called
+        before a long computation that precedes the first evaluation, a retune."""
+        k, c = float(self.system.tid_stiffness), float(self.system.tid_damping)
+        states = self.settings.for_system(self.system).states
+        placeholder = (self.theta(k, c, 1.0), 1.0, np.zeros((self.omegas.size, states)))
+        tasks, _ = self._tasks([placeholder] * points, self.settings)
+        if not _evaluate_points.is_kept(*_kernel_arguments(*tasks[0])):
+            start_workers(len(tasks), (_prepare_chunk, tasks[0]), serves=_evaluate_chunk)
+
+    def _tasks(self, points: Sequence[tuple], settings: SolverSettings):
+        """The tasks of `_evaluate_chunk` for `points`, `_CHUNK` points each (the last
+        padded with copies of its last point), and how many points each holds."""
         tasks, sizes, ratio_grid = [], [], np.asarray(self.ratio_grid)
         for start in range(0, len(points), _CHUNK):
             chunk = list(points[start : start + _CHUNK])
@@ -341,6 +362,12 @@ class Context:
             thetas, scales, z_init = (np.stack([point[i] for point in chunk]) for i in range(3))
             tasks.append((self.system, thetas, np.asarray(scales, dtype=float),
                           ratio_grid, settings, z_init, self.locate))
+        return tasks, sizes
+
+    def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
+        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call, the
+        calls dealt out to this process and its workers (`_workers.run_lanes`)."""
+        tasks, sizes = self._tasks(points, settings)
         results = []
         for used, ((jac_x, jac_y), out) in zip(
                 sizes, run_lanes(_evaluate_chunk, tasks, compiles=True), strict=True):

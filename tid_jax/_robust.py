@@ -401,6 +401,9 @@ def robust_tune(
         raise ValueError("robust_settings must be a RobustSettings, got "
                          f"{type(robust_settings).__name__}")
     say = progress if progress is not None else (lambda message: None)
+    if best is None:  # a worker compiles the design's program meanwhile, where it is not kept
+        Context(system, _band(system, omegas), settings, locate=False).warm_up(
+            amps.size * scales.size)
     best = _checked_best(system, amps, scales, best, omegas, settings, retune_settings,
                          progress)
     band = np.asarray(best.omegas)

@@ -349,6 +349,12 @@ def amplitude_sensitivities(
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
     check_retune_options(max_steps, tol, retune_settings)
     ctx = Context(system, band, settings, locate=True)
+    # A worker compiles the derivatives' program meanwhile, where it is not kept.
+    ctx.warm_up(amplitudes.size)
+    if optimum and best is None:
+        best = best_tunings(system, amplitudes, omegas=band, settings=settings,
+                            max_steps=max_steps, tol=tol, retune_settings=retune_settings,
+                            progress=progress)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
     z_given = ctx.cold_states(k, c, amplitudes, 1.0)
@@ -358,10 +364,6 @@ def amplitude_sensitivities(
         f"{len(given)} amplitude(s) converged")
     optimal = [None] * amplitudes.size
     if optimum:
-        if best is None:
-            best = best_tunings(system, amplitudes, omegas=band, settings=settings,
-                                max_steps=max_steps, tol=tol, retune_settings=retune_settings,
-                                progress=progress)
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
         starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
                   for amplitude, index in zip(amplitudes, indices, strict=True)]

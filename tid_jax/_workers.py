@@ -66,16 +66,23 @@ def process_count(lanes: int) -> int:
     return max(1, min(count, lanes))
 
 
-def start_workers(lanes: int, warm_up: tuple[Callable, tuple] | None = None) -> None:
+def start_workers(lanes: int, warm_up: tuple[Callable, tuple] | None = None, *,
+                  serves: Callable | None = None) -> None:
     """Start the worker processes that `run_lanes` will use for `lanes` lanes, so that
     they load while this process computes. With `warm_up = (function, task)` and the
-    compilation cache on, the first worker runs `function(*task)` meanwhile, its result
-    (or error) dropped: it compiles the programs of `function` (or loads them from the
-    cache) while this process computes something else, and `run_lanes` waits for it
-    before it deals out tasks, then finds them in the cache."""
+    compilation cache on, a worker not already warming up runs `function(*task)`
+    meanwhile, its result (or error) dropped: it compiles the programs of the function
+    `serves` (default `function`), or loads them from the cache, while this process
+    computes something else. `run_lanes` of `serves` waits for it before it deals out
+    tasks, then finds them in the cache; `run_lanes` of any other function deals that
+    worker tasks once it has ended. Where every worker is warming up, the warm-up is
+    dropped: this process compiles those programs when it needs them."""
     workers = _workers(process_count(lanes) - 1)
-    if warm_up is not None and workers and cache_folder() is not None:
-        workers[0].warm_up(*warm_up)
+    if warm_up is None or cache_folder() is None:
+        return
+    idle = [worker for worker in workers if not worker.warming_up()]
+    if idle:
+        idle[0].warm_up(*warm_up, serves=warm_up[0] if serves is None else serves)
 
 
 def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = False) -> list:
@@ -96,7 +103,8 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     """
     tasks = list(tasks)
     for worker in _pool:
-        worker.settle()
+        if worker.warming_for is function:
+            worker.settle()
     workers = _workers(process_count(len(tasks)) - 1)
     if not workers:
         return [function(*task) for task in tasks]
@@ -111,6 +119,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
             return left.pop(0 if last else -1) if left and not errors else None
 
     def serve(worker: "_Worker"):
+        worker.settle()  # a warm-up for another function
         # A worker that cannot tell what it will compile (no cache to look in) waits
         # before it takes its first task of `function`.
         if compiles and not worker.watched and function not in worker.ran:
@@ -195,6 +204,7 @@ class _Worker:
         )
         serve = f"from {__name__} import _serve; _serve()"
         self.warming: threading.Thread | None = None  # a warm-up in progress
+        self.warming_for: Callable | None = None  # the function it prepares
         self.ran: set[Callable] = set()  # the functions it has run (programs loaded)
         folder = cache_folder()
         # Whether it sees its compilations coming (and asks to wait before each).
@@ -230,27 +240,32 @@ class _Worker:
             raise value
         return value
 
-    def warm_up(self, function: Callable, args: tuple) -> None:
-        """Start `function(*args)` in the worker, in a thread of this process, its
-        result and any error dropped (the task, run again for real, shows it), once the
-        warm-up before it (one left by an interrupted call) has ended."""
+    def warm_up(self, function: Callable, args: tuple, serves: Callable) -> None:
+        """Start `function(*args)` in the worker, a warm-up for the function `serves`, in
+        a thread of this process, its result and any error dropped (the task, run
+        again for real, shows it), once the warm-up before it, if any, has ended."""
         self.settle()
 
         def run():
             try:
                 self.run(function, args)
-                self.ran.add(function)
+                self.ran.add(serves)
             except Exception:
                 pass
 
         self.warming = threading.Thread(target=run, daemon=True)
+        self.warming_for = serves
         self.warming.start()
+
+    def warming_up(self) -> bool:
+        """Whether a warm-up is in progress."""
+        return self.warming is not None and self.warming.is_alive()
 
     def settle(self) -> None:
         """Wait for the warm-up in progress, if any."""
         if self.warming is not None:
             self.warming.join()
-            self.warming = None
+            self.warming = self.warming_for = None
 
     def stop(self) -> None:
         """End the worker: closing its input ends its loop; a worker that does not end

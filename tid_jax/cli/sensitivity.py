@@ -3,7 +3,7 @@
 
 
 from .. import plot
-from .._design import PARAMETER_UNITS, best_tunings
+from .._design import PARAMETER_UNITS
 from .._io import write_json, write_toml
 from .._retune import RetuneSettings
 from .._sensitivity import amplitude_sensitivities, elasticity_series
@@ -92,15 +92,12 @@ def _run_sensitivity(args) -> int:
         f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
         f"{', with the retuned optimum' if optimum else ''}; {_describe(system)}"
     )
-    best = None
     retune_steps = RetuneSettings().progress_steps() if optimum else 0
     with output.steps(retune_steps + (2 if optimum else 1)) as step:
         if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
-            best = best_tunings(system, amplitudes, omegas=omegas, settings=settings,
-                                progress=step)
         results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
-                                          best=best, settings=settings, progress=step)
+                                          settings=settings, progress=step)
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
