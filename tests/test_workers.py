@@ -1,5 +1,8 @@
 import math
 import os
+import signal
+import subprocess
+import sys
 import time
 
 import jax
@@ -205,3 +208,33 @@ def test_a_warm_up_while_the_worker_warms_up_is_dropped(two_processes, tmp_path)
     assert time.perf_counter() - started < 0.5
     assert run_lanes(math.sqrt, [(4.0,), (9.0,), (16.0,)]) == [2.0, 3.0, 4.0]
     assert not (tmp_path / "second").exists()
+
+
+def _ended(pid: int) -> bool:
+    """Whether the process `pid` has ended (gone, or a zombie not yet reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as file:
+            return file.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc (Linux)")
+def test_a_worker_ends_when_its_parent_is_killed_in_the_middle_of_a_task():
+    # Killed outright, the parent never closes the worker's input: the worker, busy with a
+    # task of a minute, notices that its parent has gone and ends within seconds.
+    with subprocess.Popen([sys.executable, "-c", (
+        "import threading, time\n"
+        "from tid_jax import _workers\n"
+        "worker = _workers._Worker()\n"
+        "threading.Thread(target=worker.run, args=(time.sleep, (60,)), daemon=True).start()\n"
+        "print(worker.process.pid, flush=True)\n"
+        "time.sleep(60)\n")], stdout=subprocess.PIPE, text=True) as parent:
+        pid = int(parent.stdout.readline())
+        time.sleep(1.0)
+        assert not _ended(pid)
+        parent.send_signal(signal.SIGKILL)
+    deadline = time.monotonic() + 20
+    while not _ended(pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert _ended(pid)

@@ -7,7 +7,8 @@ processes, each taking the next lane as it finishes one.
 Processes, not threads: two threads of one process executing XLA's CPU programs at once
 can deadlock in its runtime. The workers start when first needed and serve every later
 call of this process; they compute as this process does (the same precision and the same
-compilation cache, which they load their programs from) and end with it.
+compilation cache, which they load their programs from) and end with it, even where it is
+killed outright in the middle of a task.
 
 The number of processes is `$TID_JAX_WORKERS` (1: no workers), else the CPU cores this
 process may use; off the CPU or with several devices there are no workers (the lanes are
@@ -20,6 +21,7 @@ import pickle
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -202,7 +204,7 @@ class _Worker:
             PYTHONPATH=package_root + (os.pathsep + path if path else ""),
             **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
         )
-        serve = f"from {__name__} import _serve; _serve()"
+        serve = f"from {__name__} import _serve; _serve({os.getpid()})"
         self.warming: threading.Thread | None = None  # a warm-up in progress
         self.warming_for: Callable | None = None  # the function it prepares
         self.ran: set[Callable] = set()  # the functions it has run (programs loaded)
@@ -315,9 +317,19 @@ def _answer(function, args):
         return pickle.dumps(("error", RuntimeError(message)))
 
 
-def _serve() -> None:
-    """A worker's loop: tasks from stdin, answers on the original stdout (whatever else
-    prints to stdout goes to stderr)."""
+def _end_with(parent: int) -> None:
+    """End this process as soon as its parent, the process `parent`, has gone (it is then
+    adopted by another): a parent killed outright never closes the worker's input, and a
+    task, a compilation among them, would otherwise run on."""
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(1)
+
+
+def _serve(parent: int) -> None:
+    """A worker's loop, for the process `parent`: tasks from stdin, answers on the
+    original stdout (whatever else prints to stdout goes to stderr)."""
+    threading.Thread(target=_end_with, args=(parent,), daemon=True).start()
     answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
     tasks = sys.stdin.buffer
