@@ -220,6 +220,37 @@ def test_failed_integration_is_flagged_and_its_peaks_are_nan(system):
     assert np.isnan(float(result.x_max)) and np.isnan(float(result.y_max))
 
 
+def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system,
+                                                                          monkeypatch):
+    # Explicit steps that ran out (residual inf) would run out sooner still at a tighter
+    # tolerance: such a point skips the more accurate explicit attempt for the implicit
+    # one; a point whose Newton iterations fell short (a finite residual) is retried
+    # explicitly first.
+    from tid_jax import _response
+
+    attempts = []
+    solve = _response._solve_blocks
+
+    def recorded(settings, batch, warm=None):
+        out = solve(settings, batch, warm)
+        attempts.append((settings.implicit, np.asarray(out.residual)))
+        return out
+
+    monkeypatch.setattr(_response, "_solve_blocks", recorded)
+    omega = 0.95 * float(system.host_frequency)
+    result = tj.frequency_response(system, omega, 100.0,
+                                   settings=tj.SolverSettings(max_steps=16))
+    assert not bool(result.converged)
+    assert [implicit for implicit, _ in attempts] == [False, True]
+    assert np.all(np.isinf(attempts[0][1]))
+    attempts.clear()
+    result = tj.frequency_response(system, omega, 100.0, settings=tj.SolverSettings(
+        transient_periods=0, max_newton_steps=1))
+    assert bool(result.converged)
+    assert [implicit for implicit, _ in attempts] == [False, False]
+    assert np.all(np.isfinite(attempts[0][1]))
+
+
 def _orbit_at(system, amplitude, omega, directions=()):
     """Jitted (k, c) -> the orbit of `system` tuned to (k, c), at one forcing point."""
     import jax

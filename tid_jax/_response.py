@@ -231,14 +231,21 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
     (e.g. the orbit of a nearby design). Points that do not converge are solved again,
     from the equivalent linear steady state (`_period.initial_state`), with each of
-    `settings.fallbacks()` in turn until they do; the best attempt is kept. Each block of
+    `settings.fallbacks()` in turn until they do (a point where no period could be
+    integrated skips the explicit ones); the best attempt is kept. Each block of
     the batch is sharded over all JAX devices (`sharded_batch`). The solutions are NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     for fallback in settings.fallbacks():
-        failed = np.flatnonzero(~out.converged)
+        failed = ~out.converged
+        if not fallback.implicit:
+            # A point where no period was integrated (residual inf: the explicit steps ran
+            # out, or the state blew up) goes straight to the implicit attempt: more
+            # accurate explicit steps would only run out sooner.
+            failed &= np.isfinite(out.residual)
+        failed = np.flatnonzero(failed)
         if not failed.size:
-            break
+            continue
         retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
         out = _keep_better(out, retry, failed)
     return out
