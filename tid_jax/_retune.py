@@ -62,7 +62,8 @@ class RetuneSettings(eqx.Module):
       evaluated (at their last iterate), and the final design is checked with fully
       converged steady states.
     - `max_rejected_steps`: consecutive rejected line-search steps (each at most half the
-      last) after which a stage is taken as converged: no decrease is found above the
+      last) after which a stage is taken as converged, as it is sooner where a rejected
+      step is cut to a move within the stage's tolerance: no decrease is found above the
       noise of the objective.
     - `max_design_step`: longest optimiser step in the scaled design variables (1.0 is
       about 10% in k; see `DESIGN_SCALE`).
@@ -307,7 +308,7 @@ def _stage_arguments(lanes, options: dict):
     return (systems, amplitudes, u, z, h, bands, jnp.asarray(options["sharpness"]),
             jnp.asarray(options["first_step"]), options["settings"], options["max_steps"],
             jnp.asarray(options["tol"]), options["design_newton_steps"],
-            options["max_rejected_steps"], options["max_design_step"])
+            jnp.asarray(options["max_rejected_steps"]), options["max_design_step"])
 
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
@@ -398,12 +399,12 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
     state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
 
     def cond(carry):
-        u, state, z, steps, rejected = carry
+        u, state, z, steps, rejected, settled = carry
         done, _ = solver.terminate(objective, u, z, options, state, tags)
-        return ~done & (steps < max_steps) & (rejected < max_rejected_steps)
+        return ~done & (steps < max_steps) & (rejected < max_rejected_steps) & ~settled
 
     def body(carry):
-        u, state, z, steps, rejected = carry
+        u, state, z, steps, rejected, _ = carry
         accepted = state.num_accepted_steps
         u, state, _ = solver.step(objective, u, z, options, state, tags)
         # A first step shortened on purpose (`_InterpolatingArmijo.first_step`) says
@@ -413,15 +414,21 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
         z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
                          state.aux, z)
         rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
-        return u, state, z, steps + 1, rejected
+        # A rejected step cut to a move within the tolerance (as BFGS measures an
+        # accepted step's): the line search is down to moves that would count as
+        # converged, and no decrease is found above the noise of the objective.
+        trial = jnp.abs(state.y_eval - u) / (solver.atol + solver.rtol * jnp.abs(u))
+        settled = (rejected > 0) & (solver.norm(trial) < 1)
+        return u, state, z, steps + 1, rejected, settled
 
-    u, state, z, steps, rejected = jax.lax.while_loop(
-        cond, body, (u_start, state, z_start, 0, 0)
+    u, state, z, steps, rejected, settled = jax.lax.while_loop(
+        cond, body, (u_start, state, z_start, 0, 0, False)
     )
     done, result = solver.terminate(objective, u, z, options, state, tags)
-    # A line search that finds no decrease in `max_rejected_steps` cuts has reached
-    # the noise of the objective (steady states converged to the periodicity tolerance).
-    stalled = rejected >= max_rejected_steps
+    # A line search that finds no decrease in `max_rejected_steps` cuts, or none before
+    # its cuts are within the tolerance, has reached the noise of the objective (steady
+    # states converged to the periodicity tolerance).
+    stalled = (rejected >= max_rejected_steps) | settled
     return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
             state.f_info.hessian_inv.pytree)
 
@@ -498,7 +505,8 @@ def retune(
       (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
       the stages before use `retune_settings.continuation_tol`. A stage also ends,
       converged, when its line search finds no decrease in
-      `retune_settings.max_rejected_steps` cuts of its step.
+      `retune_settings.max_rejected_steps` cuts of its step, or none before a cut step is
+      within the tolerance (as an accepted step's length is judged).
     - `retune_settings`: `RetuneSettings` of the optimiser.
     - `progress`: if given, called with a one-line message as each of the
       `retune_settings.progress_steps()` steps ends (the initial tuning's steady states,
