@@ -62,9 +62,9 @@ class RetuneSettings(eqx.Module):
       evaluated (at their last iterate), and the final design is checked with fully
       converged steady states.
     - `max_rejected_steps`: consecutive rejected line-search steps (each at most half the
-      last) after which a stage is taken as converged, as it is sooner where a rejected
-      step is cut to a move within the stage's tolerance: no decrease is found above the
-      noise of the objective.
+      last) after which a stage is taken as converged, as a stage before the last is
+      sooner where a rejected step is cut to a move within its tolerance: no decrease is
+      found above the noise of the objective.
     - `max_design_step`: longest optimiser step in the scaled design variables (1.0 is
       about 10% in k; see `DESIGN_SCALE`).
     """
@@ -267,7 +267,8 @@ class _BFGS(optx.AbstractBFGS):
 
 @compiled
 def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
-                    max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step):
+                    max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
+                    small_cuts_end):
     """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
     the frequencies `omegas[i]`) from the design `u0[i]` and inverse Hessian `h0[i]` on
     the smooth log peak, shooting from the orbits `z0` of a nearby design (its tuning
@@ -280,7 +281,8 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_st
     solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step),
                    search=_InterpolatingArmijo(max_step=max_design_step, first_step=first_step))
     lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
-                      max_steps=max_steps, max_rejected_steps=max_rejected_steps)
+                      max_steps=max_steps, max_rejected_steps=max_rejected_steps,
+                      small_cuts_end=small_cuts_end)
 
     # One lane per device (`optimal_tunings` passes as many lanes as there are devices):
     # each lane's optimiser stops when it converges, and its integrations wait only for
@@ -308,7 +310,8 @@ def _stage_arguments(lanes, options: dict):
     return (systems, amplitudes, u, z, h, bands, jnp.asarray(options["sharpness"]),
             jnp.asarray(options["first_step"]), options["settings"], options["max_steps"],
             jnp.asarray(options["tol"]), options["design_newton_steps"],
-            jnp.asarray(options["max_rejected_steps"]), options["max_design_step"])
+            jnp.asarray(options["max_rejected_steps"]), options["max_design_step"],
+            jnp.asarray(options["small_cuts_end"]))
 
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
@@ -373,7 +376,8 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
 
 
 def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solver,
-                   sharpness, settings: SolverSettings, max_steps, max_rejected_steps):
+                   sharpness, settings: SolverSettings, max_steps, max_rejected_steps,
+                   small_cuts_end):
     """BFGS on one lane of `_optimise_stage`: `(u, steps, converged, orbits, inverse
     Hessian)`."""
     options = dict(autodiff_mode="fwd")
@@ -416,9 +420,11 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
         rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
         # A rejected step cut to a move within the tolerance (as BFGS measures an
         # accepted step's): the line search is down to moves that would count as
-        # converged, and no decrease is found above the noise of the objective.
+        # converged, and no decrease is found above the noise of the objective. (Where
+        # `small_cuts_end` is off, in the last stage, the design goes on creeping by
+        # such moves where they are accepted: the optimum that `sensitivities` polishes.)
         trial = jnp.abs(state.y_eval - u) / (solver.atol + solver.rtol * jnp.abs(u))
-        settled = (rejected > 0) & (solver.norm(trial) < 1)
+        settled = small_cuts_end & (rejected > 0) & (solver.norm(trial) < 1)
         return u, state, z, steps + 1, rejected, settled
 
     u, state, z, steps, rejected, settled = jax.lax.while_loop(
@@ -505,8 +511,9 @@ def retune(
       (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
       the stages before use `retune_settings.continuation_tol`. A stage also ends,
       converged, when its line search finds no decrease in
-      `retune_settings.max_rejected_steps` cuts of its step, or none before a cut step is
-      within the tolerance (as an accepted step's length is judged).
+      `retune_settings.max_rejected_steps` cuts of its step, or (stages before the last)
+      none before a cut step is within the tolerance (as an accepted step's length is
+      judged).
     - `retune_settings`: `RetuneSettings` of the optimiser.
     - `progress`: if given, called with a one-line message as each of the
       `retune_settings.progress_steps()` steps ends (the initial tuning's steady states,
@@ -622,6 +629,7 @@ def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
         first_step=min(1.0, sharpnesses[stage - 2] / sharpness) if stage > 1 else 1.0,
         tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
         max_rejected_steps=retune_settings.max_rejected_steps,
+        small_cuts_end=stage < len(sharpnesses),
         max_design_step=float(retune_settings.max_design_step),
     )
 
