@@ -25,7 +25,7 @@ from ._peaks import (
     peak_frequencies,
     smooth_log_peak,
 )
-from ._response import batched, frequency_response, scaled_states
+from ._response import batched, lane_response, scaled_states
 from ._retune import (
     RETUNE_OUTCOMES,
     RetuneSettings,
@@ -382,17 +382,20 @@ class Context:
         return results
 
     def cold_states(self, k, c, amplitudes, scale) -> np.ndarray:
-        """Scaled orbit states `[amps, freqs, 4]` at the tuning (k, c) for each amplitude,
-        from `frequency_response` (which retries points that fail to converge)."""
-        changed = self.system.replace(
-            host_stiffness=float(self.system.host_stiffness) * scale**2,
-            tid_stiffness=k,
-            tid_damping=c,
-        )
-        omegas = self.omegas * scale
+        """Scaled orbit states `[lanes, freqs, 4]`, one lane per amplitude: the tuning k
+        (N/m), c (N s/m) at that amplitude (N) with the host frequency times `scale` (over
+        the band times `scale`), each given once or once per lane; every lane in one
+        batch (`lane_response`, which retries points that fail to converge)."""
         amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
-        response = frequency_response(changed, omegas, amplitudes, settings=self.settings)
-        return np.asarray(scaled_states(response, float(changed.host_stiffness)))
+        k, c, scale = (np.broadcast_to(np.asarray(value, dtype=float), amplitudes.shape)
+                       for value in (k, c, scale))
+        host_stiffness = float(self.system.host_stiffness) * scale**2
+        lanes = eqx.tree_at(lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
+                            batched(self.system, amplitudes.size),
+                            tuple(jnp.asarray(value) for value in (host_stiffness, k, c)))
+        response = lane_response(lanes, amplitudes, self.omegas * scale[:, None],
+                                 self.settings)
+        return np.asarray(scaled_states(response, host_stiffness))
 
 
 class Scenario(NamedTuple):
@@ -545,15 +548,10 @@ def evaluate_design(ctx, u, scenarios, z_inits, *, stencil="forward") -> Evaluat
 
 
 def cold_start(ctx: Context, u, scenarios) -> list[np.ndarray]:
-    """Orbit states at the design u for every scenario, one `frequency_response` call per
-    host-frequency scale."""
-    states = [None] * len(scenarios)
-    for scale in sorted({scenario.scale for scenario in scenarios}):
-        index = [i for i, scenario in enumerate(scenarios) if scenario.scale == scale]
-        amplitudes = [scenarios[i].amplitude for i in index]
-        for i, z in zip(index, ctx.cold_states(*ctx.tuning(u), amplitudes, scale), strict=True):
-            states[i] = z
-    return states
+    """Orbit states at the design u for every scenario, all in one batch."""
+    amplitudes, scales = ([getattr(scenario, name) for scenario in scenarios]
+                          for name in ("amplitude", "scale"))
+    return list(ctx.cold_states(*ctx.tuning(u), amplitudes, scales))
 
 
 

@@ -194,13 +194,18 @@ def _polished(ctx, starts, tol, sharpness):
     return finals, models
 
 
-def _optimum_start(ctx, scenario, best: "BestTunings", index):
-    """Where `_polished` starts from at the best tuning `best[index]`: `(scenario, u,
-    z_init, at_bound)`."""
-    at_bound = bool(best.damping_at_bound[index])
-    k, c = float(best.tid_stiffness[index]), float(best.tid_damping[index])
-    z_init = ctx.cold_states(k, c, [scenario.amplitude], scenario.scale)[0]
-    return scenario, ctx.design(k, 0.0 if at_bound else c), z_init, at_bound
+def _optimum_starts(ctx, amplitudes, best: "BestTunings", indices):
+    """Where `_polished` starts from at the best tunings `best[index]` of the nominal
+    scenarios at `amplitudes` (`indices`, one each): `(scenario, u, z_init, at_bound)`
+    each, the orbits of every amplitude solved in one batch."""
+    at_bound = [bool(best.damping_at_bound[index]) for index in indices]
+    k, c = (np.array([float(tuning[index]) for index in indices])
+            for tuning in (best.tid_stiffness, best.tid_damping))
+    z_inits = ctx.cold_states(k, c, amplitudes, 1.0)
+    return [(Scenario(float(amplitude), 1.0, 0.0), ctx.design(k_i, 0.0 if bound else c_i), z,
+             bound)
+            for amplitude, k_i, c_i, z, bound in zip(amplitudes, k, c, z_inits, at_bound,
+                                                      strict=True)]
 
 
 def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, final, model,
@@ -365,8 +370,7 @@ def amplitude_sensitivities(
     optimal = [None] * amplitudes.size
     if optimum:
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
-        starts = [_optimum_start(ctx, Scenario(amplitude, 1.0, 0.0), best, index)
-                  for amplitude, index in zip(amplitudes, indices, strict=True)]
+        starts = _optimum_starts(ctx, amplitudes, best, indices)
         given_settings = settings.for_system(system)
         tight = given_settings.tighter(_POLISH_ACCURACY)
         # Exact friction has no integration error to tighten: the context of the given
