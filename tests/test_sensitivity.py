@@ -257,6 +257,33 @@ def test_polishing_steps_keep_the_curvatures_of_their_start(system, band, monkey
                                    err_msg=name)
 
 
+def test_a_failed_steady_state_is_flagged_not_differentiated(system, band, monkeypatch):
+    # Every evaluation's steady states reported as not converged (their log peaks and
+    # derivatives NaN, as a solve that failed leaves them): the sensitivities at the given
+    # tuning and at the optimum come back flagged, with NaN values, not as an exception
+    # or as finite numbers.
+    from tid_jax import _design
+
+    best = tj.best_tunings(system, [SENSITIVITY_AMPLITUDE], omegas=band)
+    evaluate = _design.Context.evaluate
+
+    def failing(self, points):
+        return [curves._replace(log_x=np.full_like(curves.log_x, np.nan),
+                                jac_x=np.full_like(curves.jac_x, np.nan), converged=False)
+                for curves in evaluate(self, points)]
+
+    monkeypatch.setattr(_design.Context, "evaluate", failing)
+    result = tj.sensitivities(system, SENSITIVITY_AMPLITUDE, omegas=band, best=best)
+    assert not bool(result.converged)
+    assert not np.any(np.isfinite(np.asarray(result.host_elasticity)))
+    optimum = result.optimum
+    assert not bool(optimum.converged)
+    for name in ("host_elasticity", "stiffness_elasticity", "damping_elasticity",
+                 "stroke_elasticity"):
+        assert not np.any(np.isfinite(np.asarray(getattr(optimum, name)))), name
+    assert not np.isfinite(float(optimum.smooth_peak))
+
+
 def test_optimum_at_the_damping_bound_and_at_3000_n():
     # On the default band, with exact friction (the default). At 100 N the optimal damping
     # is 0 (the friction damps enough): c* stays at its bound for small changes of any

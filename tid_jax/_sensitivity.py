@@ -28,7 +28,7 @@ from ._design import (
 )
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
-from ._sqp import Model, decrement, trust_step
+from ._sqp import Model, decrement, finite, trust_step
 from ._system import TIDSystem
 
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
@@ -160,7 +160,8 @@ def _polished(ctx, starts, tol, sharpness):
                               stencil="central")
     first = list(finals)
     models = [Model(*smooth_max(final.host_terms, sharpness)) for final in finals]
-    moving = range(len(starts))
+    # A start whose smooth maximum is not finite (a steady state failed) is not polished.
+    moving = [i for i, model in enumerate(models) if finite(model)]
     for _ in range(_POLISH):
         steps = {}
         for i in moving:
@@ -213,7 +214,10 @@ def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, fin
     """`OptimumSensitivities` at the best tuning `best[index]`, polished (`final` and its
     `model`, from `_polished`) and differentiated through its stationarity condition: in
     (u0, u1), or where the damping is at its bound, in u0 alone with dc*/dp = 0 (the bound
-    stays active)."""
+    stays active). Where a steady state failed there (the smooth maximum is not finite),
+    every peak and derivative is NaN, not converged."""
+    if not finite(model):
+        return _unsolved_optimum(ctx, best, index, at_bound, final)
     u = final.u
     k, c = ctx.tuning(u)
     g, h_uu = model.grad, model.curvature()
@@ -257,6 +261,21 @@ def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, fin
                                    and best.converged[index])),
         damping_at_bound=jnp.asarray(at_bound),
     )
+
+
+def _unsolved_optimum(ctx, best: "BestTunings", index, at_bound, final) -> OptimumSensitivities:
+    """`OptimumSensitivities` at the best tuning `best[index]` (as polished, `final`) where
+    its steady states failed: the tuning, NaN for every peak and derivative, not
+    converged."""
+    k, c = ctx.tuning(final.u)
+    nan, nans = jnp.asarray(np.nan), jnp.full(len(ctx.parameters), np.nan)
+    return OptimumSensitivities(
+        tid_stiffness=jnp.asarray(k), tid_damping=jnp.asarray(c), host_peak=nan,
+        stroke_peak=nan, smooth_peak=nan, host_derivative=nans, host_elasticity=nans,
+        stroke_derivative=nans, stroke_elasticity=nans, stiffness_derivative=nans,
+        stiffness_elasticity=nans, damping_derivative=nans, damping_elasticity=nans,
+        gradient_norm=nan, iterations=jnp.asarray(int(best.iterations[index])),
+        converged=jnp.asarray(False), damping_at_bound=jnp.asarray(at_bound))
 
 
 def _best_index(best: "BestTunings", system, band, amplitude) -> tuple[int, int]:
