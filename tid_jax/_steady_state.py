@@ -384,7 +384,10 @@ def _tangent_newton(z, p, settings: SolverSettings, directions) -> _TangentNewto
 def _iterate(evaluate, z0, settings: SolverSettings):
     """Newton's iterations `evaluate(z)` (with fields `z`, `update`, `residual`) from `z0`
     until the residual is within `settings.periodicity_tol` or after
-    `settings.max_newton_steps` evaluations: the last evaluation and their count."""
+    `settings.max_newton_steps` evaluations: the last evaluation and their count.
+    `evaluate` is traced once, and evaluated only in the loop, which makes the first
+    evaluation too (at `z0`): a compiled program holds one copy of its integration."""
+    evaluate = eqx.filter_closure_convert(evaluate, z0)
 
     def cond(carry):
         newton, steps = carry
@@ -392,9 +395,14 @@ def _iterate(evaluate, z0, settings: SolverSettings):
 
     def body(carry):
         newton, steps = carry
-        return evaluate(_limited(newton.z, newton.update)), steps + 1
+        z = jnp.where(steps == 0, z0, _limited(newton.z, newton.update))
+        return evaluate(z), steps + 1
 
-    return jax.lax.while_loop(cond, body, (evaluate(z0), jnp.array(1)))
+    # Before the first evaluation: its shapes, the residual inf (not converged).
+    unevaluated = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), evaluate.out_struct)
+    unevaluated = eqx.tree_at(lambda n: n.residual, unevaluated,
+                              jnp.full_like(unevaluated.residual, jnp.inf))
+    return jax.lax.while_loop(cond, body, (unevaluated, jnp.array(0)))
 
 
 def _shoot(z0, p, settings: SolverSettings, directions=()):
