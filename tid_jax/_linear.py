@@ -120,7 +120,12 @@ def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
     **Returns:** a `LinearReceptance` (`host`, `inerter`: complex, m/N, the shape of
     `omega`).
     """
-    w = jnp.asarray(omega)
+    return _linear_receptance(system, jnp.asarray(omega))
+
+
+@eqx.filter_jit
+def _linear_receptance(system: TIDSystem, w) -> LinearReceptance:
+    """`linear_receptance`, one compiled program (not an array operation each)."""
     mechanism = 1j * w * system.parasitic_damping - system.inertance * w**2
     return _receptance(system, w, mechanism / (1 + mechanism / system.series_stiffness))
 
@@ -152,7 +157,12 @@ def stuck_receptance(system: TIDSystem, omega: ArrayLike) -> Complex[Array, "...
 
     **Returns:** the complex receptance, m/N, the shape of `omega`.
     """
-    w = jnp.asarray(omega)
+    return _stuck_receptance(system, jnp.asarray(omega))
+
+
+@eqx.filter_jit
+def _stuck_receptance(system: TIDSystem, w) -> Complex[Array, "..."]:
+    """`stuck_receptance`, one compiled program."""
     return 1 / (
         system.host_stiffness
         + system.tid_stiffness

@@ -585,6 +585,14 @@ def optimal_tunings(
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)
     initial_states = orbits[1]
+    # While a worker compiles the stages' program, this process checks the initial tuning
+    # (which the stages do not change) instead of waiting; else it is checked with the
+    # retuned designs, in one batch dealt out to every process.
+    initial_check = None
+    if warm_up is not None:
+        initial_check = run_shares(
+            _check_lanes, _check_inputs(systems, amps, bands, initial_states, refinement),
+            settings, here=True)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
@@ -603,14 +611,19 @@ def optimal_tunings(
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
             f"{int(np.max(steps, initial=0))} iterations at most")
-    k, c, both_systems, both_amplitudes, fine, warm = _check_batch(
-        systems, amps, bands, u, k_ref, c_ref, initial_states, orbits[1], refinement)
+    k, c, retuned = _retuned(systems, u, k_ref, c_ref)
+    lanes = _check_inputs(retuned, amps, bands, orbits[1], refinement)
+    if initial_check is None:
+        initial = _check_inputs(systems, amps, bands, initial_states, refinement)
+        lanes = jax.tree.map(lambda *a: np.concatenate(a), initial, lanes)
     # One share of the lanes per process, dealt out in turn: the initial and retuned
     # designs alike to each.
-    both, found = run_shares(_check_lanes, (both_systems, both_amplitudes, fine, warm),
-                             settings)
+    checked = run_shares(_check_lanes, lanes, settings)
+    if initial_check is not None:
+        checked = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
+    both, found = checked
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
-    say(f"checked the initial and retuned designs on {fine.shape[-1]} frequencies x "
+    say(f"checked the initial and retuned designs on {lanes[2].shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
     return result
 
@@ -676,19 +689,19 @@ def _initial_orbits(start: FrequencyResponse, systems: TIDSystem, k0, c0):
 
 
 @eqx.filter_jit
-def _check_batch(systems: TIDSystem, amplitudes, bands, u, k_ref, c_ref, initial_states,
-                 final_states, refinement: int):
-    """The retuned tuning (k, c) of the design variables `u`, and the check of the initial
-    and retuned designs as one batch of lanes: the systems, amplitudes and check grids,
-    every steady state shot from its design's orbits on the design grid (interpolated in
-    between)."""
+def _retuned(systems: TIDSystem, u, k_ref, c_ref):
+    """The tunings (k, c) of the lanes' design variables `u`, and the systems so tuned."""
     k, c = tuning_of_design(u.T, k_ref, c_ref)
-    warm = _on_check_grid(jnp.concatenate([initial_states, final_states]), refinement)
-    both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), systems,
-                        with_tuning(systems, k, c))
-    fine = _on_check_grid(bands, refinement)
-    return (k, c, both, jnp.concatenate([amplitudes, amplitudes]),
-            jnp.concatenate([fine, fine]), warm)
+    return k, c, with_tuning(systems, k, c)
+
+
+@eqx.filter_jit
+def _check_inputs(systems: TIDSystem, amplitudes, bands, states, refinement: int):
+    """The check's lanes of one design each (the tuning of `systems`), as `_check_lanes`
+    takes them: the systems, amplitudes and check grids, every steady state shot from the
+    design's orbits `states` on the design grid (interpolated in between)."""
+    return (systems, amplitudes, _on_check_grid(bands, refinement),
+            _on_check_grid(states, refinement))
 
 
 def _set_lanes(values, lanes, new):

@@ -164,19 +164,21 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     return results
 
 
-def run_shares(function: Callable, lanes: tuple, *args) -> tuple:
+def run_shares(function: Callable, lanes: tuple, *args, here: bool = False) -> tuple:
     """`function(*lanes, *args)`, the lanes (a tuple of arrays, or pytrees of them, with
     a leading axis of lanes) dealt out in turn to the `process_count` processes, one
     share to each (`run_lanes` with `compiles`); `function` returns a tuple of arrays (or
     pytrees of them) over its share's lanes, here put back together in the lanes'
-    order as NumPy arrays."""
+    order as NumPy arrays. With `here`, every share is run in this process, one after
+    another: the programs of the shares' shapes are then compiled (or loaded) for a
+    later call of the same shapes."""
     n = jax.tree.leaves(lanes)[0].shape[0]
     count = process_count(n)
     shares = [np.arange(n)[i::count] for i in range(count)]
-    parts = run_lanes(function, [
-        (*jax.tree.map(lambda a, share=share: np.asarray(a)[share], lanes), *args)
-        for share in shares
-    ], compiles=True)
+    tasks = [(*jax.tree.map(lambda a, share=share: np.asarray(a)[share], lanes), *args)
+             for share in shares]
+    parts = ([function(*task) for task in tasks] if here
+             else run_lanes(function, tasks, compiles=True))
     order = np.argsort(np.concatenate(shares))
     return jax.tree.map(lambda *values: np.concatenate(values)[order], *parts)
 
@@ -351,6 +353,10 @@ def _serve(parent: int) -> None:
         try:
             function, args, careful = pickle.load(tasks)
         except EOFError:
-            return
+            # The caller has closed the input and waits for this process: it ends at once,
+            # without tearing down the interpreter (every answer is sent, every program
+            # the cache keeps is written).
+            sys.stderr.flush()
+            os._exit(0)
         answers.write(_answer(function, args))
         answers.flush()

@@ -7,6 +7,7 @@ import numpy as np
 from .. import plot
 from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
+from .._response import _on_host
 from .._retune import RetuneSettings, retune
 from ._common import (
     _add_output_arguments,
@@ -81,6 +82,7 @@ def _run_retune(args) -> int:
     )
     with output.steps(RetuneSettings().progress_steps()) as step:
         result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
+    result = _on_host(result)  # read entry by entry below: no array operation each
     records = _records(result, system, amplitudes, inputs["stroke_limit"])
     save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     write_toml(

@@ -6,6 +6,7 @@ import numpy as np
 
 from .. import plot
 from .._io import write_json, write_toml
+from .._response import _on_host
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance
 from ._common import (
@@ -89,6 +90,7 @@ def _run_robust(args) -> int:
             progress=step,
         )
     given = tuning_performance(system, result.best, settings=settings)
+    result, given = _on_host((result, given))  # read entry by entry below
     records = _records(result, given, scales, amplitudes)
     save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     write_toml(

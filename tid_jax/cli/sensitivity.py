@@ -5,6 +5,7 @@
 from .. import plot
 from .._design import PARAMETER_UNITS
 from .._io import write_json, write_toml
+from .._response import _on_host
 from .._retune import RetuneSettings
 from .._sensitivity import amplitude_sensitivities, elasticity_series
 from ._common import (
@@ -98,6 +99,7 @@ def _run_sensitivity(args) -> int:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
         results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
                                           settings=settings, progress=step)
+    results = _on_host(results)  # read entry by entry below: no array operation each
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
