@@ -97,8 +97,10 @@ class SolverSettings(eqx.Module):
 
     def coarse(self) -> "SolverSettings":
         """These settings with the coarse integration tolerances (`coarse_rtol`, atol in
-        proportion), or the settings themselves where they are as coarse already."""
-        if self.coarse_rtol <= self.rtol:
+        proportion), or the settings themselves where they are as coarse already, and
+        for exact friction (whose period map has no integration error): a batch then
+        has no coarse Newton iterations (`_steady_state.shoot_queue`)."""
+        if self.coarse_rtol <= self.rtol or self.exact_friction:
             return self
         ratio = self.coarse_rtol / self.rtol
         return eqx.tree_at(lambda s: (s.rtol, s.atol), self, (self.coarse_rtol, self.atol * ratio))

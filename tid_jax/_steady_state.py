@@ -298,14 +298,18 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     `settings.chord_residual`; chord iterations with the last Newton matrix held, each
     one integration without tangents that also samples the orbit and verifies it. The
     best iterate evaluated is returned with its samples and residual, and the monodromy
-    matrix of the last Newton iterate. Points where `valid` is False are skipped."""
+    matrix of the last Newton iterate. Points where `valid` is False are skipped. Where
+    the coarse settings are these settings (`SolverSettings.coarse`), the first stage
+    would repeat the second: Newton's iterations at `settings.rtol` start at once."""
     size = z0.shape[0]
     valid = jnp.ones(size, bool) if valid is None else valid
     order = jnp.argsort(~valid, stable=True)
     count = jnp.sum(valid)
-    coarse, coarse_steps = _newton_phase(z0, p, settings.coarse(), order, count, slots,
-                                         settings.coarse_residual)
-    z = jax.vmap(lambda last: _next_iterate(last, settings))(coarse)
+    z, coarse_steps = z0, 0
+    if settings.coarse() is not settings:
+        coarse, coarse_steps = _newton_phase(z0, p, settings.coarse(), order, count, slots,
+                                             settings.coarse_residual)
+        z = jax.vmap(lambda last: _next_iterate(last, settings))(coarse)
     newton, newton_steps = _newton_phase(z, p, settings, order, count, slots,
                                          settings.chord_residual)
     chord, chord_steps = _chord_phase(newton, p, settings, order, count, slots)
