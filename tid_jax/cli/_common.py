@@ -38,7 +38,7 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
-from .._workers import WORKERS_ENVIRONMENT_VARIABLE
+from .._workers import WORKERS_ENVIRONMENT_VARIABLE, start_workers
 
 PROG = "tid-jax"
 EXIT_ERROR = 2
@@ -366,8 +366,14 @@ class _Start(NamedTuple):
     output: "_Output"
 
 
-def _start(args) -> _Start:
+def _start(args, *, workers: bool = False) -> _Start:
+    """The inputs of a command and what follows from them. With `workers` (a command
+    that solves its amplitudes as lanes), the worker processes (`_workers`, one per
+    further CPU core) start now, so that they load while this process sets the system
+    up."""
     inputs = _inputs(args)
+    if workers:
+        start_workers(len(inputs["amplitudes"]))
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)

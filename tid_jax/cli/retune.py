@@ -74,7 +74,8 @@ def _add_retune_parser(subparsers) -> None:
 
 
 def _run_retune(args) -> int:
-    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
+    start = _start(args, workers=True)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     output.say(
         f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies, "
         f"{frequencies_hz[0]:.3g}-{frequencies_hz[-1]:.3g} Hz; "

@@ -70,7 +70,8 @@ def _run_robust(args) -> int:
     tolerance = args.host_frequency_tolerance
     if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
         raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
-    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
+    start = _start(args, workers=True)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
     stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
     output.say(

@@ -87,7 +87,8 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 
 def _run_sensitivity(args) -> int:
-    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
+    start = _start(args, workers=True)
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     optimum = not args.no_optimum
     output.say(
         f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
