@@ -1,6 +1,7 @@
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -450,6 +451,9 @@ def test_coarse_settings():
     assert tj.SolverSettings(rtol=1e-5).coarse().rtol == 1e-5
     assert settings.without_coarse().coarse() == settings.without_coarse()
     assert all(fallback.coarse() == fallback for fallback in settings.fallbacks())
+    # Exact friction's period map has no integration error: no coarse Newton iterations.
+    exact = settings.for_system(tj.paper_system())
+    assert exact.coarse() is exact
     for name in ("coarse_rtol", "coarse_residual"):
         with pytest.raises(ValueError, match=name):
             tj.SolverSettings(**{name: -1.0})
@@ -463,3 +467,40 @@ def test_tighter_settings():
     # Exact friction has no integration error, and its own periodicity tolerance.
     exact = settings.for_system(tj.paper_system().replace(friction_width=0.0))
     assert exact.tighter(10.0) == exact
+
+
+def test_a_program_holds_one_copy_of_each_newton_evaluation(monkeypatch):
+    # Newton's shooting traces its evaluation once (its first iterate is the loop's first
+    # iteration), and a batch of exact friction has no coarse Newton stage, which would
+    # repeat the next one: each is a copy of the differentiated period map in a program.
+    from tid_jax import _steady_state
+    from tid_jax._dynamics import parameter_vector
+
+    counts = {}
+
+    def counted(name):
+        original = getattr(_steady_state, name)
+
+        def wrapper(*args, **kwargs):
+            counts[name] = counts.get(name, 0) + 1
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(_steady_state, name, wrapper)
+
+    for name in ("_newton", "_tangent_newton", "_newton_phase"):
+        counted(name)
+    smoothed = tj.paper_system(friction_width=None)
+    p = parameter_vector(smoothed, 300.0, float(smoothed.host_frequency))
+    z = jnp.zeros(4)
+    settings = tj.SolverSettings().for_system(smoothed)
+    jax.eval_shape(lambda z: _steady_state.solve_orbit(p, settings, z), z)
+    jax.eval_shape(lambda z: _steady_state.solve_orbit(p, settings, z, directions=(5, 6)), z)
+    assert counts == {"_newton": 1, "_tangent_newton": 1}
+    counts.clear()
+    batch = (jnp.zeros((8, 4)), jnp.broadcast_to(p, (8, p.shape[0])))
+    jax.eval_shape(lambda z, q: _steady_state.shoot_queue(z, q, settings, 4), *batch)
+    assert counts["_newton_phase"] == 2  # smoothed friction: coarse, then full accuracy
+    counts.clear()
+    exact = tj.SolverSettings().for_system(tj.paper_system())
+    jax.eval_shape(lambda z, q: _steady_state.shoot_queue(z, q, exact, 4), *batch)
+    assert counts["_newton_phase"] == 1

@@ -61,6 +61,22 @@ def test_shares_of_lanes_come_back_in_the_lanes_order(two_processes):
     np.testing.assert_array_equal(info["first"], pairs[:, 0])
 
 
+def _shifted_pid(values, offset):
+    return values + offset, np.full(values.shape, os.getpid())
+
+
+def test_shares_run_here_take_the_shapes_of_the_shares(two_processes):
+    # `here`: every share in this process, one call per share of the same lanes as
+    # with the workers (what a later call of those shapes finds compiled).
+    values = np.arange(7.0)
+    shifted, pids = run_shares(_shifted_pid, (values,), 10.0, here=True)
+    np.testing.assert_array_equal(shifted, values + 10.0)
+    assert set(pids.tolist()) == {os.getpid()}
+    shapes = []
+    run_shares(lambda v: shapes.append(v.shape) or (v,), (values,), here=True)
+    assert shapes == [(4,), (3,)]
+
+
 def test_an_error_in_a_worker_is_raised_here(two_processes):
     with pytest.raises(ValueError, match="math domain error"):
         run_lanes(math.sqrt, [(4.0,), (9.0,), (-1.0,), (16.0,)])
