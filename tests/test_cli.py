@@ -564,3 +564,16 @@ def test_cache_environment_variable_turns_the_cache_off(monkeypatch, value):
     monkeypatch.delenv("TID_JAX_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", "/somewhere")
     assert tj.default_cache_dir() == pathlib.Path("/somewhere/tid_jax")
+
+
+def test_json_is_strict_with_numbers_that_could_not_be_computed_as_null():
+    # Python's json writes NaN and inf as bare tokens, which strict readers reject.
+    data = {"peak": float("nan"), "rows": [1.5, np.float64(np.inf), {"x": -np.inf}],
+            "pair": (2.0, float("nan")), "ok": True, "n": 3}
+    text = _io.json_text(data)
+
+    def refuse(token):
+        raise ValueError(f"not strict JSON: {token}")
+
+    assert json.loads(text, parse_constant=refuse) == {
+        "peak": None, "rows": [1.5, None, {"x": None}], "pair": [2.0, None], "ok": True, "n": 3}

@@ -2,6 +2,7 @@ import contextlib
 import csv
 import io
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -42,8 +43,22 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
 
 
 def json_text(data) -> str:
-    """`data` as indented JSON text (no trailing newline)."""
-    return json.dumps(data, indent=2, sort_keys=False)
+    """`data` as indented, strict JSON text (no trailing newline): a number that is not
+    finite (NaN, a quantity that could not be computed and is flagged beside it, or
+    inf) is written as `null`, which every JSON reader takes (the bare `NaN` that
+    Python's `json` writes by default, strict readers reject)."""
+    return json.dumps(_finite_or_null(data), indent=2, sort_keys=False, allow_nan=False)
+
+
+def _finite_or_null(value):
+    """`value` (JSON data) with every non-finite float replaced by `None`."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _finite_or_null(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_null(item) for item in value]
+    return value
 
 
 def write_json(path: str | os.PathLike, data) -> Path:
