@@ -99,3 +99,13 @@ def test_unusable_trials_are_rejected():
                                          max_step=0.25, min_step=1e-6, feasibility=1e-10,
                                          max_steps=100, tol=1e-12)
     assert design is start and 0 < steps < 100
+
+
+@pytest.mark.parametrize("g, h", [
+    ([1.0, 0.0], [[np.nan, 0.0], [0.0, 1.0]]),
+    ([np.inf, 0.0], [[1.0, 0.0], [0.0, 1.0]]),
+])
+def test_trust_step_refuses_a_gradient_or_curvature_that_is_not_finite(g, h):
+    # eigh of NaN gives NaN, and the step would be NaN with no word said.
+    with pytest.raises(ValueError, match="must be finite"):
+        trust_step(np.array(g), np.array(h), 0.5)

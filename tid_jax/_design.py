@@ -18,8 +18,8 @@ from ._checks import check_grid, check_steady_state_device, check_system
 from ._linear import den_hartog_tuning
 from ._peaks import (
     REFINED_PEAKS,
-    grid_peak,
     interpolated,
+    lane_grid_peaks,
     located_peak,
     parabola_vertices,
     peak_frequencies,
@@ -347,9 +347,9 @@ class Context:
         k, c = float(self.system.tid_stiffness), float(self.system.tid_damping)
         states = self.settings.for_system(self.system).states
         placeholder = (self.theta(k, c, 1.0), 1.0, np.zeros((self.omegas.size, states)))
-        tasks, _ = self._tasks([placeholder] * points, self.settings)
-        if not _evaluate_points.is_kept(*_kernel_arguments(*tasks[0])):
-            start_workers(len(tasks), (_prepare_chunk, tasks[0]), serves=_evaluate_chunk)
+        (task,), _ = self._tasks([placeholder], self.settings)  # the shapes of every task
+        if not _evaluate_points.is_kept(*_kernel_arguments(*task)):
+            start_workers(-(-points // _CHUNK), (_prepare_chunk, task), serves=_evaluate_chunk)
 
     def _tasks(self, points: Sequence[tuple], settings: SolverSettings):
         """The tasks of `_evaluate_chunk` for `points`, `_CHUNK` points each (the last
@@ -627,10 +627,10 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
     )
 
 
-def _smooth_objective(values, omegas) -> np.ndarray:
+@jax.jit
+def _smooth_objective(values, omegas):
     """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
-    smooth = jax.vmap(lambda v, w: smooth_log_peak(v, w, OBJECTIVE_SHARPNESS))
-    return np.asarray(smooth(jnp.asarray(values), jnp.asarray(omegas)))
+    return jax.vmap(lambda v, w: smooth_log_peak(v, w, OBJECTIVE_SHARPNESS))(values, omegas)
 
 
 def best_tunings(
@@ -677,8 +677,7 @@ def best_tunings(
     # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
     # which the check grid holds at every `check_refinement`-th point.
     on_band = np.asarray(result.x_response)[:, ::retune_settings.check_refinement]
-    band_peaks = np.asarray(jax.vmap(lambda v, w: grid_peak(v, w)[0])(
-        jnp.asarray(on_band), bands))
+    band_peaks = lane_grid_peaks(on_band, bands)[0]
     shape = (scales.size, amps.size)
     grid = lambda a: jnp.asarray(np.asarray(a).reshape(shape))
     return BestTunings(

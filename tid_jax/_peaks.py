@@ -77,6 +77,13 @@ def grid_peak(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
     return peaks[i], omega_peaks[i], (i == 0) | (i == values.shape[0] - 1)
 
 
+@jax.jit
+def lane_grid_peaks(values: Float[Array, "lanes freqs"], omegas: Float[Array, "lanes freqs"]):
+    """`grid_peak` of each lane of `values` on its grid `omegas`, in one compiled program
+    (not an array operation at a time)."""
+    return jax.vmap(grid_peak)(values, omegas)
+
+
 def _candidates(values, omegas):
     """Refined local maxima of `values` with the band ends: (peak, omega, is_candidate)."""
     peaks, omega_peaks, is_peak = local_peaks(values, omegas)

@@ -5,7 +5,6 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
@@ -27,12 +26,12 @@ from ._design import (
     smooth_max,
 )
 from ._peaks import (
-    grid_peak,
+    lane_grid_peaks,
 )
 from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
-from ._sqp import Model, minimise_stage, stationary
+from ._sqp import Model, finite, minimise_stage, stationary
 from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 from ._workers import run_shares
@@ -136,7 +135,7 @@ def _minimise(
     steps, converged = 0, False
     for stage, sharpness in enumerate(stages, start=1):
         f, c = _models(current, sharpness, stroke_log_limit)
-        if not np.isfinite(f.value) or (c is not None and not np.isfinite(c.value)):
+        if not (finite(f) and (c is None or finite(c))):
             return _Minimum(current, f, c, steps, False)
 
         def evaluate(u, accepted, sharpness=sharpness):
@@ -211,10 +210,8 @@ def _lane_peaks(lanes, amplitudes, grids, settings):
     `lane_response`, and whether every steady state of it converged, as NumPy arrays: a
     task of `run_shares`."""
     response = lane_response(lanes, amplitudes, grids, settings)
-    on_grid = jax.vmap(grid_peak)
-    grids = jax.device_put(grids)
-    return (np.asarray(on_grid(response.x_max, grids)[0]),
-            np.asarray(on_grid(response.y_max, grids)[0]),
+    return (np.asarray(lane_grid_peaks(response.x_max, grids)[0]),
+            np.asarray(lane_grid_peaks(response.y_max, grids)[0]),
             np.all(np.asarray(response.converged), axis=-1))
 
 

@@ -69,7 +69,11 @@ def stationary(f: Model, c: Model | None, tol, feasibility) -> bool:
 
 
 def trust_step(g, h, radius) -> np.ndarray:
-    """Minimiser of g.d + d.h.d / 2 over |d| <= radius (2-norm), h symmetric 2 x 2."""
+    """Minimiser of g.d + d.h.d / 2 over |d| <= radius (2-norm), h symmetric 2 x 2.
+    `ValueError` where g or h is not finite (a step from a failed evaluation)."""
+    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(h))):
+        raise ValueError(f"trust_step: the gradient {g} and curvature {h.tolist()} must be "
+                         "finite (a failed evaluation has no step)")
     values, vectors = np.linalg.eigh(h)
     g_eig = vectors.T @ g
     if values[0] > 0:
