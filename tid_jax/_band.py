@@ -19,6 +19,7 @@ from ._peaks import (
     bracket,
     grid_peak,
     interpolated,
+    lane_grid_peaks,
     located_peak,
     newton_peak,
     stencil,
@@ -151,7 +152,7 @@ def _peaks_found(response: FrequencyResponse, omegas, index, valid, centre, esti
     def take(a):
         return jnp.take_along_axis(a, best[:, None], axis=1)[:, 0]
 
-    y, omega_y, _ = jax.vmap(grid_peak)(response.y_max, omegas)
+    y, omega_y, _ = lane_grid_peaks(response.y_max, omegas)
     return Peaks(
         amplitudes=response.amplitudes,
         x_peak=jnp.where(converged, take(peak), jnp.nan),
