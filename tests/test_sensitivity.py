@@ -124,7 +124,8 @@ def test_the_warm_up_compiles_the_program_of_the_evaluations(system, band, monke
         assert kwargs == {"serves": _design._evaluate_chunk}
         k, c = float(system.tid_stiffness), float(system.tid_damping)
         z = ctx.cold_states(k, c, [400.0], 1.0)[0]
-        [real], _ = ctx._tasks([(ctx.theta(k, c, 400.0), 1.0, z)], ctx.settings)
+        points = [(ctx.theta(k, c, 400.0), 1.0, z)]
+        [real], _ = ctx._tasks(points, ctx._grids(points, ctx.settings), ctx.settings)
         assert _kernel_key(task) == _kernel_key(real)
 
 

@@ -3,6 +3,7 @@ band, a sweep over it, and the peaks of the host (true maxima over frequency) an
 the inerter terminal (`peaks`, `peak_response`)."""
 
 import functools as ft
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -83,34 +84,64 @@ class Peaks(eqx.Module):
     converged: Bool[Array, " amps"]  # every steady state in the band converged
 
 
-def response_peaks(systems: TIDSystem, response: FrequencyResponse,
-                   settings: SolverSettings) -> Peaks:
-    """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
-    true maxima over frequency of |x| (`_peaks.true_peaks`; every Newton step's stencils
-    of every lane solved in one batch, each steady state shot from the grid's orbits,
-    interpolated), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
-    can have corners, where the highest of the terminal's excursions within a period
-    changes, which Newton steps on its slope would miss). NaN where a steady state in the
-    band, or of a stencil, did not converge."""
+class Located(NamedTuple):
+    """The host's highest peaks of each lane of a `lane_response`, located in continuous
+    frequency (`locate_peaks`), as NumPy arrays: the lanes' frequencies and scaled states,
+    and per peak (lanes x `REFINED_PEAKS`) its grid index, the last Newton step's estimate,
+    its frequency, whether it is a local maximum and whether its bracket is interior;
+    `converged`: every steady state of the lane, grid and stencils, converged."""
+
+    omegas: np.ndarray
+    states: np.ndarray
+    index: np.ndarray
+    estimate: np.ndarray
+    centre: np.ndarray
+    valid: np.ndarray
+    interior: np.ndarray
+    converged: np.ndarray
+
+
+def locate_peaks(systems: TIDSystem, response: FrequencyResponse,
+                 settings: SolverSettings) -> Located:
+    """The `REFINED_PEAKS` highest local maxima of |x| of each lane of a `lane_response` of
+    the systems `systems` (lanes x frequencies), each located in continuous frequency by
+    `PEAK_NEWTON_STEPS` Newton steps on its slope (`_peaks.newton_peak`): every step's
+    stencils of every lane solved in one batch, each steady state shot from the grid's
+    orbits, interpolated."""
     omegas, states, converged, index, centre, valid, lower, upper, interior = _selection(
         response, systems.host_stiffness)
     converged = np.array(converged)
-
-    def solve(at, warm):
-        solved = lane_response(systems, response.amplitudes, at.reshape(at.shape[0], -1),
-                               settings, warm)
-        return (np.asarray(solved.x_max).reshape(at.shape),
-                np.all(np.asarray(solved.converged), axis=-1))
-
+    estimate = np.full(centre.shape, np.nan)
     for _ in range(PEAK_NEWTON_STEPS):
         at, warm = _stencils(centre, interior, states, omegas, STENCIL_POINTS)
-        values, ok = solve(at, warm)
+        values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
         converged &= ok
         estimate, centre = _newton_steps(values, at, lower, upper, interior)
-    at, warm = _stencils(centre, interior, states, omegas, 1)
-    values, ok = solve(at, warm)
-    return _peaks_found(response, omegas, index, valid, centre, estimate, values[..., 0],
-                        converged & ok)
+    return Located(*(np.asarray(a) for a in (omegas, states, index, estimate, centre, valid,
+                                              interior)), converged)
+
+
+def _solve_at(systems, amplitudes, at, settings, warm):
+    """|x| (m) at the frequencies `at` (lanes x ...) of each lane, shot from `warm`, and
+    whether every one of a lane converged."""
+    solved = lane_response(systems, amplitudes, at.reshape(at.shape[0], -1), settings, warm)
+    return (np.asarray(solved.x_max).reshape(at.shape),
+            np.all(np.asarray(solved.converged), axis=-1))
+
+
+def response_peaks(systems: TIDSystem, response: FrequencyResponse,
+                   settings: SolverSettings) -> Peaks:
+    """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
+    true maxima over frequency of |x| (`locate_peaks`, then the response at each located
+    frequency), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
+    can have corners, where the highest of the terminal's excursions within a period
+    changes, which Newton steps on its slope would miss). NaN where a steady state in the
+    band, or of a stencil, did not converge."""
+    found = locate_peaks(systems, response, settings)
+    at, warm = _stencils(found.centre, found.interior, found.states, found.omegas, 1)
+    values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
+    return _peaks_found(response, found.omegas, found.index, found.valid, found.centre,
+                        found.estimate, values[..., 0], found.converged & ok)
 
 
 @eqx.filter_jit

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._band import _band, sweep
+from ._band import _band, locate_peaks, sweep
 from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
 from ._linear import den_hartog_tuning
@@ -22,7 +22,6 @@ from ._peaks import (
     lane_grid_peaks,
     located_peak,
     parabola_vertices,
-    peak_frequencies,
     smooth_log_peak,
 )
 from ._response import batched, lane_response, scaled_states
@@ -36,7 +35,7 @@ from ._retune import (
 )
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
-from ._workers import run_lanes, start_workers
+from ._workers import run_lanes, run_shares, start_workers
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
@@ -116,7 +115,8 @@ def _log_candidates(values, omegas, true):
 
 def _changed_system(system, theta, scale):
     """`system` with the parameters `theta` (order `parameters_of(system)`, amplitude last
-    and unused) and its host stiffness multiplied by `scale**2`."""
+    and unused) and its host stiffness multiplied by `scale**2`; of a `batched` system,
+    `theta` holds a row per parameter and `scale` an entry per point."""
     values = dict(zip(parameters_of(system)[:-1], theta, strict=False))
     values["host_stiffness"] = values["host_stiffness"] * scale**2
     return eqx.tree_at(lambda s: [getattr(s, name) for name in values], system,
@@ -162,39 +162,23 @@ class _PointOutputs(NamedTuple):
     located: Array
 
 
-def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
-    """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| if
-    `locate` (see `_log_candidates`), for the parameters `theta` (order `parameters_of(system)`),
-    with the host stiffness multiplied by `scale**2`, and which entries carry derivatives
-    in `theta`. The orbits are solved over the grid without derivatives, then again with
-    them (shot from the grid's orbits) at the samples of each response's
-    `_TANGENT_CANDIDATES` highest grid candidates only (`_tangent_slots`), and at the
-    true peaks' frequencies, all in one sweep: the forward-mode derivatives are most of
-    the cost of a solve, and each traced sweep of its compilation. Lower grid candidates
-    are no candidates here; in a smooth maximum, each weighs less than any of those
-    kept."""
-    held = jax.lax.stop_gradient(theta)
-    held_system = _changed_system(system, held, scale)
-    xs, ys, converged, states = sweep(held_system, held[-1], omegas, settings, z_init)
-    states = jax.lax.stop_gradient(states)
-
-    def on_stencils(at):
-        # Every peak's stencil in one sweep (nested vmaps would batch the solves' loops
-        # twice over when traced), without derivatives.
-        z_at = interpolated(states, omegas, at)
-        x, _, ok, _ = sweep(held_system, held[-1], at.reshape(-1), settings,
-                            z_at.reshape((-1,) + z_at.shape[2:]))
-        return jnp.where(ok, x, jnp.nan).reshape(at.shape)
-
-    # The host's peaks are located in continuous frequency, the stroke's are the grid's
-    # (see `_retune.response_peaks`).
-    if locate:
-        selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
-        found = peak_frequencies(selection, omegas, on_stencils, REFINED_PEAKS)
-        index, estimate, centre, valid = (a[jnp.argsort(found[0])] for a in found)
-    else:
-        index, estimate, centre, valid = (jnp.zeros(0, int), jnp.zeros(0, xs.dtype),
-                                          jnp.zeros(0, xs.dtype), jnp.zeros(0, bool))
+def _point_curves(system, theta, scale, omegas, settings, grid, located):
+    """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| where
+    `located` holds them (see `_log_candidates`), for the parameters `theta` (order
+    `parameters_of(system)`), with the host stiffness multiplied by `scale**2`, and which
+    entries carry derivatives in `theta`. `grid = (xs, ys, converged, states)` is the
+    response over `omegas` at `theta` (without derivatives) and `located = (index,
+    estimate, centre, valid)` its host peaks (`_band.locate_peaks`; none when not
+    located). The orbits are solved again with derivatives (shot from the grid's orbits)
+    at the samples of each response's `_TANGENT_CANDIDATES` highest grid candidates only
+    (`_tangent_slots`), and at the true peaks' frequencies, all in one sweep: the
+    forward-mode derivatives are most of the cost of a solve, and each traced sweep of its
+    compilation. Lower grid candidates are no candidates here; in a smooth maximum, each
+    weighs less than any of those kept."""
+    xs, ys, converged, states = grid
+    # The peaks in the order of their grid indices: between nearby designs, the same entry
+    # holds the same peak.
+    index, estimate, centre, valid = (a[jnp.argsort(located[0])] for a in located)
     none = (jnp.zeros(0, int), jnp.zeros(0, ys.dtype), jnp.zeros(0, bool))
     slots = jnp.concatenate([_tangent_slots(xs, omegas, index),
                              _tangent_slots(ys, omegas, none[0])])
@@ -218,10 +202,11 @@ def _point_curves(system, theta, scale, omegas, settings, z_init, locate):
                                          tangent_x, tangent_y, converged, states, true_x[0])
 
 
-def _kernel_arguments(system, thetas, scales, ratio_grid, settings, z_init, locate):
+def _kernel_arguments(system, thetas, scales, ratio_grid, settings, grids, located):
     """The arguments of `_evaluate_points` for one chunk (a task of `_evaluate_chunk`)."""
     return (system, jnp.asarray(thetas), jnp.asarray(scales), jnp.asarray(ratio_grid),
-            settings, jnp.asarray(z_init), locate)
+            settings, tuple(jnp.asarray(a) for a in grids),
+            tuple(jnp.asarray(a) for a in located))
 
 
 def _evaluate_chunk(*task):
@@ -237,22 +222,23 @@ def _prepare_chunk(*task):
 
 
 @compiled
-def _evaluate_points(system, thetas, scales, ratio_grid, settings, z_init, locate):
-    """`_CHUNK` points at once, shooting from the scaled states `z_init`: for each, the log
-    refined peaks (with the host's true peaks if `locate`), candidate masks and their
-    Jacobians with respect to `theta` (forward mode, implicit differentiation through the
-    orbits). Each point's band is `ratio_grid` times its host frequency."""
+def _evaluate_points(system, thetas, scales, ratio_grid, settings, grids, located):
+    """`_CHUNK` points at once, from their responses over the band `grids` and their
+    located host peaks `located` (see `_point_curves`): for each, the log refined peaks,
+    candidate masks and their Jacobians with respect to `theta` (forward mode, implicit
+    differentiation through the orbits). Each point's band is `ratio_grid` times its host
+    frequency."""
     host_frequency = jax.lax.stop_gradient(system.host_frequency)
 
-    def one(theta, scale, z0):
+    def one(theta, scale, grid, peaks):
         omegas = ratio_grid * host_frequency * scale
 
         def curves(t):
-            return _point_curves(system, t, scale, omegas, settings, z0, locate)
+            return _point_curves(system, t, scale, omegas, settings, grid, peaks)
 
         return jax.jacfwd(curves, has_aux=True)(theta)
 
-    return jax.vmap(one)(thetas, scales, jax.lax.stop_gradient(z_init))
+    return jax.vmap(one)(thetas, scales, grids, located)
 
 
 # --- host side: points, stencils, the smooth worst case and its derivatives ----------------
@@ -346,28 +332,47 @@ class Context:
         before a long computation that precedes the first evaluation, a retune."""
         k, c = float(self.system.tid_stiffness), float(self.system.tid_damping)
         states = self.settings.for_system(self.system).states
-        placeholder = (self.theta(k, c, 1.0), 1.0, np.zeros((self.omegas.size, states)))
-        (task,), _ = self._tasks([placeholder], self.settings)  # the shapes of every task
+        n, peaks = self.omegas.size, REFINED_PEAKS if self.locate else 0
+        placeholder = _Grid(np.ones(n), np.ones(n), np.ones(n, bool), np.zeros((n, states)),
+                            np.zeros(peaks, int), np.ones(peaks), np.ones(peaks),
+                            np.ones(peaks, bool))
+        # The shapes of every task
+        (task,), _ = self._tasks([(self.theta(k, c, 1.0), 1.0)], [placeholder], self.settings)
         if not _evaluate_points.is_kept(*_kernel_arguments(*task)):
             start_workers(-(-points // _CHUNK), (_prepare_chunk, task), serves=_evaluate_chunk)
 
-    def _tasks(self, points: Sequence[tuple], settings: SolverSettings):
-        """The tasks of `_evaluate_chunk` for `points`, `_CHUNK` points each (the last
-        padded with copies of its last point), and how many points each holds."""
+    def _grids(self, points: Sequence[tuple], settings: SolverSettings) -> list["_Grid"]:
+        """The `_Grid` of each `(theta, scale, z_init)` (`_solve_grids`), the points shared
+        out to this process and its workers (`_workers.run_shares`)."""
+        lanes = tuple(np.stack([point[i] for point in points]) for i in range(3))
+        fields = run_shares(_solve_grids, lanes, self.system, self.omegas, settings,
+                            self.locate)
+        return [_Grid(*(field[i] for field in fields)) for i in range(len(points))]
+
+    def _tasks(self, points: Sequence[tuple], grids: Sequence["_Grid"],
+               settings: SolverSettings):
+        """The tasks of `_evaluate_chunk` for `points` (`(theta, scale, ...)`) and their
+        `grids`, `_CHUNK` points each (the last padded with copies of its last point), and
+        how many points each holds."""
         tasks, sizes, ratio_grid = [], [], np.asarray(self.ratio_grid)
         for start in range(0, len(points), _CHUNK):
-            chunk = list(points[start : start + _CHUNK])
+            chunk = [(point[0], point[1], grid)
+                     for point, grid in zip(points[start : start + _CHUNK],
+                                            grids[start : start + _CHUNK], strict=True)]
             sizes.append(len(chunk))
             chunk += [chunk[-1]] * (_CHUNK - len(chunk))
-            thetas, scales, z_init = (np.stack([point[i] for point in chunk]) for i in range(3))
-            tasks.append((self.system, thetas, np.asarray(scales, dtype=float),
-                          ratio_grid, settings, z_init, self.locate))
+            thetas, scales = (np.stack([point[i] for point in chunk]) for i in range(2))
+            fields = [np.stack(field) for field in zip(*(point[2] for point in chunk),
+                                                       strict=True)]
+            tasks.append((self.system, thetas, np.asarray(scales, dtype=float), ratio_grid,
+                          settings, tuple(fields[:4]), tuple(fields[4:])))
         return tasks, sizes
 
     def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
-        """`_Curves` at each point with `settings`, `_CHUNK` points per compiled call, the
-        calls dealt out to this process and its workers (`_workers.run_lanes`)."""
-        tasks, sizes = self._tasks(points, settings)
+        """`_Curves` at each point with `settings`: the responses over the band of every
+        point in one batch (`_grids`), then the derivatives `_CHUNK` points per compiled
+        call, the calls dealt out to this process and its workers (`_workers.run_lanes`)."""
+        tasks, sizes = self._tasks(points, self._grids(points, settings), settings)
         results = []
         for used, ((jac_x, jac_y), out) in zip(
                 sizes, run_lanes(_evaluate_chunk, tasks, compiles=True), strict=True):
@@ -389,13 +394,49 @@ class Context:
         amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
         k, c, scale = (np.broadcast_to(np.asarray(value, dtype=float), amplitudes.shape)
                        for value in (k, c, scale))
-        host_stiffness = float(self.system.host_stiffness) * scale**2
-        lanes = eqx.tree_at(lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
-                            batched(self.system, amplitudes.size),
-                            tuple(jnp.asarray(value) for value in (host_stiffness, k, c)))
+        thetas = np.stack([self.theta(k_i, c_i, amplitude)
+                           for k_i, c_i, amplitude in zip(k, c, amplitudes, strict=True)])
+        lanes = _changed_system(batched(self.system, amplitudes.size), thetas.T, scale)
         response = lane_response(lanes, amplitudes, self.omegas * scale[:, None],
                                  self.settings)
-        return np.asarray(scaled_states(response, host_stiffness))
+        return np.asarray(scaled_states(response, lanes.host_stiffness))
+
+
+class _Grid(NamedTuple):
+    """One point's response over its band, without derivatives (NumPy): peak |x| and |y|
+    (m) and convergence per frequency, the orbits' scaled states, and its located host
+    peaks (grid index, last Newton estimate, frequency, local maximum; none where the
+    peaks are the grid's)."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    converged: np.ndarray
+    states: np.ndarray
+    index: np.ndarray
+    estimate: np.ndarray
+    centre: np.ndarray
+    valid: np.ndarray
+
+
+def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
+    """The fields of `_Grid` (a leading axis of points) at the parameters `thetas` (a row
+    per point, order `parameters_of(system)`) with the host stiffness multiplied by
+    `scales**2`, over the band `omegas` times `scales`, each point shot from its scaled
+    states `z_init`: every point in one batch (`lane_response`) and, where `locate`, the
+    host's peaks located in continuous frequency (`locate_peaks`)."""
+    lanes = _changed_system(batched(system, len(thetas)), thetas.T, scales)
+    response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init)
+    states = np.asarray(scaled_states(response, lanes.host_stiffness))
+    xs, ys, converged = (np.asarray(a) for a in (response.x_max, response.y_max,
+                                                 response.converged))
+    if locate:
+        found = locate_peaks(lanes, response, settings)
+        located = (found.index.astype(int), found.estimate, found.centre, found.valid)
+        converged = converged & found.converged[:, None]
+    else:
+        none = np.zeros((len(thetas), 0))
+        located = (none.astype(int), none, none, none.astype(bool))
+    return (xs, ys, converged, states, *located)
 
 
 class Scenario(NamedTuple):
