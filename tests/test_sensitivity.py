@@ -95,23 +95,25 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
         for response, values, mask, jac in (("x", log_x, mask_x, jac_x),
                                             ("y", log_y, mask_y, jac_y)):
             kept = getattr(curves, f"peak_{response}")
-            # The highest candidates are kept, at most the kernel's number.
+            # The highest candidates are kept, at most the kernel's number (the entries
+            # after the grid's, of located peaks, are none here: no candidates).
             highest = np.argsort(np.where(mask, values, -np.inf))[::-1]
             highest = highest[:min(_TANGENT_CANDIDATES, int(np.sum(mask)))]
             assert np.array_equal(np.flatnonzero(kept), np.sort(highest)), response
-            np.testing.assert_allclose(getattr(curves, f"log_{response}")[kept],
-                                       np.asarray(values)[kept], rtol=0, atol=1e-7)
-            np.testing.assert_allclose(getattr(curves, f"jac_{response}")[kept],
-                                       np.asarray(jac)[kept], rtol=1e-5, atol=1e-9)
+            grid = slice(0, values.size)
+            np.testing.assert_allclose(getattr(curves, f"log_{response}")[grid][kept[grid]],
+                                       np.asarray(values)[kept[grid]], rtol=0, atol=1e-7)
+            np.testing.assert_allclose(getattr(curves, f"jac_{response}")[grid][kept[grid]],
+                                       np.asarray(jac)[kept[grid]], rtol=1e-5, atol=1e-9)
 
 
-def test_the_warm_up_compiles_the_program_of_the_evaluations(system, band, monkeypatch):
+def test_the_warm_up_compiles_the_one_program_of_the_evaluations(system, band, monkeypatch):
     # A worker compiles the kernel for placeholder points while this process retunes: it
     # must be the program that the real points then run (same static arguments, shapes
     # and dtypes), or the worker compiles in vain.
     from tid_jax import _design
 
-    asked = []
+    asked, keys = [], []
     monkeypatch.setattr(_design._evaluate_points, "is_kept", lambda *args: False)
     monkeypatch.setattr(_design, "start_workers", lambda *args, **kwargs: asked.append(
         (args, kwargs)))
@@ -127,6 +129,9 @@ def test_the_warm_up_compiles_the_program_of_the_evaluations(system, band, monke
         points = [(ctx.theta(k, c, 400.0), 1.0, z)]
         [real], _ = ctx._tasks(points, ctx._grids(points, ctx.settings), ctx.settings)
         assert _kernel_key(task) == _kernel_key(real)
+        keys.append(_kernel_key(real))
+    # Points with located peaks and points without share the program.
+    assert keys[0] == keys[1]
 
 
 def _kernel_key(task):

@@ -73,6 +73,9 @@ def parameters_of(system: TIDSystem) -> tuple[str, ...]:
 STENCIL_STEP = 1e-3
 UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
 _CHUNK = 3  # points per kernel call (one compiled shape for every use)
+# The grid index of a located peak that is none (where the host's peaks are the grid's):
+# beyond every candidate array, so that no grid candidate is left out for it.
+_NO_PEAK = np.iinfo(np.int32).max
 # Grid candidates of each response per point whose derivatives are taken (`_point_curves`).
 _TANGENT_CANDIDATES = 4
 MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
@@ -168,9 +171,10 @@ def _point_curves(system, theta, scale, omegas, settings, grid, located):
     `parameters_of(system)`), with the host stiffness multiplied by `scale**2`, and which
     entries carry derivatives in `theta`. `grid = (xs, ys, converged, states)` is the
     response over `omegas` at `theta` (without derivatives) and `located = (index,
-    estimate, centre, valid)` its host peaks (`_band.locate_peaks`; none when not
-    located). The orbits are solved again with derivatives (shot from the grid's orbits)
-    at the samples of each response's `_TANGENT_CANDIDATES` highest grid candidates only
+    estimate, centre, valid)` its host peaks (`_band.locate_peaks`; where they are the
+    grid's, `REFINED_PEAKS` entries that are no peaks: index `_NO_PEAK`, not valid). The
+    orbits are solved again with derivatives (shot from the grid's orbits) at the samples
+    of each response's `_TANGENT_CANDIDATES` highest grid candidates only
     (`_tangent_slots`), and at the true peaks' frequencies, all in one sweep: the
     forward-mode derivatives are most of the cost of a solve, and each traced sweep of its
     compilation. Lower grid candidates are no candidates here; in a smooth maximum, each
@@ -332,7 +336,7 @@ class Context:
         before a long computation that precedes the first evaluation, a retune."""
         k, c = float(self.system.tid_stiffness), float(self.system.tid_damping)
         states = self.settings.for_system(self.system).states
-        n, peaks = self.omegas.size, REFINED_PEAKS if self.locate else 0
+        n, peaks = self.omegas.size, REFINED_PEAKS
         placeholder = _Grid(np.ones(n), np.ones(n), np.ones(n, bool), np.zeros((n, states)),
                             np.zeros(peaks, int), np.ones(peaks), np.ones(peaks),
                             np.ones(peaks, bool))
@@ -434,8 +438,10 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
         located = (found.index.astype(int), found.estimate, found.centre, found.valid)
         converged = converged & found.converged[:, None]
     else:
-        none = np.zeros((len(thetas), 0))
-        located = (none.astype(int), none, none, none.astype(bool))
+        # No peaks: entries the kernel leaves out (one program for both kinds of points).
+        shape = (len(thetas), REFINED_PEAKS)
+        located = (np.full(shape, _NO_PEAK), np.full(shape, np.nan),
+                   np.broadcast_to(omegas[0] * scales[:, None], shape), np.zeros(shape, bool))
     return (xs, ys, converged, states, *located)
 
 
@@ -495,7 +501,7 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
         # An entry whose derivatives a neighbour did not take (`_point_curves`): its
         # curvature is unknown.
         dgrad[np.isnan(dgrad) & np.isfinite(grad)[:, None, :]] = 0.0
-        if response == "x" and stencil[0].located.size:
+        if response == "x" and ctx.locate:
             dgrad = without_jumped_peaks(dgrad, [curves.located for curves in stencil],
                                          stencil[0].located)
     curves = stencil[0]
