@@ -134,6 +134,26 @@ def test_the_warm_up_compiles_the_one_program_of_the_evaluations(system, band, m
     assert keys[0] == keys[1]
 
 
+def test_the_design_kernel_solves_one_sweep(system, band, monkeypatch):
+    # The kernel takes each point's response over the band and its located peaks as
+    # inputs and solves only the derivatives' sweep: each sweep is a copy of the period
+    # map and its Newton shooting in the compiled program.
+    from tid_jax import _design
+
+    sweeps, asked = [], []
+    sweep = _design.sweep
+    monkeypatch.setattr(_design, "sweep", lambda *args: sweeps.append(args) or sweep(*args))
+    monkeypatch.setattr(_design._evaluate_points, "is_kept", lambda *args: False)
+    monkeypatch.setattr(_design, "start_workers", lambda *args, **kwargs: asked.append(args))
+    _design.Context(system, band, tj.SolverSettings(), locate=True).warm_up(3)
+    [(_, (_, task))] = asked
+    system_, thetas, scales, ratio_grid, settings, grids, located = (
+        _design._kernel_arguments(*task))
+    jax.eval_shape(lambda t, g, p: _design._evaluate_points.function(
+        system_, t, scales, ratio_grid, settings, g, p), thetas, grids, located)
+    assert len(sweeps) == 1
+
+
 def _kernel_key(task):
     """The key of the kernel's program for a task of `_evaluate_chunk`."""
     from tid_jax import _design
