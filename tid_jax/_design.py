@@ -340,7 +340,7 @@ class Context:
         placeholder = _Grid(np.ones(n), np.ones(n), np.ones(n, bool), np.zeros((n, states)),
                             np.zeros(peaks, int), np.ones(peaks), np.ones(peaks),
                             np.ones(peaks, bool))
-        # The shapes of every task
+        # (a task of the shapes of every task)
         (task,), _ = self._tasks([(self.theta(k, c, 1.0), 1.0)], [placeholder], self.settings)
         if not _evaluate_points.is_kept(*_kernel_arguments(*task)):
             start_workers(-(-points // _CHUNK), (_prepare_chunk, task), serves=_evaluate_chunk)
@@ -409,8 +409,8 @@ class Context:
 class _Grid(NamedTuple):
     """One point's response over its band, without derivatives (NumPy): peak |x| and |y|
     (m) and convergence per frequency, the orbits' scaled states, and its located host
-    peaks (grid index, last Newton estimate, frequency, local maximum; none where the
-    peaks are the grid's)."""
+    peaks (grid index, last Newton estimate, frequency, local maximum; where the peaks are
+    the grid's, `REFINED_PEAKS` entries that are no peaks, see `_point_curves`)."""
 
     xs: np.ndarray
     ys: np.ndarray
