@@ -400,15 +400,14 @@ class Context:
                        for value in (k, c, scale))
         thetas = np.stack([self.theta(k_i, c_i, amplitude)
                            for k_i, c_i, amplitude in zip(k, c, amplitudes, strict=True)])
-        lanes = _changed_system(batched(self.system, amplitudes.size), thetas.T, scale)
-        response = lane_response(lanes, amplitudes, self.omegas * scale[:, None],
-                                 self.settings)
-        return np.asarray(scaled_states(response, lanes.host_stiffness))
+        return _solve_grids(thetas, scale, None, self.system, self.omegas, self.settings,
+                            False).states
 
 
 class _Grid(NamedTuple):
-    """One point's response over its band, without derivatives (NumPy): peak |x| and |y|
-    (m) and convergence per frequency, the orbits' scaled states, and its located host
+    """One point's response over its band, without derivatives (NumPy; or several points',
+    each field with a leading axis of points): peak |x| and |y| (m) and convergence per
+    frequency, the orbits' scaled states, and its located host
     peaks (grid index, last Newton estimate, frequency, local maximum; where the peaks are
     the grid's, `REFINED_PEAKS` entries that are no peaks, see `_point_curves`)."""
 
@@ -423,10 +422,11 @@ class _Grid(NamedTuple):
 
 
 def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
-    """The fields of `_Grid` (a leading axis of points) at the parameters `thetas` (a row
+    """The `_Grid` of points (a leading axis of points) at the parameters `thetas` (a row
     per point, order `parameters_of(system)`) with the host stiffness multiplied by
     `scales**2`, over the band `omegas` times `scales`, each point shot from its scaled
-    states `z_init`: every point in one batch (`lane_response`) and, where `locate`, the
+    states `z_init` (None: from the equivalent linear steady state after a transient):
+    every point in one batch (`lane_response`) and, where `locate`, the
     host's peaks located in continuous frequency (`locate_peaks`)."""
     lanes = _changed_system(batched(system, len(thetas)), thetas.T, scales)
     response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init)
@@ -442,7 +442,7 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
         shape = (len(thetas), REFINED_PEAKS)
         located = (np.full(shape, _NO_PEAK), np.full(shape, np.nan),
                    np.broadcast_to(omegas[0] * scales[:, None], shape), np.zeros(shape, bool))
-    return (xs, ys, converged, states, *located)
+    return _Grid(xs, ys, converged, states, *located)
 
 
 class Scenario(NamedTuple):
