@@ -10,6 +10,7 @@ import pathlib
 import shutil
 import subprocess
 import sys
+import time
 import tomllib
 
 import numpy as np
@@ -541,12 +542,19 @@ def test_compilation_cache_is_filled_and_can_be_turned_off(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert any(cache.iterdir()) and any((cache / "programs").iterdir())
+    # The cache moved to where $TID_JAX_CACHE_DIR points: a run there uses its traced
+    # programs (marked used) and traces none.
     moved = tmp_path / "moved"
+    shutil.copytree(cache, moved)
+    programs = sorted((moved / "programs").iterdir())
+    for path in programs:
+        os.utime(path, (time.time() - 3600,) * 2)
     environment = dict(os.environ, TID_JAX_CACHE_DIR=str(moved))
     done = subprocess.run(argv + ["--out", tmp_path / "b"], capture_output=True, text=True,
                           timeout=300, env=environment)
     assert done.returncode == 0, done.stderr
-    assert any(moved.iterdir())
+    assert sorted((moved / "programs").iterdir()) == programs
+    assert all(path.stat().st_mtime > time.time() - 600 for path in programs)
     off = tmp_path / "off"
     environment = dict(os.environ, TID_JAX_CACHE_DIR=str(off))
     done = subprocess.run(argv + ["--out", tmp_path / "c", "--no-cache"], capture_output=True,
