@@ -24,23 +24,27 @@ import numpy as np
 import tid_jax as tj
 from tid_jax._sharding import batch_sharding, sharded_batch
 
+import tid_jax._response
+# Where do the solve's outputs live (before they are trimmed and gathered)? Recorded on
+# the way out of the solve that `frequency_response` shards.
+solve_devices = []
+shard = tid_jax._response.sharded_batch
+def recorded(function, *batch, **options):
+    def solve(*placed):
+        out = function(*placed)
+        solve_devices.append(len(jax.tree.leaves(out)[0].devices()))
+        return out
+    return shard(solve, *batch, **options)
+tid_jax._response.sharded_batch = recorded
+
 settings = tj.SolverSettings(chunk=2)
 system = tj.paper_system(friction_width=None)
 omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
 response = tj.frequency_response(system, omegas, [100.0, 400.0], settings=settings)
+tid_jax._response.sharded_batch = shard
 retuned = tj.retune(system, [200.0, 600.0], omegas=np.linspace(0.8, 1.2, 9) * float(
     system.host_frequency), tol=1e-5, settings=settings)
 seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
-# The solve itself, on the same (already compiled) padded batch: where did its outputs live?
-from tid_jax._response import _points, batched
-flat_w, flat_a = (g.reshape(-1) for g in np.meshgrid(omegas, [100.0, 400.0]))
-solved = []
-sharded_batch(
-    lambda w, a: solved.append(_points(
-        batched(system, w.shape[0]), w, a, settings, jax.numpy.zeros(w.shape + (4,)),
-        jax.numpy.ones(w.shape, bool), jax.numpy.zeros(w.shape, bool))) or solved[-1],
-    jax.numpy.asarray(flat_w), jax.numpy.asarray(flat_a),
-)
 sharding = batch_sharding()
 devices_used = 1 if sharding is None else len(sharding.mesh.devices.reshape(-1))
 print(json.dumps(dict(
@@ -49,7 +53,7 @@ print(json.dumps(dict(
     padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
     if sharding is not None else 1,
     trimmed=len(seen),
-    solve_devices=len(solved[0].x_max.devices()),
+    solve_devices=solve_devices[0],
     x_max=np.asarray(response.x_max).tolist(),
     y_max=np.asarray(response.y_max).tolist(),
     converged=np.asarray(response.converged).tolist(),
