@@ -186,17 +186,21 @@ def located_peak(estimate: Float[Array, " peaks"], value: Float[Array, " peaks"]
 
 
 def newton_iterates(solve, centre: Float[Array, " peaks"], interior: Bool[Array, " peaks"],
-                    lower, upper):
+                    lower, upper, aux=()):
     """`PEAK_NEWTON_STEPS` Newton steps (`newton_peak`, a loop) from the frequencies
     `centre` towards the peaks, kept within [`lower`, `upper`]: `solve(at)` gives the
     response at each step's `stencil` frequencies `at` (peaks x points; no derivatives
-    needed). Returns the last step's estimate of each peak and its frequency."""
+    needed) and whatever else its solves give, `aux` (a pytree of arrays of the shapes of
+    the one given, which stands before the first step). Returns the last step's estimate
+    of each peak and its frequency, that step's stencil and its `aux`."""
 
     def step(_, carry):
         at = stencil(jax.lax.stop_gradient(carry[1]), interior)
-        return newton_peak(solve(at), at, lower, upper, interior)
+        values, aux = solve(at)
+        return *newton_peak(values, at, lower, upper, interior), at, aux
 
-    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre))
+    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre),
+             stencil(jax.lax.stop_gradient(centre), interior), aux)
     return jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
 
 
@@ -211,7 +215,8 @@ def peak_frequencies(values: Float[Array, " freqs"], omegas: Float[Array, " freq
     Each peak is the response at its frequency (`located_peak`)."""
     index, centre, valid = top_peaks(values, omegas, count)
     lower, upper, interior = bracket(index, omegas)
-    estimate, centre = newton_iterates(solve, centre, interior, lower, upper)
+    estimate, centre, _, _ = newton_iterates(lambda at: (solve(at), ()), centre, interior,
+                                             lower, upper)
     return index, estimate, jax.lax.stop_gradient(centre), valid
 
 

@@ -27,6 +27,7 @@ from ._peaks import (
     located_peak,
     newton_iterates,
     smooth_log_peak,
+    stencil,
     top_peaks,
 )
 from ._period import initial_state
@@ -331,8 +332,9 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
     shot from the grid's orbits (interpolated) with the monodromy matrix of the
     peak's grid point and settled by chord iterations; the peak, the response at the
-    last iterate, is solved with tangents, which give its derivatives and renew the
-    monodromy matrices at those grid points.
+    last iterate, is solved with tangents from the last stencil's orbits
+    (interpolated), which give its derivatives and renew the monodromy matrices at
+    those grid points.
     Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
     k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
                                      system.inertance)
@@ -351,26 +353,31 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
     lower, upper, interior = bracket(index, omegas)
 
-    def on_stencil(f, at):
+    def on_stencil(at):
         nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
         # One vmap over every stencil point (a nested one would batch the solves' loops
         # twice over when traced).
         args = (at, interpolated(states, omegas, at), nearby)
-        out = jax.vmap(f)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
-        return jax.tree.map(lambda a: a.reshape(at.shape + a.shape[1:]), out)
+        z, x = jax.vmap(settle)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        return x.reshape(at.shape), z.reshape(at.shape + z.shape[1:])
 
-    estimate, centre = newton_iterates(lambda at: on_stencil(settle, at)[1], centre, interior,
-                                       lower, upper)
+    no_states = jnp.zeros(stencil(centre, interior).shape + states.shape[1:], states.dtype)
+    estimate, centre, at, stencil_states = newton_iterates(on_stencil, centre, interior,
+                                                           lower, upper, no_states)
+    # Each peak is shot with tangents from its last stencil's orbits, interpolated to its
+    # frequency (the last Newton step's move from that stencil's centre): closer than
+    # the grid's, so that no chord iterations (another copy of the solver in the
+    # compiled program) precede the Newton iterations with tangents.
+    start = jax.vmap(interpolated)(stencil_states, at, centre[:, None])[:, 0]
 
-    def full(omega, z0, monodromy):
-        orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0, monodromy,
-                                          DESIGN_PARAMETERS)
+    def full(omega, z0):
+        orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
+                                          directions=DESIGN_PARAMETERS)
         return x_max, (orbit.monodromy, orbit.state_derivatives)
 
-    values, (m_new, d_new) = on_stencil(full, centre[:, None])
-    peak = located_peak(estimate, values[:, 0])
-    orbits = (states, monodromies.at[index].set(m_new[:, 0]),
-              derivatives.at[index].set(d_new[:, 0]))
+    values, (m_new, d_new) = jax.vmap(full)(centre, start)
+    peak = located_peak(estimate, values)
+    orbits = (states, monodromies.at[index].set(m_new), derivatives.at[index].set(d_new))
     return (jax.lax.stop_gradient(xs), (index, peak)), (
         jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
