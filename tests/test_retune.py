@@ -73,6 +73,33 @@ def test_exact_h_infinity_tuning_of_damped_host(system, band):
     assert float(again.x_peak[0]) / _static(system, 1000.0) == pytest.approx(peak, abs=1e-5)
 
 
+
+def test_a_later_run_checks_in_the_lanes_of_the_first(system, band, monkeypatch):
+    # A first run, which finds the stages' program not kept on disk, checks the initial
+    # tuning while a worker compiles that program; a later run checks it after the
+    # stages. Both check it in lanes of the shapes of the retuned designs' check, so that
+    # the later run finds every program of the check compiled by the first.
+    from tid_jax import _retune
+
+    linear = system.replace(friction_force=0.0)
+    lanes, shapes, results = [], [], []
+    check = _retune._check_lanes
+
+    def recorded(systems, amplitudes, omegas, warm, settings):
+        lanes.append((amplitudes.shape, omegas.shape, warm.shape))
+        return check(systems, amplitudes, omegas, warm, settings)
+
+    monkeypatch.setattr(_retune, "_check_lanes", recorded)
+    for kept in (False, True):
+        monkeypatch.setattr(_retune._optimise_stage, "is_kept", lambda *_, kept=kept: kept)
+        results.append(tj.retune(linear, [1000.0], omegas=band, tol=1e-5))
+        shapes.append(set(lanes))
+        lanes.clear()
+    assert len(shapes[0]) == 1 and shapes[1] == shapes[0]
+    for name in ("x_peak", "x_peak_initial", "tid_stiffness", "status"):
+        np.testing.assert_allclose(getattr(results[1], name), getattr(results[0], name),
+                                   rtol=1e-12, err_msg=name)
+
 @pytest.fixture(scope="module")
 def nonlinear(system, band):
     # The twelve paper amplitudes, 100 to 3000 N, in one batched call.

@@ -593,13 +593,13 @@ def optimal_tunings(
     orbits = _initial_orbits(start, systems, k0, c0)
     initial_states = orbits[1]
     # While a worker compiles the stages' program, this process checks the initial tuning
-    # (which the stages do not change) instead of waiting; else it is checked with the
-    # retuned designs, in one batch dealt out to every process.
+    # (which the stages do not change) instead of waiting; else it is checked after the
+    # stages, dealt out to every process. Either way in the shares of the retuned designs'
+    # check (the same programs: a later run compiles none of its own).
     initial_check = None
+    initial = _check_inputs(systems, amps, bands, initial_states, refinement)
     if warm_up is not None:
-        initial_check = run_shares(
-            _check_lanes, _check_inputs(systems, amps, bands, initial_states, refinement),
-            settings, here=True)
+        initial_check = run_shares(_check_lanes, initial, settings, here=True)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
@@ -621,14 +621,10 @@ def optimal_tunings(
     k, c, retuned = _retuned(systems, u, k_ref, c_ref)
     lanes = _check_inputs(retuned, amps, bands, orbits[1], refinement)
     if initial_check is None:
-        initial = _check_inputs(systems, amps, bands, initial_states, refinement)
-        lanes = jax.tree.map(lambda *a: np.concatenate(a), initial, lanes)
-    # One share of the lanes per process, dealt out in turn: the initial and retuned
-    # designs alike to each.
+        initial_check = run_shares(_check_lanes, initial, settings)
+    # One share of the lanes per process, dealt out in turn.
     checked = run_shares(_check_lanes, lanes, settings)
-    if initial_check is not None:
-        checked = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
-    both, found = checked
+    both, found = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
     say(f"checked the initial and retuned designs on {lanes[2].shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
