@@ -214,9 +214,13 @@ def test_unconverged_point_is_flagged_and_retried(system):
     assert bool(result.converged)
 
 
+# Too few integration steps for any orbit of the paper's system (explicit ones, at least):
+# one compiled program for every test of a failed integration.
+STARVED = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
+
+
 def test_failed_integration_is_flagged_and_its_peaks_are_nan(system):
-    settings = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
-    result = tj.frequency_response(system, float(system.host_frequency), 100.0, settings=settings)
+    result = tj.frequency_response(system, float(system.host_frequency), 100.0, settings=STARVED)
     assert not bool(result.converged)
     assert np.isnan(float(result.x_max)) and np.isnan(float(result.y_max))
 
@@ -239,8 +243,7 @@ def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system
 
     monkeypatch.setattr(_response, "_solve_blocks", recorded)
     omega = 0.95 * float(system.host_frequency)
-    result = tj.frequency_response(system, omega, 100.0,
-                                   settings=tj.SolverSettings(max_steps=16))
+    result = tj.frequency_response(system, omega, 100.0, settings=STARVED)
     assert not bool(result.converged)
     assert [implicit for implicit, _ in attempts] == [False, True]
     assert np.all(np.isinf(attempts[0][1]))
@@ -303,10 +306,6 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     np.testing.assert_allclose(np.asarray(state), np.asarray(exact.state), atol=1e-5)
     assert float(refined_peak(samples)) == pytest.approx(float(refined_peak(exact.x_samples)),
                                                          rel=1e-5)
-
-
-# Too few integration steps for any orbit of the paper's system.
-STARVED = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
 
 
 def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
