@@ -73,7 +73,6 @@ def test_exact_h_infinity_tuning_of_damped_host(system, band):
     assert float(again.x_peak[0]) / _static(system, 1000.0) == pytest.approx(peak, abs=1e-5)
 
 
-
 def test_a_later_run_checks_in_the_lanes_of_the_first(system, band, monkeypatch):
     # A first run, which finds the stages' program not kept on disk, checks the initial
     # tuning while a worker compiles that program; a later run checks it after the
@@ -99,6 +98,7 @@ def test_a_later_run_checks_in_the_lanes_of_the_first(system, band, monkeypatch)
     for name in ("x_peak", "x_peak_initial", "tid_stiffness", "status"):
         np.testing.assert_allclose(getattr(results[1], name), getattr(results[0], name),
                                    rtol=1e-12, err_msg=name)
+
 
 @pytest.fixture(scope="module")
 def nonlinear(system, band):
