@@ -124,6 +124,7 @@ def locate_peaks(systems: TIDSystem, response: FrequencyResponse,
 def _solve_at(systems, amplitudes, at, settings, warm):
     """|x| (m) at the frequencies `at` (lanes x ...) of each lane, shot from `warm`, and
     whether every one of a lane converged."""
+    at = np.asarray(at)
     solved = lane_response(systems, amplitudes, at.reshape(at.shape[0], -1), settings, warm)
     return (np.asarray(solved.x_max).reshape(at.shape),
             np.all(np.asarray(solved.converged), axis=-1))
@@ -144,7 +145,7 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
                         found.estimate, values[..., 0], found.converged & ok)
 
 
-@eqx.filter_jit
+@compiled
 def _selection(response: FrequencyResponse, host_stiffness):
     """The grid's part of `response_peaks`, one program: the lanes' frequencies and scaled
     states, whether every steady state converged, and the `REFINED_PEAKS` highest local
@@ -159,7 +160,7 @@ def _selection(response: FrequencyResponse, host_stiffness):
     return omegas, states, converged, index, centre, valid, lower, upper, interior
 
 
-@eqx.filter_jit
+@compiled
 def _stencils(centre, interior, states, omegas, points: int):
     """The stencils of `points` frequencies around each lane's peaks (lanes x peaks x
     points; one point: the centres) and the grid's states interpolated to them (lanes x
@@ -168,10 +169,13 @@ def _stencils(centre, interior, states, omegas, points: int):
     return at, jax.vmap(interpolated)(states, omegas, at.reshape(at.shape[0], -1))
 
 
-_newton_steps = eqx.filter_jit(jax.vmap(newton_peak))
+@compiled
+def _newton_steps(values, at, lower, upper, interior):
+    """`_peaks.newton_peak` on every lane."""
+    return jax.vmap(newton_peak)(values, at, lower, upper, interior)
 
 
-@eqx.filter_jit
+@compiled
 def _peaks_found(response: FrequencyResponse, omegas, index, valid, centre, estimate, values,
                  converged) -> Peaks:
     """`Peaks` from the located maxima of `response_peaks` (the last Newton step's

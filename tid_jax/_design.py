@@ -207,10 +207,12 @@ def _point_curves(system, theta, scale, omegas, settings, grid, located):
 
 
 def _kernel_arguments(system, thetas, scales, ratio_grid, settings, grids, located):
-    """The arguments of `_evaluate_points` for one chunk (a task of `_evaluate_chunk`)."""
-    return (system, jnp.asarray(thetas), jnp.asarray(scales), jnp.asarray(ratio_grid),
-            settings, tuple(jnp.asarray(a) for a in grids),
-            tuple(jnp.asarray(a) for a in located))
+    """The arguments of `_evaluate_points` for one chunk (a task of `_evaluate_chunk`), as
+    NumPy arrays: placed on the device by the call (`_cache.compiled`), with no program
+    of their own."""
+    return (system, np.asarray(thetas), np.asarray(scales), np.asarray(ratio_grid),
+            settings, tuple(np.asarray(a) for a in grids),
+            tuple(np.asarray(a) for a in located))
 
 
 def _evaluate_chunk(*task):
@@ -430,7 +432,7 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
     host's peaks located in continuous frequency (`locate_peaks`)."""
     lanes = _changed_system(batched(system, len(thetas)), thetas.T, scales)
     response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init)
-    states = np.asarray(scaled_states(response, lanes.host_stiffness))
+    states = scaled_states(response, lanes.host_stiffness, np)
     xs, ys, converged = (np.asarray(a) for a in (response.x_max, response.y_max,
                                                  response.converged))
     if locate:

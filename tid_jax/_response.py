@@ -175,10 +175,10 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
 
 
 def batched(system: TIDSystem, count: int) -> TIDSystem:
-    """`system` repeated `count` times: every field an array of `count` equal entries (the
-    batched form, one system per point, that `solve_points` takes)."""
-    return jax.tree.map(lambda leaf: jnp.broadcast_to(jnp.asarray(leaf, float), (count,)),
-                        system)
+    """`system` repeated `count` times: every field a NumPy array of `count` equal entries
+    (the batched form, one system per point, that `solve_points` takes; on the host, so
+    that no program is compiled, or loaded, for each count)."""
+    return jax.tree.map(lambda leaf: np.broadcast_to(np.asarray(leaf, float), (count,)), system)
 
 
 # Batches are solved in blocks of BLOCK points, the last one padded: padding costs little
@@ -286,14 +286,17 @@ def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
                              amplitudes=jax.device_put(amplitudes), **out.fields())
 
 
-def scaled_states(response: FrequencyResponse, host_stiffness) -> Float[Array, "amps freqs 4"]:
+def scaled_states(response: FrequencyResponse, host_stiffness,
+                  xp=jnp) -> Float[Array, "amps freqs 4"]:
     """The orbits' states of a `response` over amplitudes x frequencies in the scaled units
     of `solve_orbit` (displacements in A / K, velocities in omega A / K); `host_stiffness`
-    K is one value or one per amplitude (lane)."""
-    static = response.amplitudes[:, None] / jnp.reshape(host_stiffness, (-1, 1))
-    pairs = response.state.shape[-1] // 2
-    units = jnp.stack([static + 0 * response.omegas, static * response.omegas] * pairs, axis=-1)
-    return response.state / units
+    K is one value or one per amplitude (lane). With `xp=np`, computed on the host."""
+    amplitudes, omegas, state = (xp.asarray(a) for a in (response.amplitudes,
+                                                         response.omegas, response.state))
+    static = amplitudes[:, None] / xp.reshape(xp.asarray(host_stiffness), (-1, 1))
+    pairs = state.shape[-1] // 2
+    units = xp.stack([static + 0 * omegas, static * omegas] * pairs, axis=-1)
+    return state / units
 
 
 def frequency_response(
