@@ -22,6 +22,8 @@ Units are those of `_dynamics`: phase `theta = omega t`, displacements in A / K,
 velocities in omega A / K.
 """
 
+import functools as ft
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -244,6 +246,9 @@ def _initial_sign(z, p):
     return jnp.where(z[3] > 0, 1, jnp.where(z[3] < 0, -1, at_rest))
 
 
+# Traced once for each program that integrates periods (samples, monodromy, derivatives:
+# up to five times in one), its forward derivatives and batches taken of that trace.
+@ft.partial(jax.jit, static_argnums=(2, 3))
 def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
            keep_samples: bool = True):
     """One forcing period of the hybrid flow from the scaled state `z0` at phase 0: the

@@ -666,7 +666,7 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
     """One system per scale s (batched fields): host stiffness times s**2 and, keeping the
     TID's frequency ratio and damping ratio (Den Hartog's k scales with K and c with
     sqrt(k b)), TID stiffness times s**2 and damping times s."""
-    scales = jnp.asarray(scales, float)
+    scales = np.asarray(scales, float)
     lanes = batched(system, scales.size)
     return eqx.tree_at(
         lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
