@@ -181,9 +181,11 @@ def transient(z, p, settings: SolverSettings, periods=None):
         return z
     if settings.exact_friction:
         count = settings.transient_periods if periods is None else periods
-        end = jax.lax.fori_loop(
-            0, count, lambda _, z: _coulomb.period(z, p, settings.samples, False)[1], z
-        )
+
+        def step(_, z):
+            return _coulomb.period(z, p, settings.samples, keep_samples=False)[1]
+
+        end = jax.lax.fori_loop(0, count, step, z)
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
     sol = integrate(
         vector_field,
