@@ -1,68 +1,87 @@
 """Sharding the batch over several devices gives the single-device answer.
 
-Each case runs in a fresh subprocess, since the number of (simulated CPU) devices is fixed
-when JAX starts."""
+The four (simulated CPU) devices run in a fresh subprocess, since the number of devices is
+fixed when JAX starts."""
 
 import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 
+import tid_jax as tj
+
+
 # 2 amplitudes x 5 frequencies = 10 points: not a multiple of 4 devices, so padding is used.
-# Chunks of 2 points make the batched solves run chunk by chunk (on each device's part).
-# The retune (2 amplitudes, a few optimiser steps) spreads its amplitudes over the devices.
+# On four devices, chunks of 2 points make the batched solves run chunk by chunk (on each
+# device's part). The retune (2 amplitudes) optimises on one device and checks its designs
+# on all four. The answer on one device is computed in this process with the default
+# chunks and the band of `conftest`, in programs that other tests compile too.
+def measure(chunk: int | None = None) -> dict:
+    """The batch and retune computed on every device of this process, as a dict."""
+    import tid_jax._response
+    from tid_jax._sharding import batch_sharding, per_device, sharded_batch
+
+    # Where do the solve's outputs live (before they are trimmed and gathered)? Recorded on
+    # the way out of the solve that `frequency_response` shards.
+    solve_devices = []
+    shard = tid_jax._response.sharded_batch
+
+    def recorded(function, *batch, **options):
+        def solve(*placed):
+            out = function(*placed)
+            solve_devices.append(len(jax.tree.leaves(out)[0].devices()))
+            return out
+
+        return shard(solve, *batch, **options)
+
+    settings = tj.SolverSettings() if chunk is None else tj.SolverSettings(chunk=chunk)
+    system = tj.paper_system(friction_width=None)
+    omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
+    tid_jax._response.sharded_batch = recorded
+    try:
+        response = tj.frequency_response(system, omegas, [100.0, 400.0], settings=settings)
+    finally:
+        tid_jax._response.sharded_batch = shard
+    band = np.asarray(tj.default_omegas(system, 21))
+    retuned = tj.retune(system, [200.0, 600.0], omegas=band, tol=1e-5, settings=settings)
+    seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
+    # The part of a batch of 8 that `per_device` hands to the function on each device.
+    parts = []
+    doubled = jax.jit(lambda a: per_device(lambda part: parts.append(part.shape[0]) or 2 * part,
+                                           a))(jax.numpy.arange(8.0))
+    sharding = batch_sharding()
+    return dict(
+        devices=len(jax.devices()),
+        devices_used=1 if sharding is None else len(sharding.mesh.devices.reshape(-1)),
+        padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
+        if sharding is not None else 1,
+        trimmed=len(seen),
+        part=parts[0],
+        doubled=np.asarray(doubled).tolist(),
+        solve_devices=solve_devices[0],
+        x_max=np.asarray(response.x_max).tolist(),
+        y_max=np.asarray(response.y_max).tolist(),
+        converged=np.asarray(response.converged).tolist(),
+        retune_stiffness=np.asarray(retuned.tid_stiffness).tolist(),
+        retune_damping=np.asarray(retuned.tid_damping).tolist(),
+        retune_x_peak=np.asarray(retuned.x_peak).tolist(),
+        retune_status=np.asarray(retuned.status).tolist(),
+        retune_iterations=np.asarray(retuned.iterations).tolist(),
+    )
+
+
 SCRIPT = """
-import json
+import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
-import jax
-import numpy as np
-import tid_jax as tj
-from tid_jax._sharding import batch_sharding, sharded_batch
-
-import tid_jax._response
-# Where do the solve's outputs live (before they are trimmed and gathered)? Recorded on
-# the way out of the solve that `frequency_response` shards.
-solve_devices = []
-shard = tid_jax._response.sharded_batch
-def recorded(function, *batch, **options):
-    def solve(*placed):
-        out = function(*placed)
-        solve_devices.append(len(jax.tree.leaves(out)[0].devices()))
-        return out
-    return shard(solve, *batch, **options)
-tid_jax._response.sharded_batch = recorded
-
-settings = tj.SolverSettings(chunk=2)
-system = tj.paper_system(friction_width=None)
-omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
-response = tj.frequency_response(system, omegas, [100.0, 400.0], settings=settings)
-tid_jax._response.sharded_batch = shard
-retuned = tj.retune(system, [200.0, 600.0], omegas=np.linspace(0.8, 1.2, 9) * float(
-    system.host_frequency), tol=1e-5, settings=settings)
-seen = sharded_batch(lambda a: a * 1.0, jax.numpy.arange(10.0))
-sharding = batch_sharding()
-devices_used = 1 if sharding is None else len(sharding.mesh.devices.reshape(-1))
-print(json.dumps(dict(
-    devices=len(jax.devices()),
-    devices_used=devices_used,
-    padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
-    if sharding is not None else 1,
-    trimmed=len(seen),
-    solve_devices=solve_devices[0],
-    x_max=np.asarray(response.x_max).tolist(),
-    y_max=np.asarray(response.y_max).tolist(),
-    converged=np.asarray(response.converged).tolist(),
-    retune_stiffness=np.asarray(retuned.tid_stiffness).tolist(),
-    retune_damping=np.asarray(retuned.tid_damping).tolist(),
-    retune_x_peak=np.asarray(retuned.x_peak).tolist(),
-    retune_status=np.asarray(retuned.status).tolist(),
-    retune_iterations=np.asarray(retuned.iterations).tolist(),
-)))
+sys.path.insert(0, {root!r})
+from tests.test_sharding import measure
+print(json.dumps(measure(chunk=2)))
 """
 
 
@@ -71,9 +90,10 @@ def _start(device_count: int) -> subprocess.Popen:
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={device_count}"
     env["JAX_ENABLE_X64"] = "1"
     env["JAX_PLATFORMS"] = "cpu"
+    root = str(Path(__file__).resolve().parent.parent)
     return subprocess.Popen(
-        [sys.executable, "-c", SCRIPT], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True,
+        [sys.executable, "-c", SCRIPT.format(root=root)], env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
     )
 
 
@@ -85,14 +105,15 @@ def _result(process: subprocess.Popen) -> dict:
 
 @pytest.fixture(scope="module")
 def runs():
-    # Both at once: each compiles on one core for most of its run.
-    processes = [_start(1), _start(4)]
+    # Four devices in a process of their own (the number of devices is fixed when JAX
+    # starts), one in this process meanwhile.
+    process = _start(4)
     try:
-        return tuple(_result(process) for process in processes)
+        single = measure()
+        return single, _result(process)
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
+        if process.poll() is None:
+            process.kill()
 
 
 # Batches of different widths round differently (vectorised arithmetic): agreement to
@@ -103,6 +124,8 @@ def test_four_devices_match_one(runs):
     assert sharded["devices"] == 4 and sharded["devices_used"] == 4
     assert sharded["padded_devices"] == 4
     assert sharded["trimmed"] == 10
+    assert sharded["part"] == 2 and single["part"] == 8
+    assert sharded["doubled"] == single["doubled"] == [2.0 * i for i in range(8)]
     assert sharded["solve_devices"] == 4 and single["solve_devices"] == 1
     assert np.all(single["converged"]) and sharded["converged"] == single["converged"]
     for key in ("x_max", "y_max"):

@@ -12,7 +12,7 @@ from ._dynamics import parameters
 from ._eigen import eigenvalues
 from ._period import initial_state, transient
 from ._settings import SolverSettings
-from ._sharding import map_batch, map_parts, sharded_batch
+from ._sharding import map_batch, per_device, sharded_batch
 from ._steady_state import (
     moving_part,
     refined_peak,
@@ -137,8 +137,12 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
                          jnp.where(warm_start, 0, settings.transient_periods))
 
     chunk = settings.chunk
-    z0 = map_batch(lambda batch: start(*batch), (p, warm, use_warm), chunk, valid)
-    shots = map_parts(lambda z, q, v: shoot_queue(z, q, settings, chunk, v), z0, p, valid)
+
+    def solve(q, w, use, v):
+        z0 = map_batch(lambda batch: start(*batch), (q, w, use), chunk, v)
+        return shoot_queue(z0, q, settings, chunk, v)
+
+    shots = per_device(solve, p, warm, use_warm, valid)
     samples, residual = shots.samples, shots.residual
     static = amplitudes / systems.host_stiffness
     units = jnp.stack([static, omegas * static] * (settings.states // 2), axis=-1)

@@ -41,7 +41,6 @@ from ._response import (
     with_tuning,
 )
 from ._settings import SolverSettings
-from ._sharding import sharded_batch
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem
@@ -270,12 +269,13 @@ class _BFGS(optx.AbstractBFGS):
 def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
                     max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
                     small_cuts_end):
-    """BFGS per lane (the system `systems[i]`, its fields batched, at `amplitudes[i]` over
-    the frequencies `omegas[i]`) from the design `u0[i]` and inverse Hessian `h0[i]` on
-    the smooth log peak, shooting from the orbits `z0` of a nearby design (its tuning
-    (k, c) and, per frequency, the scaled state, monodromy matrix and state derivatives
-    with respect to (k, c)); returns the designs, iterations, success, the orbits of the
-    last accepted design and BFGS's inverse Hessian there."""
+    """BFGS on one lane (every array with a leading axis of one lane: the system
+    `systems[0]`, its fields batched, at `amplitudes[0]` over the frequencies `omegas[0]`)
+    from the design `u0[0]` and inverse Hessian `h0[0]` on the smooth log peak, shooting
+    from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
+    scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
+    the design, iterations, success, the orbits of the last accepted design and BFGS's
+    inverse Hessian there, each with the lane axis."""
     settings = eqx.tree_at(
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
     )
@@ -285,24 +285,22 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_st
                       max_steps=max_steps, max_rejected_steps=max_rejected_steps,
                       small_cuts_end=small_cuts_end)
 
-    # One lane per device (`optimal_tunings` passes as many lanes as there are devices):
-    # each lane's optimiser stops when it converges, and its integrations wait only for
-    # its own stiffest steady state. A single lane is not vmapped: batching the loops of
-    # the optimiser, with the batched loops of the steady states inside, costs most of
-    # the program's tracing.
+    # One lane per call: its optimiser stops when it converges, and its integrations wait
+    # only for its own stiffest steady state. Batching the loops of the optimiser, with
+    # the batched loops of the steady states inside, would cost most of the program's
+    # tracing; spread over several devices as one batch (one lane each), every device
+    # would also wait for the others at each iteration of those loops (4 simulated CPU
+    # devices took five times as long as one), and optimistix's BFGS cannot yet run on
+    # each device on its own (`shard_map`: lineax issue 185).
     args = (systems, amplitudes, omegas, u0, z0, h0)
-    if amplitudes.shape[0] == 1:
-        return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
-    return jax.vmap(lane)(*args)
+    return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
 
 
 def _stage_lanes(lanes, options: dict):
-    """One stage (`_optimise_stage`) of the lanes `(systems, amplitudes, bands, designs,
-    orbits, inverse Hessians)` (NumPy arrays, sharded over the devices), its results as
-    NumPy arrays: a task of `run_lanes`."""
-    out = sharded_batch(lambda *lanes: _optimise_stage(*_stage_arguments(lanes, options)),
-                        *lanes)
-    return jax.tree.map(np.asarray, out)
+    """One stage (`_optimise_stage`) of the lane `(systems, amplitudes, bands, designs,
+    orbits, inverse Hessians)` (NumPy arrays, with a leading axis of one lane), its
+    results as NumPy arrays: a task of `run_lanes`."""
+    return jax.tree.map(np.asarray, _optimise_stage(*_stage_arguments(lanes, options)))
 
 
 def _stage_arguments(lanes, options: dict):
@@ -479,10 +477,11 @@ def retune(
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
-    The amplitudes are optimised one after another (each with its frequencies batched; with
-    several JAX devices, one per device at a time) by one compiled program, whatever their
-    number, so that each optimiser stops as soon as it converges; the checks are batched
-    over every amplitude and frequency. The non-smooth maximum over frequency is replaced by
+    The amplitudes are optimised one after another (each with its frequencies batched; on
+    a CPU with several cores, one per process at a time: `_workers`) by one compiled
+    program, whatever their number, so that each optimiser stops as soon as it converges;
+    the checks are batched over every amplitude and frequency (and sharded over several
+    JAX devices). The non-smooth maximum over frequency is replaced by
     a smooth maximum of the local peaks (the highest located in continuous frequency, so
     that the optimum does not depend on where the grid falls) whose sharpness grows over
     `retune_settings.sharpness` (continuation), each stage a BFGS run (optimistix's, with
@@ -560,7 +559,7 @@ def optimal_tunings(
 ) -> RetuneResult:
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
     fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
-    frequencies `bands[i]`: the lanes are optimised one after another (one per device at
+    frequencies `bands[i]`: the lanes are optimised one after another (one per process at
     a time), their initial orbits and their check each solved in one batch.
     `check_omegas` of the result is one check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
@@ -573,7 +572,6 @@ def optimal_tunings(
     stuck = _below_breakaway(systems, amps, bands)
     moving = np.flatnonzero(~stuck)
     ok = np.zeros(amps.shape, bool)
-    group = len(jax.devices())
     stages = [_stage_options(stage, sharpnesses, tol, settings, max_steps, retune_settings)
               for stage in range(1, len(sharpnesses) + 1)]
     # Several CPU cores: worker processes for the stages below, started now so that they
@@ -583,7 +581,7 @@ def optimal_tunings(
     warm_up = None
     if moving.size:
         placeholder = _placeholder_orbits(k0, c0, bands, settings)
-        lanes = _lanes_of(moving[:group], (systems, amps, bands, u, placeholder, hessian_inv))
+        lanes = _lanes_of(moving[:1], (systems, amps, bands, u, placeholder, hessian_inv))
         options = dict(stages[0], tol=float(np.finfo(float).max))
         if not _optimise_stage.is_kept(*_stage_arguments(lanes, options)):
             warm_up = (_stage_lanes, (lanes, options))
@@ -604,11 +602,11 @@ def optimal_tunings(
         steps = np.zeros(moving.size, int)
         if moving.size:
             lanes = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
-            # As many lanes per call as there are devices (one on each), one call per core
-            # at a time on a CPU: one compiled program serves any number of lanes.
+            # One lane per call, one call per core at a time on a CPU: one compiled
+            # program serves any number of lanes.
             parts = run_lanes(_stage_lanes, [
-                (jax.tree.map(lambda a, start=start: a[start : start + group], lanes), options)
-                for start in range(0, moving.size, group)
+                (jax.tree.map(lambda a, i=i: a[i : i + 1], lanes), options)
+                for i in range(moving.size)
             ], compiles=True)
             new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
                 lambda *values: np.concatenate(values), *parts)

@@ -4,9 +4,10 @@ Batched solves (one steady-state orbit per (amplitude, frequency) point) are
 independent along the batch axis, so they split across devices with no
 communication: the batch is padded to a multiple of the device count, placed
 with `NamedSharding(Mesh(devices, ("batch",)), PartitionSpec("batch"))`, and
-the jitted, vmapped solve then runs one slice per device (XLA propagates the
-input sharding through the vmap). The outputs are trimmed back to the
-original length. On a single device this is a no-op.
+the jitted solve runs each device's slice on that device on its own
+(`per_device`, a `shard_map`: no device waits in its loops for another's). The
+outputs are trimmed back to the original length. On a single device this is a
+no-op.
 
 Several GPUs of one node are used automatically: `jax.devices()` lists them
 all. For several hosts, every process calls `jax.distributed.initialize()`
@@ -68,30 +69,19 @@ def map_batch(function, batch, chunk: int, valid=None):
     only for that chunk's slowest entry. The batch is padded to whole chunks (repeating its
     last entry), so that one chunk's computation is compiled, not a second one for a
     remainder. Where `valid` (a boolean per entry) is False throughout a chunk, that
-    chunk is skipped and its outputs are zero (on one device). When n divides evenly
-    over the devices, the batch is first split into one part per device, each mapped on
-    its own: a batch placed by `sharded_batch` then runs in parallel on every device."""
+    chunk is skipped and its outputs are zero."""
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
-    parts = len(jax.devices())
-    if size % parts:
-        parts = 1
-    if size <= chunk * parts:
+    if size <= chunk:
         return jax.vmap(function)(batch)
-    length = size // parts
-    chunks = -(-length // chunk)
+    chunks = -(-size // chunk)
     if valid is None:
         valid = jax.numpy.ones(size, bool)
 
     def split(a):
-        a = a.reshape(parts, length, *a.shape[1:])
-        extra = chunks * chunk - length
+        extra = chunks * chunk - size
         if extra:
-            a = jax.numpy.concatenate([a, jax.numpy.repeat(a[:, -1:], extra, axis=1)], axis=1)
-        return a.reshape(parts, chunks, chunk, *a.shape[2:])
-
-    def merge(a):
-        a = a.reshape(parts, chunks * chunk, *a.shape[3:])[:, :length]
-        return a.reshape(size, *a.shape[2:])
+            a = jax.numpy.concatenate([a, jax.numpy.repeat(a[-1:], extra, axis=0)])
+        return a.reshape(chunks, chunk, *a.shape[1:])
 
     # Traced once, here: the chunks' computation and the shapes of its outputs (for the
     # zeros of a skipped chunk) both come from this one trace. (`lax.cond` hashes its
@@ -102,30 +92,27 @@ def map_batch(function, batch, chunk: int, valid=None):
     shapes = mapped.out_struct
 
     def one_chunk(args):
-        part_batch, part_valid = args
+        chunk_batch, chunk_valid = args
         return jax.lax.cond(
-            jax.numpy.any(part_valid), lambda chunk_batch: mapped(chunk_batch),
+            jax.numpy.any(chunk_valid), lambda b: mapped(b),
             lambda _: jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), shapes),
-            part_batch,
+            chunk_batch,
         )
 
-    split_batch = jax.tree_util.tree_map(split, (batch, valid))
-    if parts == 1:  # no vmap over parts, which would turn the skipping `cond` into a select
-        out = jax.tree.map(lambda a: a[None], jax.lax.map(
-            one_chunk, jax.tree.map(lambda a: a[0], split_batch)))
-    else:
-        out = jax.vmap(lambda part: jax.lax.map(one_chunk, part))(split_batch)
-    return jax.tree_util.tree_map(merge, out)
+    out = jax.lax.map(one_chunk, jax.tree_util.tree_map(split, (batch, valid)))
+    return jax.tree_util.tree_map(lambda a: a.reshape(chunks * chunk, *a.shape[2:])[:size], out)
 
 
-def map_parts(function, *batch):
-    """`function(*batch)` (arrays with leading length n, results too) on one part of the
-    batch per device, in parallel, where n divides evenly over the devices (a batch
-    placed by `sharded_batch` then runs on every device); on the whole batch otherwise."""
+def per_device(function, *batch):
+    """`function(*batch)` (pytrees of arrays with leading length n, results too), inside a
+    jitted program, on one part of the batch per device where n divides evenly over
+    several devices (`shard_map`): each device computes its part on its own, its loops
+    waiting for none of the others' (a batch placed by `sharded_batch` is already split
+    so). On the whole batch otherwise. Values that `function` closes over are the same on
+    every device."""
+    sharding = batch_sharding()
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
-    parts = len(jax.devices())
-    if parts == 1 or size % parts:
+    if sharding is None or size % sharding.mesh.size:
         return function(*batch)
-    split = lambda a: a.reshape(parts, size // parts, *a.shape[1:])
-    out = jax.vmap(function)(*jax.tree_util.tree_map(split, batch))
-    return jax.tree_util.tree_map(lambda a: a.reshape(size, *a.shape[2:]), out)
+    return jax.shard_map(function, mesh=sharding.mesh, in_specs=sharding.spec,
+                         out_specs=sharding.spec, check_vma=False)(*batch)
