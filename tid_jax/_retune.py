@@ -289,9 +289,10 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_st
     # only for its own stiffest steady state. Batching the loops of the optimiser, with
     # the batched loops of the steady states inside, would cost most of the program's
     # tracing; spread over several devices as one batch (one lane each), every device
-    # would also wait for the others at each iteration of those loops (4 simulated CPU
-    # devices took five times as long as one), and optimistix's BFGS cannot yet run on
-    # each device on its own (`shard_map`: lineax issue 185).
+    # would also wait for the others at each iteration of those loops (a retune with
+    # smoothed friction took five times as long on 4 simulated CPU devices as on one),
+    # and optimistix's BFGS cannot yet run on each device on its own (in a `shard_map`:
+    # lineax issue 185).
     args = (systems, amplitudes, omegas, u0, z0, h0)
     return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
 
