@@ -27,10 +27,10 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 BATCH_AXIS = "batch"
 
 
-def batch_sharding(devices=None) -> NamedSharding | None:
-    """The sharding of a batch axis over `devices` (default: all of `jax.devices()`), or
-    `None` when there is only one device."""
-    devices = jax.devices() if devices is None else list(devices)
+def batch_sharding() -> NamedSharding | None:
+    """The sharding of a batch axis over every JAX device (`jax.devices()`), or `None`
+    when there is only one device."""
+    devices = jax.devices()
     if len(devices) < 2:
         return None
     return NamedSharding(Mesh(np.asarray(devices), (BATCH_AXIS,)), PartitionSpec(BATCH_AXIS))
@@ -45,12 +45,12 @@ def _pad(array, size: int):
     return jax.numpy.concatenate([array, jax.numpy.repeat(array[-1:], extra, axis=0)])
 
 
-def sharded_batch(function, *batch, devices=None):
+def sharded_batch(function, *batch):
     """`function(*batch)` with every array of `batch` (pytrees of arrays with the same
     leading length n) padded to a multiple of the device count and sharded over the
     devices along its leading axis; every array of the returned pytree is trimmed back to
     its first n entries. Calls `function(*batch)` unchanged on one device."""
-    sharding = batch_sharding(devices)
+    sharding = batch_sharding()
     if sharding is None:
         return function(*batch)
     size = jax.tree_util.tree_leaves(batch)[0].shape[0]
