@@ -20,7 +20,8 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
 
 from benchmarks.bench_steady_state import replace_block  # noqa: E402
 
@@ -61,7 +62,7 @@ def measure(devices: int) -> dict:
                XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
     env.pop("TID_JAX_CACHE_DIR", None)
     done = subprocess.run([sys.executable, "-c", MEASURE], env=env, capture_output=True,
-                          text=True, cwd=os.path.dirname(os.path.dirname(__file__)) or ".")
+                          text=True, cwd=ROOT)
     if done.returncode:
         raise SystemExit(f"{devices} device(s) failed:\n{done.stderr[-4000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])

@@ -78,10 +78,7 @@ def map_batch(function, batch, chunk: int, valid=None):
         valid = jax.numpy.ones(size, bool)
 
     def split(a):
-        extra = chunks * chunk - size
-        if extra:
-            a = jax.numpy.concatenate([a, jax.numpy.repeat(a[-1:], extra, axis=0)])
-        return a.reshape(chunks, chunk, *a.shape[1:])
+        return _pad(a, chunks * chunk).reshape(chunks, chunk, *a.shape[1:])
 
     # Traced once, here: the chunks' computation and the shapes of its outputs (for the
     # zeros of a skipped chunk) both come from this one trace. (`lax.cond` hashes its
