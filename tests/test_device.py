@@ -18,6 +18,14 @@ MODEL_FIELDS = ("host_mass", "host_stiffness", "host_damping", "inertance", "fri
 OMEGA_RATIOS = np.array([0.85, 0.95, 1.02, 1.12])
 
 
+@pytest.fixture(scope="module")
+def system():
+    """The paper's system with the friction smoothed at the relative width: the model of
+    the compliant device (which has no exact friction) and of the transient references;
+    the rigid device's exact friction is compared alongside where it applies."""
+    return tj.paper_system(friction_width=None)
+
+
 def _fields(system):
     return {name: float(getattr(system, name)) for name in MODEL_FIELDS}
 

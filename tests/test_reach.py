@@ -1,6 +1,7 @@
 """Steady states of random structures (tall buildings to machines), against independent
 references: the transient integration of the same smoothed model (`reference/transient.py`,
-implicit Kvaerno5) and exact Coulomb friction (`reference/coulomb.py`)."""
+implicit Kvaerno5) and exact Coulomb friction (`reference/coulomb.py`); and the design
+with the smoothed model against exact friction's."""
 
 import numpy as np
 import pytest
@@ -74,3 +75,29 @@ def test_slow_tall_structure_with_high_friction_converges():
     assert bool(response.converged)
     reference = transient_peaks(case, 1e-4)
     assert float(response.x_max) == pytest.approx(reference["x_max"], rel=1e-3)
+
+
+def test_design_at_the_relative_width_agrees_with_exact_friction(system, band):
+    # The design entry points with the smoothed model: its peaks are within half a percent
+    # of exact Coulomb friction's (above), so the best achievable peak is too (the minimum
+    # of a function moved by at most 0.5% everywhere moves by at most that). The
+    # sensitivities of its optimum obey the exact scaling laws of the model (the relative
+    # width scales with A / K).
+    smoothed = system.replace(friction_width=None)
+    assert system.exact_friction and not smoothed.exact_friction
+    amplitudes = [200.0, 1000.0]
+    best, exact = (tj.best_tunings(model, amplitudes, omegas=band) for model in (smoothed,
+                                                                                 system))
+    assert bool(np.all(best.converged)) and bool(np.all(exact.converged))
+    np.testing.assert_allclose(np.asarray(best.host_peak), np.asarray(exact.host_peak),
+                               rtol=5e-3)
+    sens = tj.sensitivities(smoothed, 1000.0, omegas=band, best=best)
+    optimum = sens.optimum
+    assert bool(sens.converged) and bool(optimum.converged)
+    index = {name: i for i, name in enumerate(sens.parameters)}
+    a, f = index["amplitude"], index["friction_force"]
+    for e in (sens.host_elasticity, optimum.host_elasticity):
+        assert float(np.sum(e)) == pytest.approx(0.0, abs=1e-4)
+        assert float(e[a] + e[f]) == pytest.approx(1.0, abs=1e-4)
+    e = np.asarray(optimum.stiffness_elasticity)
+    assert float(np.sum(e)) == pytest.approx(1.0, abs=3e-3)

@@ -169,7 +169,6 @@ def test_cli_robust_writes_the_design(tmp_path, capsys, band, robust_free):
 
     argv = ["robust", "--amplitudes", *map(str, ROBUST_AMPLITUDES), "--n-frequencies",
             str(len(band)), "--no-stroke-limit",
-            "--friction-width", "relative",  # the fixture's model
             "--quiet", "--out", str(tmp_path)]
     assert cli.main(argv) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -165,8 +165,8 @@ def test_elasticities_obey_scaling_laws(sensitivity):
     # Exact laws of eq. (12), whatever the solver. Multiplying every mass, stiffness,
     # damping and force by s leaves x and y unchanged: the elasticities sum to 0. The
     # forcing and friction forces set the response only through A/K and ff/A up to a scale:
-    # x(s A, s ff) = s x(A, ff), so e_A + e_ff = 1. (The friction width, a velocity, is held
-    # fixed by both.) At the optimum the same laws hold with k, c free: the host and stroke
+    # x(s A, s ff) = s x(A, ff), so e_A + e_ff = 1 (exact Coulomb friction has no width to
+    # change with them). At the optimum the same laws hold with k, c free: the host and stroke
     # elasticities over the other parameters sum to 0 and e_A + e_ff = 1, k* scales with
     # stiffness (its elasticities sum to 1) and c* likewise, and neither depends on A, ff
     # apart from ff / A.
@@ -189,9 +189,9 @@ def test_elasticities_obey_scaling_laws(sensitivity):
         assert np.sum(e) == pytest.approx(1.0, abs=3e-3)
         assert e[a] + e[f] == pytest.approx(0.0, abs=3e-3)
     # Time scaled by s (stiffnesses by s^2, dampings by s, forces by s^2 with the masses
-    # held) leaves x and y unchanged, the band and the relative friction width moving with
-    # the host frequency: sum_p (time units of p) e_p = time units of the quantity. (Not
-    # the stroke's: its peak is refined on the grid, which the derivatives hold fixed.)
+    # held) leaves x and y unchanged, the band moving with the host frequency: sum_p (time
+    # units of p) e_p = time units of the quantity. (Not the stroke's: its peak is refined
+    # on the grid, which the derivatives hold fixed.)
     units = {"host_stiffness": 2, "tid_stiffness": 2, "host_damping": 1, "tid_damping": 1,
              "parasitic_damping": 1, "friction_force": 2, "amplitude": 2}
     weights = np.array([units.get(name, 0) for name in sensitivity.parameters])
@@ -403,8 +403,6 @@ def test_cli_sensitivity_ranks_parameters(tmp_path, capsys, band, sensitivity):
             "--n-frequencies",
             str(len(band)),
             "--no-optimum",
-            "--friction-width",
-            "relative",  # the fixture's model
             "--quiet",
             "--out",
             str(tmp_path),

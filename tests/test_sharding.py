@@ -40,7 +40,7 @@ def measure(chunk: int | None = None) -> dict:
         return shard(solve, *batch, **options)
 
     settings = tj.SolverSettings() if chunk is None else tj.SolverSettings(chunk=chunk)
-    system = tj.paper_system(friction_width=None)
+    system = tj.paper_system()
     omegas = np.linspace(0.8, 1.2, 5) * np.sqrt(system.host_stiffness / system.host_mass)
     tid_jax._response.sharded_batch = recorded
     try:
