@@ -66,7 +66,7 @@ def retune_run(tmp_path_factory):
         "# the paper's device on a 2000 kg host\n"
         "host_mass = 2000.0\nhost_frequency_hz = 4.0\nhost_damping_ratio = 0.02\n"
         "inertance = 100.0\nfriction_force = 20.0\n"
-        "amplitudes = [200.0, 600.0]\nband_hz = [3.2, 4.8]\nn_frequencies = 17\n"
+        "amplitudes = [200.0, 600.0]\nband_hz = [3.2, 4.8]\nn_frequencies = 21\n"
         "stroke_limit = 0.005\n"
     )
     out = folder / "out"
