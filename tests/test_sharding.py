@@ -31,13 +31,13 @@ def measure(chunk: int | None = None) -> dict:
     solve_devices = []
     shard = tid_jax._response.sharded_batch
 
-    def recorded(function, *batch, **options):
+    def recorded(function, *batch):
         def solve(*placed):
             out = function(*placed)
             solve_devices.append(len(jax.tree.leaves(out)[0].devices()))
             return out
 
-        return shard(solve, *batch, **options)
+        return shard(solve, *batch)
 
     settings = tj.SolverSettings() if chunk is None else tj.SolverSettings(chunk=chunk)
     system = tj.paper_system()
