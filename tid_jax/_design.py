@@ -563,32 +563,37 @@ class Evaluation(NamedTuple):
 
 def evaluate_designs(ctx, designs, *, stencil="forward") -> list[Evaluation]:
     """An `Evaluation` at each of `designs`, `(u, scenarios, z_inits)`: the curves at the
-    design u and its `stencil` (a kind of `STENCILS`) for every scenario (shooting from
-    `z_inits`, one state array per scenario) and the terms of the smooth maxima (each
-    scenario's log host peaks less its offset, and its log inerter peaks). Every point of
-    every design is solved in one batch."""
+    design u and its `stencil` (a kind of `STENCILS`, or one kind per scenario) for every
+    scenario (shooting from `z_inits`, one state array per scenario) and the terms of the
+    smooth maxima (`evaluation_of`). Every point of every design is solved in one
+    batch."""
     points, stencils = [], []
     for u, scenarios, z_inits in designs:
-        us = _stencil(u, stencil)
+        kinds = [stencil] * len(scenarios) if isinstance(stencil, str) else stencil
+        us = [_stencil(u, kind) for kind in kinds]
         stencils.append(us)
-        for scenario, z in zip(scenarios, z_inits, strict=True):
+        for scenario, z, vs in zip(scenarios, z_inits, us, strict=True):
             points += [(ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z)
-                       for v in us]
+                       for v in vs]
     curves = iter(ctx.evaluate(points))
+    return [evaluation_of(ctx, u, scenarios, [[next(curves) for _ in vs] for vs in us])
+            for (u, scenarios, _), us in zip(designs, stencils, strict=True)]
+
+
+def evaluation_of(ctx, u, scenarios, stencils) -> Evaluation:
+    """The `Evaluation` at the design u from the curves of each scenario at `_stencil(u,
+    kind)` (`stencils`, one list per scenario): each scenario's log host peaks less its
+    offset, and its log inerter peaks, with their derivatives (`coordinates`)."""
 
     def join(parts):
         return Terms(*(np.concatenate(field) for field in zip(*parts, strict=True)))
 
-    evaluations = []
-    for (_, scenarios, _), us in zip(designs, stencils, strict=True):
-        per_scenario = [[next(curves) for _ in us] for _ in scenarios]
-        host, stroke = [], []
-        for scenario, stencil in zip(scenarios, per_scenario, strict=True):
-            terms = coordinates(ctx, us[0], stencil, "x")
-            host.append(terms._replace(values=terms.values - scenario.offset))
-            stroke.append(coordinates(ctx, us[0], stencil, "y"))
-        evaluations.append(Evaluation(us[0], per_scenario, join(host), join(stroke)))
-    return evaluations
+    host, stroke = [], []
+    for scenario, stencil in zip(scenarios, stencils, strict=True):
+        terms = coordinates(ctx, u, stencil, "x")
+        host.append(terms._replace(values=terms.values - scenario.offset))
+        stroke.append(coordinates(ctx, u, stencil, "y"))
+    return Evaluation(u, stencils, join(host), join(stroke))
 
 
 def evaluate_design(ctx, u, scenarios, z_inits, *, stencil="forward") -> Evaluation:

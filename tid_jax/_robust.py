@@ -18,11 +18,13 @@ from ._design import (
     Context,
     Evaluation,
     Scenario,
+    Terms,
     best_tunings,
     check_best,
     check_distinct,
     cold_start,
     evaluate_design,
+    evaluation_of,
     smooth_max,
 )
 from ._peaks import (
@@ -38,6 +40,11 @@ from ._workers import run_shares
 
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
 _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
+# A scenario whose weight in the smooth worst case (and in the stroke's smooth maximum)
+# is below this is evaluated at the design alone, without the neighbours that give the
+# curvatures of its peaks: its share of the curvature, below this fraction of theirs, is
+# left out; the value and gradient stay exact (the optimum is the same).
+_NEGLIGIBLE = 1e-3
 
 
 class RobustSettings(eqx.Module):
@@ -112,6 +119,57 @@ def _models(evaluation: Evaluation, sharpness, stroke_log_limit):
     return f, Model(value - stroke_log_limit, grad, hess)
 
 
+def _weights(evaluation: Evaluation, sharpness, stroke_log_limit) -> np.ndarray:
+    """Each scenario's weight (the sum of its terms') in the smooth worst case at
+    `sharpness` and, with a stroke limit, in the smooth maximum of the inerter peaks:
+    the larger of the two. All 1 where a smooth maximum is not finite."""
+    count = len(evaluation.stencils)
+
+    def per_scenario(terms: Terms, response: str) -> np.ndarray:
+        values = np.where(terms.mask, terms.values, -np.inf)
+        top = np.max(values)
+        if not np.isfinite(top):
+            return np.ones(count)
+        weights = np.exp(sharpness * (values - top))
+        sizes = [getattr(stencil[0], f"log_{response}").size for stencil in evaluation.stencils]
+        return np.add.reduceat(weights / weights.sum(), np.cumsum([0] + sizes[:-1]))
+
+    weights = per_scenario(evaluation.host_terms, "x")
+    if stroke_log_limit is not None:
+        weights = np.maximum(weights, per_scenario(evaluation.stroke_terms, "y"))
+    return weights
+
+
+def _evaluate(ctx, u, scenarios, z_inits, curved, sharpness, stroke_log_limit) -> Evaluation:
+    """The `Evaluation` at the design u with the forward stencil of the scenarios where
+    `curved` holds, the others at u alone, then `_completed`."""
+    evaluation = evaluate_design(ctx, u, scenarios, z_inits,
+                                 stencil=["forward" if c else "centre" for c in curved])
+    return _completed(ctx, evaluation, scenarios, sharpness, stroke_log_limit)
+
+
+def _completed(ctx, evaluation: Evaluation, scenarios, sharpness,
+               stroke_log_limit) -> Evaluation:
+    """`evaluation` with the forward stencil of every scenario solved at the design alone
+    whose weight (`_weights`) is not negligible, solved now; the others' curvature (NaN,
+    unknown) left out (0)."""
+    weights = _weights(evaluation, sharpness, stroke_log_limit)
+    missing = [i for i, (weight, stencil) in enumerate(zip(weights, evaluation.stencils,
+                                                           strict=True))
+               if weight >= _NEGLIGIBLE and len(stencil) == 1]
+    if missing:
+        again = evaluate_design(ctx, evaluation.u, [scenarios[i] for i in missing],
+                                [evaluation.states()[i] for i in missing])
+        stencils = list(evaluation.stencils)
+        for i, stencil in zip(missing, again.stencils, strict=True):
+            stencils[i] = stencil
+        evaluation = evaluation_of(ctx, evaluation.u, scenarios, stencils)
+    return evaluation._replace(**{
+        name: terms._replace(dgrad=np.nan_to_num(terms.dgrad, nan=0.0))
+        for name, terms in (("host_terms", evaluation.host_terms),
+                            ("stroke_terms", evaluation.stroke_terms))})
+
+
 def _minimise(
     ctx,
     scenarios,
@@ -128,18 +186,25 @@ def _minimise(
     """Minimise the smooth worst case f over `scenarios` in the design variables u, at each
     smooth-max sharpness of `stages` in turn, by a trust-region Newton method; with a
     stroke limit, by sequential quadratic programming on the constraint c <= 0 with the
-    exact penalty f + weight max(c, 0) as merit function."""
+    exact penalty f + weight max(c, 0) as merit function. Each trial design is evaluated
+    with the curvatures of the scenarios that weigh in the last accepted one, and of any
+    other that weighs in it; the first design with those of the scenarios that weigh in
+    it (`_evaluate`)."""
     if z_inits is None:
         z_inits = cold_start(ctx, u, scenarios)
-    current = evaluate_design(ctx, np.asarray(u, dtype=float), scenarios, z_inits)
+    current = _evaluate(ctx, np.asarray(u, dtype=float), scenarios, z_inits,
+                        [False] * len(scenarios), stages[0], stroke_log_limit)
     steps, converged = 0, False
     for stage, sharpness in enumerate(stages, start=1):
+        current = _completed(ctx, current, scenarios, sharpness, stroke_log_limit)
         f, c = _models(current, sharpness, stroke_log_limit)
         if not (finite(f) and (c is None or finite(c))):
             return _Minimum(current, f, c, steps, False)
 
         def evaluate(u, accepted, sharpness=sharpness):
-            trial = evaluate_design(ctx, u, scenarios, accepted.states())
+            curved = _weights(accepted, sharpness, stroke_log_limit) >= _NEGLIGIBLE
+            trial = _evaluate(ctx, u, scenarios, accepted.states(), curved, sharpness,
+                              stroke_log_limit)
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
             return trial, t_f, t_c, trial.converged()
 
