@@ -319,7 +319,8 @@ class Context:
         return theta
 
     def evaluate(self, points: Sequence[tuple]) -> list[_Curves]:
-        """`_Curves` at each `(theta, scale, z_init)`; points where a steady state did not
+        """`_Curves` at each `(theta, scale, z_init)` (z_init None at every point: the
+        orbits solved from the linear steady state); points where a steady state did not
         converge are tried again with each of `SolverSettings.fallbacks()` in turn."""
         results = self._evaluate(points, self.settings)
         for settings in self.settings.fallbacks():
@@ -348,11 +349,14 @@ class Context:
             start_workers(-(-points // _CHUNK), (_prepare_chunk, task), serves=_evaluate_chunk)
 
     def _grids(self, points: Sequence[tuple], settings: SolverSettings) -> list["_Grid"]:
-        """The `_Grid` of each `(theta, scale, z_init)` (`_solve_grids`), the points shared
-        out to this process and its workers (`_workers.run_shares`)."""
-        lanes = tuple(np.stack([point[i] for point in points]) for i in range(3))
-        fields = run_shares(_solve_grids, lanes, self.system, self.omegas, settings,
-                            self.locate)
+        """The `_Grid` of each `(theta, scale, z_init)` (`_solve_grids`; z_init None at
+        every point: from the linear steady state), the points shared out to this process
+        and its workers (`_workers.run_shares`)."""
+        thetas, scales, z_inits = ([point[i] for point in points] for i in range(3))
+        cold = all(z is None for z in z_inits)
+        lanes = (np.stack(thetas), np.stack(scales)) + (() if cold else (np.stack(z_inits),))
+        fields = run_shares(_solve_cold_grids if cold else _solve_grids, lanes,
+                            self.system, self.omegas, settings, self.locate)
         return [_Grid(*(field[i] for field in fields)) for i in range(len(points))]
 
     def _tasks(self, points: Sequence[tuple], grids: Sequence["_Grid"],
@@ -445,6 +449,11 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
         located = (np.full(shape, _NO_PEAK), np.full(shape, np.nan),
                    np.broadcast_to(omegas[0] * scales[:, None], shape), np.zeros(shape, bool))
     return _Grid(xs, ys, converged, states, *located)
+
+
+def _solve_cold_grids(thetas, scales, system, omegas, settings, locate):
+    """`_solve_grids` from the linear steady state (a task of `run_shares`)."""
+    return _solve_grids(thetas, scales, None, system, omegas, settings, locate)
 
 
 class Scenario(NamedTuple):

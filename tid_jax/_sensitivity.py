@@ -381,8 +381,7 @@ def amplitude_sensitivities(
                             progress=progress)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
-    z_given = ctx.cold_states(k, c, amplitudes, 1.0)
-    given = ctx.evaluate([(theta, 1.0, z) for theta, z in zip(thetas, z_given, strict=True)])
+    given = ctx.evaluate([(theta, 1.0, None) for theta in thetas])
     say = progress if progress is not None else (lambda message: None)
     say(f"derivatives at the given tuning: {sum(curves.converged for curves in given)}/"
         f"{len(given)} amplitude(s) converged")
