@@ -186,10 +186,10 @@ def _minimise(
     """Minimise the smooth worst case f over `scenarios` in the design variables u, at each
     smooth-max sharpness of `stages` in turn, by a trust-region Newton method; with a
     stroke limit, by sequential quadratic programming on the constraint c <= 0 with the
-    exact penalty f + weight max(c, 0) as merit function. Each trial design is evaluated
-    with the curvatures of the scenarios that weigh in the last accepted one, and of any
-    other that weighs in it; the first design with those of the scenarios that weigh in
-    it (`_evaluate`)."""
+    exact penalty f + weight max(c, 0) as merit function. A design is evaluated with the
+    curvatures of only the scenarios that weigh in the smooth maxima (`_NEGLIGIBLE`): a
+    trial with those that weighed in the last accepted design, then those of any other
+    that weighs at the trial (`_evaluate`, `_completed`)."""
     if z_inits is None:
         z_inits = cold_start(ctx, u, scenarios)
     current = _evaluate(ctx, np.asarray(u, dtype=float), scenarios, z_inits,
