@@ -425,7 +425,9 @@ def robust_tune(
     worst case is a smooth maximum, with sharpness rising over `robust_settings.sharpness`,
     of the scenarios' log peak ratios. It is minimised by sequential quadratic programming
     with the smooth maximum of the log inerter peaks held below the limit (aimed
-    `robust_settings.stroke_margin` below it): trust-region Newton steps, aiming at a
+    `robust_settings.stroke_margin` below it): trust-region Newton steps (the curvature
+    from the scenarios that weigh at least 1e-3 in either smooth maximum; the value and
+    gradient from all), aiming at a
     decrement along the constraint below `tol` (converged within `NOISE_FACTOR * tol`),
     from the system's tuning or the best tuning of a nominal scenario, whichever has the
     smaller worst case within the limit. The stroke is then checked on a grid
