@@ -399,15 +399,16 @@ class Context:
     def cold_states(self, k, c, amplitudes, scale) -> np.ndarray:
         """Scaled orbit states `[lanes, freqs, 4]`, one lane per amplitude: the tuning k
         (N/m), c (N s/m) at that amplitude (N) with the host frequency times `scale` (over
-        the band times `scale`), each given once or once per lane; every lane in one
-        batch (`lane_response`, which retries points that fail to converge)."""
+        the band times `scale`), each given once or once per lane; the lanes shared out
+        to this process and its workers (`_solve_cold_grids`, whose `lane_response`
+        retries points that fail to converge)."""
         amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
         k, c, scale = (np.broadcast_to(np.asarray(value, dtype=float), amplitudes.shape)
                        for value in (k, c, scale))
         thetas = np.stack([self.theta(k_i, c_i, amplitude)
                            for k_i, c_i, amplitude in zip(k, c, amplitudes, strict=True)])
-        return _solve_grids(thetas, scale, None, self.system, self.omegas, self.settings,
-                            False).states
+        return run_shares(_solve_cold_grids, (thetas, np.asarray(scale)), self.system,
+                          self.omegas, self.settings, False).states
 
 
 class _Grid(NamedTuple):
