@@ -533,24 +533,33 @@ def without_jumped_peaks(dgrad, located, reference) -> np.ndarray:
     return dgrad
 
 
+def term_weights(candidates: Terms, sharpness):
+    """The smooth maximum G = ln(sum exp(s T)) / s of the candidate terms T and each
+    term's weight in it, exp(s (T - G)) (0 for a term that is no candidate; they sum to
+    1): `(inf, None)` where no candidate is finite."""
+    terms = np.where(candidates.mask, candidates.values, -np.inf)
+    top = np.max(terms)
+    if not np.isfinite(top):
+        return np.inf, None
+    weights = np.exp(sharpness * (terms - top))
+    total = weights.sum()
+    return top + np.log(total) / sharpness, weights / total
+
+
 def smooth_max(candidates: Terms, sharpness):
     """Smooth maximum G = ln(sum exp(s T)) / s of the candidate terms T, its gradient in
     all coordinates and its derivatives along u0, u1 (rows) in all coordinates: the exact
     curvature of the log-sum-exp plus the weighted curvatures of the terms."""
-    values, mask, grad, dgrad = candidates
-    terms = np.where(mask, values, -np.inf)
-    top = np.max(terms)
-    if not np.isfinite(top):
-        return np.inf, None, None
-    weights = np.exp(sharpness * (terms - top))
-    total = weights.sum()
-    weights /= total
+    _, mask, grad, dgrad = candidates
+    value, weights = term_weights(candidates, sharpness)
+    if weights is None:
+        return value, None, None
     grad = np.where(mask[:, None], grad, 0.0)
     dgrad = np.where(mask[:, None, None], dgrad, 0.0)
     g = weights @ grad
     hess = sharpness * (np.einsum("n,ni,nj->ij", weights, grad[:, :2], grad) - np.outer(g[:2], g))
     hess += np.einsum("n,nij->ij", weights, dgrad)
-    return top + np.log(total) / sharpness, g, hess
+    return value, g, hess
 
 
 class Evaluation(NamedTuple):

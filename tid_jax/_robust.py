@@ -26,6 +26,7 @@ from ._design import (
     evaluate_design,
     evaluation_of,
     smooth_max,
+    term_weights,
 )
 from ._peaks import (
     lane_grid_peaks,
@@ -120,32 +121,22 @@ def _models(evaluation: Evaluation, sharpness, stroke_log_limit):
 
 
 def _weights(evaluation: Evaluation, sharpness, stroke_log_limit) -> np.ndarray:
-    """Each scenario's weight (the sum of its terms') in the smooth worst case at
-    `sharpness` and, with a stroke limit, in the smooth maximum of the inerter peaks:
-    the larger of the two. All 1 where a smooth maximum is not finite."""
+    """Each scenario's weight (the sum of its terms', `term_weights`) in the smooth worst
+    case at `sharpness` and, with a stroke limit, in the smooth maximum of the inerter
+    peaks: the larger of the two. All 1 where a smooth maximum is not finite."""
     count = len(evaluation.stencils)
 
     def per_scenario(terms: Terms, response: str) -> np.ndarray:
-        values = np.where(terms.mask, terms.values, -np.inf)
-        top = np.max(values)
-        if not np.isfinite(top):
+        _, weights = term_weights(terms, sharpness)
+        if weights is None:
             return np.ones(count)
-        weights = np.exp(sharpness * (values - top))
         sizes = [getattr(stencil[0], f"log_{response}").size for stencil in evaluation.stencils]
-        return np.add.reduceat(weights / weights.sum(), np.cumsum([0] + sizes[:-1]))
+        return np.add.reduceat(weights, np.cumsum([0] + sizes[:-1]))
 
     weights = per_scenario(evaluation.host_terms, "x")
     if stroke_log_limit is not None:
         weights = np.maximum(weights, per_scenario(evaluation.stroke_terms, "y"))
     return weights
-
-
-def _evaluate(ctx, u, scenarios, z_inits, curved, sharpness, stroke_log_limit) -> Evaluation:
-    """The `Evaluation` at the design u with the forward stencil of the scenarios where
-    `curved` holds, the others at u alone, then `_completed`."""
-    evaluation = evaluate_design(ctx, u, scenarios, z_inits,
-                                 stencil=["forward" if c else "centre" for c in curved])
-    return _completed(ctx, evaluation, scenarios, sharpness, stroke_log_limit)
 
 
 def _completed(ctx, evaluation: Evaluation, scenarios, sharpness,
@@ -158,8 +149,9 @@ def _completed(ctx, evaluation: Evaluation, scenarios, sharpness,
                                                            strict=True))
                if weight >= _NEGLIGIBLE and len(stencil) == 1]
     if missing:
+        states = evaluation.states()
         again = evaluate_design(ctx, evaluation.u, [scenarios[i] for i in missing],
-                                [evaluation.states()[i] for i in missing])
+                                [states[i] for i in missing])
         stencils = list(evaluation.stencils)
         for i, stencil in zip(missing, again.stencils, strict=True):
             stencils[i] = stencil
@@ -189,11 +181,12 @@ def _minimise(
     exact penalty f + weight max(c, 0) as merit function. A design is evaluated with the
     curvatures of only the scenarios that weigh in the smooth maxima (`_NEGLIGIBLE`): a
     trial with those that weighed in the last accepted design, then those of any other
-    that weighs at the trial (`_evaluate`, `_completed`)."""
+    that weighs at the trial (`_completed`); the first, solved at the design alone, with
+    those that weigh there."""
     if z_inits is None:
         z_inits = cold_start(ctx, u, scenarios)
-    current = _evaluate(ctx, np.asarray(u, dtype=float), scenarios, z_inits,
-                        [False] * len(scenarios), stages[0], stroke_log_limit)
+    current = evaluate_design(ctx, np.asarray(u, dtype=float), scenarios, z_inits,
+                              stencil="centre")
     steps, converged = 0, False
     for stage, sharpness in enumerate(stages, start=1):
         current = _completed(ctx, current, scenarios, sharpness, stroke_log_limit)
@@ -203,8 +196,9 @@ def _minimise(
 
         def evaluate(u, accepted, sharpness=sharpness):
             curved = _weights(accepted, sharpness, stroke_log_limit) >= _NEGLIGIBLE
-            trial = _evaluate(ctx, u, scenarios, accepted.states(), curved, sharpness,
-                              stroke_log_limit)
+            trial = evaluate_design(ctx, u, scenarios, accepted.states(),
+                                    stencil=["forward" if c else "centre" for c in curved])
+            trial = _completed(ctx, trial, scenarios, sharpness, stroke_log_limit)
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
             return trial, t_f, t_c, trial.converged()
 
