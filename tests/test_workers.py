@@ -5,12 +5,13 @@ import subprocess
 import sys
 import time
 
+import equinox._errors
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tid_jax import _workers
+from tid_jax import _launch, _workers
 from tid_jax._workers import (
     WORKERS_ENVIRONMENT_VARIABLE,
     process_count,
@@ -251,6 +252,61 @@ def test_a_worker_ends_when_its_parent_is_killed_in_the_middle_of_a_task():
         assert not _ended(pid)
         parent.send_signal(signal.SIGKILL)
     deadline = time.monotonic() + 20
+    while not _ended(pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert _ended(pid)
+
+
+# --- workers started by the command line before it imports JAX (`_launch`) -----------------
+
+
+@pytest.mark.parametrize(("argv", "environment", "expected"), [
+    (["retune"], {}, 1),  # two cores: one worker beside this process
+    (["sensitivity", "--amplitudes", "100"], {}, 1),
+    (["robust", "--workers", "3"], {}, 2),
+    (["robust", "--workers=1"], {}, 0),
+    (["retune"], {WORKERS_ENVIRONMENT_VARIABLE: "4"}, 3),
+    (["retune", "--workers", "2"], {WORKERS_ENVIRONMENT_VARIABLE: "4"}, 1),
+    (["retune", "--workers", "two"], {}, 0),  # the command refuses it
+    (["frf"], {}, 0),  # no lanes to deal out
+    (["retune", "--help"], {}, 0),
+    ([], {}, 0),
+    (["retune"], {"JAX_PLATFORMS": "cuda"}, 0),
+])
+def test_the_command_line_starts_the_workers_its_command_uses(monkeypatch, argv, environment,
+                                                              expected):
+    monkeypatch.delenv(WORKERS_ENVIRONMENT_VARIABLE, raising=False)
+    monkeypatch.delenv("JAX_PLATFORMS", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    for name, value in environment.items():
+        monkeypatch.setenv(name, value)
+    assert _launch.early_workers(argv) == expected
+
+
+def test_a_worker_started_early_serves_the_lanes(two_processes):
+    _workers._stop_workers()
+    process = _launch.spawn_worker(x64=jax.config.jax_enable_x64,
+                                   on_error=equinox._errors.EQX_ON_ERROR)
+    _launch._started.append(process)
+    try:
+        pids = run_lanes(_slow_pid, [(0.3,)] * 8)
+        assert set(pids) == {os.getpid(), process.pid}
+        assert [worker.process for worker in _workers._pool] == [process]
+    finally:
+        _workers._stop_workers()
+
+
+def test_a_worker_started_early_and_not_needed_ends_quietly():
+    # Started for a command that then fails on its arguments: its input closes unread.
+    with subprocess.Popen([sys.executable, "-c", (
+        "from tid_jax import _launch\n"
+        "worker = _launch.spawn_worker(x64=True, on_error='raise')\n"
+        "print(worker.pid, flush=True)\n")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True) as parent:
+        pid = int(parent.stdout.readline())
+        assert parent.wait(timeout=30) == 0
+        assert parent.stderr.read() == ""
+    deadline = time.monotonic() + 60
     while not _ended(pid) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert _ended(pid)

@@ -1,140 +1,47 @@
-"""Design of tuned inerter dampers (TIDs) whose inerter has dry friction."""
+"""Design of tuned inerter dampers (TIDs) whose inerter has dry friction.
 
-from ._band import (
-    Peaks as Peaks,
-)
-from ._band import (
-    default_omegas as default_omegas,
-)
-from ._band import (
-    peak_response as peak_response,
-)
-from ._band import (
-    peaks as peaks,
-)
-from ._cache import (
-    default_cache_dir as default_cache_dir,
-)
-from ._cache import (
-    enable_compilation_cache as enable_compilation_cache,
-)
-from ._design import (
-    BestTunings as BestTunings,
-)
-from ._design import (
-    best_tunings as best_tunings,
-)
-from ._device import (
-    ForceSettings as ForceSettings,
-)
-from ._device import (
-    InerterDevice as InerterDevice,
-)
-from ._identify import (
-    IdentifySettings as IdentifySettings,
-)
-from ._identify import (
-    InerterFit as InerterFit,
-)
-from ._identify import (
-    InerterRecord as InerterRecord,
-)
-from ._identify import (
-    ModelComparison as ModelComparison,
-)
-from ._identify import (
-    identify_inerter as identify_inerter,
-)
-from ._linear import (
-    Breakaway as Breakaway,
-)
-from ._linear import (
-    LinearReceptance as LinearReceptance,
-)
-from ._linear import (
-    breakaway_amplitude as breakaway_amplitude,
-)
-from ._linear import (
-    den_hartog as den_hartog,
-)
-from ._linear import (
-    den_hartog_tuning as den_hartog_tuning,
-)
-from ._linear import (
-    linear_receptance as linear_receptance,
-)
-from ._linear import (
-    paper_system as paper_system,
-)
-from ._linear import (
-    stuck_receptance as stuck_receptance,
-)
-from ._response import (
-    FrequencyResponse as FrequencyResponse,
-)
-from ._response import (
-    frequency_response as frequency_response,
-)
-from ._retune import (
-    RetuneResult as RetuneResult,
-)
-from ._retune import (
-    RetuneSettings as RetuneSettings,
-)
-from ._retune import (
-    retune as retune,
-)
-from ._robust import (
-    RobustDesign as RobustDesign,
-)
-from ._robust import (
-    RobustSettings as RobustSettings,
-)
-from ._robust import (
-    TuningPerformance as TuningPerformance,
-)
-from ._robust import (
-    robust_tune as robust_tune,
-)
-from ._robust import (
-    tuning_performance as tuning_performance,
-)
-from ._sensitivity import (
-    OptimumSensitivities as OptimumSensitivities,
-)
-from ._sensitivity import (
-    Sensitivities as Sensitivities,
-)
-from ._sensitivity import (
-    amplitude_sensitivities as amplitude_sensitivities,
-)
-from ._sensitivity import (
-    sensitivities as sensitivities,
-)
-from ._settings import SolverSettings as SolverSettings
-from ._substructuring import (
-    Substructuring as Substructuring,
-)
-from ._substructuring import (
-    SubstructuringStability as SubstructuringStability,
-)
-from ._substructuring import (
-    simulate_substructuring as simulate_substructuring,
-)
-from ._substructuring import (
-    substructuring_stability as substructuring_stability,
-)
-from ._system import (
-    DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
-)
-from ._system import (
-    PAPER_AMPLITUDES as PAPER_AMPLITUDES,
-)
-from ._system import (
-    PAPER_STROKE as PAPER_STROKE,
-)
-from ._system import (
-    TIDSystem as TIDSystem,
-)
+The public API is the names below, each from the module of its idea. They load when
+first used (`import tid_jax` alone imports neither JAX nor the library's modules), so
+that the `tid-jax` command starts its worker processes before it imports them
+(`_launch`).
+"""
+
+import importlib
 
 __version__ = "0.1.0"
+
+_API = {
+    "_band": ("Peaks", "default_omegas", "peak_response", "peaks"),
+    "_cache": ("default_cache_dir", "enable_compilation_cache"),
+    "_design": ("BestTunings", "best_tunings"),
+    "_device": ("ForceSettings", "InerterDevice"),
+    "_identify": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
+                  "identify_inerter"),
+    "_linear": ("Breakaway", "LinearReceptance", "breakaway_amplitude", "den_hartog",
+                "den_hartog_tuning", "linear_receptance", "paper_system", "stuck_receptance"),
+    "_response": ("FrequencyResponse", "frequency_response"),
+    "_retune": ("RetuneResult", "RetuneSettings", "retune"),
+    "_robust": ("RobustDesign", "RobustSettings", "TuningPerformance", "robust_tune",
+                "tuning_performance"),
+    "_sensitivity": ("OptimumSensitivities", "Sensitivities", "amplitude_sensitivities",
+                     "sensitivities"),
+    "_settings": ("SolverSettings",),
+    "_substructuring": ("Substructuring", "SubstructuringStability",
+                        "simulate_substructuring", "substructuring_stability"),
+    "_system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
+}
+_MODULE_OF = {name: module for module, names in _API.items() for name in names}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -304,6 +304,12 @@ def _stage_lanes(lanes, options: dict):
     return jax.tree.map(np.asarray, _optimise_stage(*_stage_arguments(lanes, options)))
 
 
+def _prepare_stage(lanes, options: dict):
+    """`_optimise_stage` for `_stage_lanes(lanes, options)` compiled, or loaded from the
+    cache, not run: a worker's warm-up for the stages."""
+    _optimise_stage.prepare(*_stage_arguments(lanes, options))
+
+
 def _stage_arguments(lanes, options: dict):
     """The arguments of `_optimise_stage` for `_stage_lanes`."""
     systems, amplitudes, bands, u, z, h = lanes
@@ -575,18 +581,18 @@ def optimal_tunings(
     ok = np.zeros(amps.shape, bool)
     stages = [_stage_options(stage, sharpnesses, tol, settings, max_steps, retune_settings)
               for stage in range(1, len(sharpnesses) + 1)]
-    # Several CPU cores: worker processes for the stages below, started now so that they
-    # load while the initial tuning is solved. Where the stages' program is not kept on
-    # disk, one of them compiles it meanwhile, on the first moving lane with placeholder
-    # orbits (and a tolerance that any step meets: one step).
-    warm_up = None
+    # Several CPU cores: worker processes for the stages below, started now (unless the
+    # command line started them already) so that they load while the initial tuning is
+    # solved, one of them compiling the stages' program meanwhile (for the first moving
+    # lane, with placeholder orbits) or, where it is kept on disk, loading it.
+    warm_up, compiling = None, False
     if moving.size:
         placeholder = _placeholder_orbits(k0, c0, bands, settings)
         lanes = _lanes_of(moving[:1], (systems, amps, bands, u, placeholder, hessian_inv))
-        options = dict(stages[0], tol=float(np.finfo(float).max))
-        if not _optimise_stage.is_kept(*_stage_arguments(lanes, options)):
-            warm_up = (_stage_lanes, (lanes, options))
-    start_workers(amps.size, warm_up)
+        compiling = not _optimise_stage.is_kept(*_stage_arguments(lanes, stages[0]))
+        warm_up = (_prepare_stage, (lanes, stages[0]))
+    # (The stages wait for a compiling worker, and start at once beside a loading one.)
+    start_workers(amps.size, warm_up, serves=_stage_lanes if compiling else None)
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)
@@ -597,7 +603,7 @@ def optimal_tunings(
     # check (the same programs: a later run compiles none of its own).
     initial_check = None
     initial = _check_inputs(systems, amps, bands, initial_states, refinement)
-    if warm_up is not None:
+    if compiling:
         initial_check = run_shares(_check_lanes, initial, settings, here=True)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)

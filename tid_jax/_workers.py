@@ -5,10 +5,11 @@ scenario each, optimised independently) are solved one after another on one devi
 CPU with several cores, `run_lanes` deals them out to this process and to worker
 processes, each taking the next lane as it finishes one.
 Processes, not threads: two threads of one process executing XLA's CPU programs at once
-can deadlock in its runtime. The workers start when first needed and serve every later
-call of this process; they compute as this process does (the same precision and the same
-compilation cache, which they load their programs from) and end with it, even where it is
-killed outright in the middle of a task.
+can deadlock in its runtime. The workers start when first needed (those of the `tid-jax`
+command before it imports JAX: `_launch`) and serve every later call of this process;
+they compute as this process does (the same precision and the same compilation cache,
+which they load their programs from) and end with it, even where it is killed outright
+in the middle of a task.
 
 The number of processes is `$TID_JAX_WORKERS` (1: no workers), else the CPU cores this
 process may use; off the CPU or with several devices there are no workers (the lanes are
@@ -16,6 +17,7 @@ sharded over the devices instead, `_sharding`).
 """
 
 import atexit
+import importlib
 import os
 import pickle
 import subprocess
@@ -23,7 +25,6 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import equinox._errors
 import jax
@@ -35,8 +36,7 @@ from ._cache import (
     compiles_watchable,
     enable_compilation_cache,
 )
-
-WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
+from ._launch import WORKERS_ENVIRONMENT_VARIABLE, spawn_worker, take_started
 
 _pool: list["_Worker"] = []
 
@@ -193,28 +193,16 @@ class _Worker:
     runs, it may also ask `("wait", None)` before it compiles a program, and go on when
     it receives `"go"`."""
 
-    def __init__(self):
-        package_root = str(Path(__file__).resolve().parent.parent)
-        path = os.environ.get("PYTHONPATH")
-        env = dict(
-            os.environ,
-            # As this process computes (JAX reads these when imported).
-            JAX_ENABLE_X64=str(bool(jax.config.jax_enable_x64)),
-            EQX_ON_ERROR=equinox._errors.EQX_ON_ERROR,
-            JAX_PLATFORMS="cpu",
-            # This package from where this process has it, and no workers of its own.
-            PYTHONPATH=package_root + (os.pathsep + path if path else ""),
-            **{WORKERS_ENVIRONMENT_VARIABLE: "1"},
-        )
-        serve = f"from {__name__} import _serve; _serve({os.getpid()})"
+    def __init__(self, process: subprocess.Popen | None = None):
+        """A new worker process, or the worker `process` started earlier (`_launch`)."""
         self.warming: threading.Thread | None = None  # a warm-up in progress
         self.warming_for: Callable | None = None  # the function it prepares
         self.ran: set[Callable] = set()  # the functions it has run (programs loaded)
         folder = cache_folder()
         # Whether it sees its compilations coming (and asks to wait before each).
         self.watched = folder is not None and compiles_watchable()
-        self.process = subprocess.Popen([sys.executable, "-c", serve], env=env,
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.process = process if process is not None else spawn_worker(
+            x64=jax.config.jax_enable_x64, on_error=equinox._errors.EQX_ON_ERROR)
         self._send(None if folder is None else str(folder))
 
     def alive(self) -> bool:
@@ -291,6 +279,8 @@ def _workers(count: int) -> list[_Worker]:
     for worker in [worker for worker in _pool if not worker.alive()]:
         worker.stop()
         _pool.remove(worker)
+    # Those the command line started early first (idle where more than `count`).
+    _pool.extend(_Worker(process) for process in take_started())
     while len(_pool) < count:
         _pool.append(_Worker())
     return _pool[:max(count, 0)]
@@ -335,7 +325,13 @@ def _serve(parent: int) -> None:
     answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
     tasks = sys.stdin.buffer
-    folder = pickle.load(tasks)
+    # The steady-state core and the optimisers, which every task of this package runs,
+    # imported while the caller prepares the first task.
+    importlib.import_module(f"{__package__}._design")
+    try:
+        folder = pickle.load(tasks)
+    except EOFError:  # started early, never used
+        os._exit(0)
     if folder is not None:
         enable_compilation_cache(folder)
     careful = False
