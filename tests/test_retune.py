@@ -334,9 +334,9 @@ def test_worker_processes_retune_as_this_process_alone(system, band, monkeypatch
 
     warm_ups = []
 
-    def start_workers(lanes, warm_up=None):
-        warm_ups.append(warm_up)
-        return tj._workers.start_workers(lanes, warm_up)
+    def start_workers(lanes, warm_up=None, *, serves=None):
+        warm_ups.append((warm_up, serves))
+        return tj._workers.start_workers(lanes, warm_up, serves=serves)
 
     monkeypatch.setattr(_retune, "start_workers", start_workers)
     amplitudes = [300.0, 1500.0, 3000.0]
@@ -346,9 +346,10 @@ def test_worker_processes_retune_as_this_process_alone(system, band, monkeypatch
     shared = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
     assert len(tj._workers._pool) == 1
     # The stages' program, kept by the first retune, is found for the placeholder orbits
-    # of the second: no worker compiles it ahead (a warm-up is asked for only where it is
-    # not kept on disk).
-    assert warm_ups[1] is None
+    # of the second: a worker loads it ahead, and the stages do not wait for it (they do
+    # for a worker that compiles it).
+    (function, _), serves = warm_ups[1]
+    assert function is _retune._prepare_stage and serves is None
     for name in ("tid_stiffness", "tid_damping", "x_peak", "iterations", "status"):
         np.testing.assert_allclose(getattr(shared, name), getattr(alone, name), rtol=1e-12,
                                    err_msg=name)
