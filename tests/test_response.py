@@ -225,12 +225,9 @@ def test_failed_integration_is_flagged_and_its_peaks_are_nan(system):
     assert np.isnan(float(result.x_max)) and np.isnan(float(result.y_max))
 
 
-def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system,
-                                                                          monkeypatch):
-    # Explicit steps that ran out (residual inf) would run out sooner still at a tighter
-    # tolerance: such a point skips the more accurate explicit attempt for the implicit
-    # one; a point whose Newton iterations fell short (a finite residual) is retried
-    # explicitly first.
+def _recorded_attempts(monkeypatch):
+    """Each attempt of `solve_points` from now on, as `(settings, shot from given states,
+    residuals)`."""
     from tid_jax import _response
 
     attempts = []
@@ -238,21 +235,45 @@ def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system
 
     def recorded(settings, batch, warm=None):
         out = solve(settings, batch, warm)
-        attempts.append((settings.implicit, np.asarray(out.residual)))
+        attempts.append((settings, warm is not None, np.asarray(out.residual)))
         return out
 
     monkeypatch.setattr(_response, "_solve_blocks", recorded)
+    return attempts
+
+
+def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system,
+                                                                          monkeypatch):
+    # Explicit steps that ran out (residual inf) would run out sooner still at a tighter
+    # tolerance: such a point skips the more accurate explicit attempt for the implicit
+    # one, and it is not shot on from where it stopped.
+    attempts = _recorded_attempts(monkeypatch)
     omega = 0.95 * float(system.host_frequency)
     result = tj.frequency_response(system, omega, 100.0, settings=STARVED)
     assert not bool(result.converged)
-    assert [implicit for implicit, _ in attempts] == [False, True]
-    assert np.all(np.isinf(attempts[0][1]))
-    attempts.clear()
-    result = tj.frequency_response(system, omega, 100.0, settings=tj.SolverSettings(
-        transient_periods=0, max_newton_steps=1))
+    assert [settings.implicit for settings, _, _ in attempts] == [False, True]
+    assert not any(warm for _, warm, _ in attempts)
+    assert np.all(np.isinf(attempts[0][2]))
+
+
+def test_a_near_miss_is_shot_on_from_its_own_state_before_any_fallback(system, monkeypatch):
+    # One Newton iteration from the linear steady state falls short (a finite residual):
+    # shot on from its last state with the same settings, it converges, and no fallback
+    # (another program) is tried.
+    attempts = _recorded_attempts(monkeypatch)
+    omega = 0.95 * float(system.host_frequency)
+    settings = tj.SolverSettings(transient_periods=0, max_newton_steps=1)
+    result = tj.frequency_response(system, omega, 100.0, settings=settings)
     assert bool(result.converged)
-    assert [implicit for implicit, _ in attempts] == [False, False]
-    assert np.all(np.isfinite(attempts[0][1]))
+    (first, cold, missed), *on = attempts
+    assert not cold and np.all(np.isfinite(missed))
+    assert missed > first.for_system(system).exact_periodicity_tol
+    assert on and all(again == first and warm for again, warm, _ in on)
+    assert on[-1][2] < missed
+    # The same steady state as with Newton's iterations enough to converge at once.
+    reference = tj.frequency_response(system, omega, 100.0)
+    np.testing.assert_allclose(result.x_max, reference.x_max, rtol=1e-9)
+    np.testing.assert_allclose(result.y_max, reference.y_max, rtol=1e-8)
 
 
 def _orbit_at(system, amplitude, omega, directions=()):

@@ -145,7 +145,7 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     shots = per_device(solve, p, warm, use_warm, valid)
     samples, residual = shots.samples, shots.residual
     static = amplitudes / systems.host_stiffness
-    units = jnp.stack([static, omegas * static] * (settings.states // 2), axis=-1)
+    units = _state_units(omegas, amplitudes, systems.host_stiffness, settings.states, jnp)
     peak = jax.vmap(refined_peak)
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
@@ -190,6 +190,8 @@ def batched(system: TIDSystem, count: int) -> TIDSystem:
 # about 40 ms longer than in a block of its own size on the paper's system), and batches
 # of every size share one compiled program, whichever sizes a run happens to meet first.
 BLOCK = 512
+# Rounds of shooting on at the points that came closest to their orbit (`solve_points`).
+CONTINUATIONS = 2
 
 
 def _block_sizes(count: int):
@@ -240,6 +242,18 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     the batch is sharded over all JAX devices (`sharded_batch`). The solutions are NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
+    # A near miss (a finite residual above the tolerance: its Newton iterations ran out
+    # on an orbit that converges slowly) is shot on from its own last state with the same
+    # settings, and the same compiled program, up to `CONTINUATIONS` times before any
+    # fallback.
+    for _ in range(CONTINUATIONS):
+        near = np.flatnonzero(~out.converged & np.isfinite(out.residual))
+        if not near.size:
+            break
+        part = jax.tree.map(lambda b, near=near: b[near], batch)
+        own = out.state[near] / _state_units(part[0], part[1], part[2].host_stiffness,
+                                             out.state.shape[-1])
+        out = _keep_better(out, _solve_blocks(settings, part, own), near)
     for fallback in settings.fallbacks():
         failed = ~out.converged
         if not fallback.implicit:
@@ -253,6 +267,14 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
         retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
         out = _keep_better(out, retry, failed)
     return out
+
+
+def _state_units(omegas, amplitudes, host_stiffness, states: int, xp=np):
+    """The units of the scaled states (`solve_orbit`: displacements in A / K, velocities
+    in omega A / K) at points (`omegas`, `amplitudes`) of hosts of stiffness
+    `host_stiffness` (broadcast together), `[..., states]`."""
+    static = amplitudes / host_stiffness
+    return xp.stack([static + 0 * omegas, static * omegas] * (states // 2), axis=-1)
 
 
 def _keep_better(out: _Solutions, retry: _Solutions, points) -> _Solutions:
@@ -297,10 +319,9 @@ def scaled_states(response: FrequencyResponse, host_stiffness,
     K is one value or one per amplitude (lane). With `xp=np`, computed on the host."""
     amplitudes, omegas, state = (xp.asarray(a) for a in (response.amplitudes,
                                                          response.omegas, response.state))
-    static = amplitudes[:, None] / xp.reshape(xp.asarray(host_stiffness), (-1, 1))
-    pairs = state.shape[-1] // 2
-    units = xp.stack([static + 0 * omegas, static * omegas] * pairs, axis=-1)
-    return state / units
+    return state / _state_units(omegas, amplitudes[:, None],
+                                xp.reshape(xp.asarray(host_stiffness), (-1, 1)),
+                                state.shape[-1], xp)
 
 
 def frequency_response(
