@@ -170,14 +170,14 @@ OTHER_AMPLITUDES = ("250", "450")
 
 def run_cli(command, cache_dir, limit_s, extra=()):
     """Wall time of `tid-jax COMMAND` on the paper's defaults (with the flags `extra`), end
-    to end, in a child process, with the compilation cache in `cache_dir`; None if stopped
-    at `limit_s`."""
+    to end, in a child process (the console script's entry point, as a user runs it),
+    with the compilation cache in `cache_dir`; None if stopped at `limit_s`."""
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         try:
             done = subprocess.run(
-                [sys.executable, "-m", "tid_jax.cli", command, "--out", folder, "--quiet",
-                 "--cache-dir", cache_dir, *extra],
+                [sys.executable, "-c", "from tid_jax._launch import run; run()", command,
+                 "--out", folder, "--quiet", "--cache-dir", cache_dir, *extra],
                 capture_output=True, text=True, timeout=limit_s,
             )
         except subprocess.TimeoutExpired:
