@@ -235,7 +235,9 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`) of the
     systems `systems` (one per point: its fields are arrays, entry i for point i; see
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
-    (e.g. the orbit of a nearby design). Points that do not converge are solved again,
+    (e.g. the orbit of a nearby design). A near miss (a finite periodicity residual above
+    the tolerance) is first shot on from its own last state with the same settings, up to
+    `CONTINUATIONS` times. Points that do not converge are solved again,
     from the equivalent linear steady state (`_period.initial_state`), with each of
     `settings.fallbacks()` in turn until they do (a point where no period could be
     integrated skips the explicit ones); the best attempt is kept. Each block of
