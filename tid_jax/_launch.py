@@ -44,6 +44,13 @@ def spawn_worker(*, x64: bool, on_error: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE)
 
 
+def cpu_cores() -> int:
+    """The CPU cores this process may use."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def early_workers(argv: list[str]) -> int:
     """How many worker processes the command line `argv` (without the program's name) is
     to start at once: the CPU cores this process may use less one (or `--workers`, else
@@ -60,9 +67,7 @@ def early_workers(argv: list[str]) -> int:
     given = parser.parse_known_args(argv[1:])[0].workers
     given = given if given is not None else os.environ.get(WORKERS_ENVIRONMENT_VARIABLE)
     if given is None:
-        cores = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                 else os.cpu_count() or 1)
-        return cores - 1
+        return cpu_cores() - 1
     try:
         return max(0, int(given) - 1)
     except ValueError:

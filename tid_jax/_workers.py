@@ -36,7 +36,7 @@ from ._cache import (
     compiles_watchable,
     enable_compilation_cache,
 )
-from ._launch import WORKERS_ENVIRONMENT_VARIABLE, spawn_worker, take_started
+from ._launch import WORKERS_ENVIRONMENT_VARIABLE, cpu_cores, spawn_worker, take_started
 
 _pool: list["_Worker"] = []
 
@@ -53,8 +53,7 @@ def process_count(lanes: int) -> int:
     """
     value = os.environ.get(WORKERS_ENVIRONMENT_VARIABLE)
     if value is None:
-        count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
+        count = cpu_cores()
     else:
         try:
             count = int(value)
