@@ -284,9 +284,11 @@ def _peak_response(system, amplitude, omegas, host, settings):
         def solve(at, last):
             del last
             z0 = interpolated(states, omegas, at)
-            x, _, ok, _ = jax.vmap(sweep, (None, None, 0, None, 0))(
-                system, amplitude, at, settings, z0)
-            return jnp.where(ok, x, jnp.nan)
+            # One sweep over every point of every peak (a sweep per peak would batch the
+            # solves' loops twice over when traced).
+            x, _, ok, _ = sweep(system, amplitude, at.reshape(-1), settings,
+                                z0.reshape((-1,) + z0.shape[2:]))
+            return jnp.where(ok, x, jnp.nan).reshape(at.shape)
 
         selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
         _, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
