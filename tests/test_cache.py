@@ -1,5 +1,6 @@
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -151,19 +152,31 @@ PREPARE_SCRIPT = textwrap.dedent(
 )
 
 
-def test_a_prepared_program_is_kept_and_compiled_for_the_next_process(tmp_path):
-    def run(mode):
-        done = subprocess.run([sys.executable, "-c", PREPARE_SCRIPT, str(tmp_path), mode],
-                              capture_output=True, text=True, timeout=300, env=dict(os.environ))
-        assert done.returncode == 0, done.stderr
-        return json.loads(done.stdout.strip().splitlines()[-1])
+def _run_prepare(folder, mode) -> dict:
+    done = subprocess.run([sys.executable, "-c", PREPARE_SCRIPT, str(folder), mode],
+                          capture_output=True, text=True, timeout=300, env=dict(os.environ))
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
-    prepared = run("prepare")
+
+def test_a_prepared_program_is_kept_and_compiled_for_the_next_process(tmp_path):
+    prepared = _run_prepare(tmp_path, "prepare")
     # Traced once, kept and compiled (misses of the compilation cache), not run.
     assert prepared["traces"] == 1 and prepared["kept"] and prepared["misses"] >= 2
     assert prepared["out"] is None
-    called = run("call")
+    called = _run_prepare(tmp_path, "call")
     # The next process neither traces nor compiles it: its executable is in the cache.
+    assert called["traces"] == 0 and called["misses"] == 0
+    np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
+                               rtol=1e-14)
+
+
+def test_a_copied_cache_folder_serves_its_programs(tmp_path):
+    # The cache folder's path is in no program's key: a copy of it (a CI cache restored
+    # elsewhere) neither traces nor compiles what the original holds.
+    _run_prepare(tmp_path / "original", "prepare")
+    shutil.copytree(tmp_path / "original", tmp_path / "copy")
+    called = _run_prepare(tmp_path / "copy", "call")
     assert called["traces"] == 0 and called["misses"] == 0
     np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
                                rtol=1e-14)

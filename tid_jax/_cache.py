@@ -83,6 +83,10 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     # does when set before equinox is imported.
     equinox._errors.EQX_ON_ERROR = "nan"
     jax.config.update("jax_compilation_cache_dir", str(folder))
+    # Nor XLA's own GPU caches inside the folder: JAX would write their paths into every
+    # program's compile options, hence into its key, so that a folder copied or moved
+    # (a CI cache restored elsewhere, another user's home) would hold no program found.
+    jax.config.update("jax_persistent_cache_enable_xla_caches", None)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _programs_folder = folder / PROGRAMS
