@@ -1,3 +1,4 @@
+import gc
 import math
 import os
 import signal
@@ -24,6 +25,11 @@ from tid_jax._workers import (
 def _slow_pid(seconds):
     time.sleep(seconds)
     return os.getpid()
+
+
+def _slow_collector(seconds):
+    time.sleep(seconds)
+    return os.getpid(), gc.get_threshold()
 
 
 def _die_outside(pid):
@@ -294,6 +300,25 @@ def test_a_worker_started_early_serves_the_lanes(two_processes):
         assert [worker.process for worker in _workers._pool] == [process]
     finally:
         _workers._stop_workers()
+
+
+def test_workers_and_the_command_collect_garbage_rarely(two_processes):
+    _workers._stop_workers()
+    process = _launch.spawn_worker(x64=jax.config.jax_enable_x64,
+                                   on_error=equinox._errors.EQX_ON_ERROR)
+    _launch._started.append(process)
+    try:
+        answers = dict(run_lanes(_slow_collector, [(0.3,)] * 8))
+        assert answers[process.pid] == _launch.GC_THRESHOLDS
+    finally:
+        _workers._stop_workers()
+    # The command sets them for itself (its subcommand replaced here, one without workers).
+    code = ("import gc, sys\nimport tid_jax.cli\nfrom tid_jax import _launch\n"
+            "tid_jax.cli.run = lambda: print(gc.get_threshold())\n"
+            "sys.argv = ['tid-jax', 'frf']\n_launch.run()")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.stdout.strip() == str(_launch.GC_THRESHOLDS)
 
 
 def test_a_worker_started_early_and_not_needed_ends_quietly():
