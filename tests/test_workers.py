@@ -295,24 +295,17 @@ def test_a_worker_started_early_serves_the_lanes(two_processes):
                                    on_error=equinox._errors.EQX_ON_ERROR)
     _launch._started.append(process)
     try:
-        pids = run_lanes(_slow_pid, [(0.3,)] * 8)
-        assert set(pids) == {os.getpid(), process.pid}
+        answers = run_lanes(_slow_collector, [(0.3,)] * 8)
+        assert {pid for pid, _ in answers} == {os.getpid(), process.pid}
         assert [worker.process for worker in _workers._pool] == [process]
+        # and collects garbage at the command's thresholds
+        assert dict(answers)[process.pid] == _launch.GC_THRESHOLDS
     finally:
         _workers._stop_workers()
 
 
-def test_workers_and_the_command_collect_garbage_rarely(two_processes):
-    _workers._stop_workers()
-    process = _launch.spawn_worker(x64=jax.config.jax_enable_x64,
-                                   on_error=equinox._errors.EQX_ON_ERROR)
-    _launch._started.append(process)
-    try:
-        answers = dict(run_lanes(_slow_collector, [(0.3,)] * 8))
-        assert answers[process.pid] == _launch.GC_THRESHOLDS
-    finally:
-        _workers._stop_workers()
-    # The command sets them for itself (its subcommand replaced here, one without workers).
+def test_the_command_collects_garbage_rarely():
+    # As its workers do (its subcommand replaced here, one without workers).
     code = ("import gc, sys\nimport tid_jax.cli\nfrom tid_jax import _launch\n"
             "tid_jax.cli.run = lambda: print(gc.get_threshold())\n"
             "sys.argv = ['tid-jax', 'frf']\n_launch.run()")
