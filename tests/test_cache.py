@@ -159,16 +159,21 @@ def _run_prepare(folder, mode) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def _assert_served(called: dict) -> None:
+    """A `_run_prepare(..., "call")` that neither traced nor compiled its program and
+    computed it right."""
+    assert called["traces"] == 0 and called["misses"] == 0
+    np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
+                               rtol=1e-14)
+
+
 def test_a_prepared_program_is_kept_and_compiled_for_the_next_process(tmp_path):
     prepared = _run_prepare(tmp_path, "prepare")
     # Traced once, kept and compiled (misses of the compilation cache), not run.
     assert prepared["traces"] == 1 and prepared["kept"] and prepared["misses"] >= 2
     assert prepared["out"] is None
-    called = _run_prepare(tmp_path, "call")
     # The next process neither traces nor compiles it: its executable is in the cache.
-    assert called["traces"] == 0 and called["misses"] == 0
-    np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
-                               rtol=1e-14)
+    _assert_served(_run_prepare(tmp_path, "call"))
 
 
 def test_a_copied_cache_folder_serves_its_programs(tmp_path):
@@ -176,7 +181,4 @@ def test_a_copied_cache_folder_serves_its_programs(tmp_path):
     # elsewhere) neither traces nor compiles what the original holds.
     _run_prepare(tmp_path / "original", "prepare")
     shutil.copytree(tmp_path / "original", tmp_path / "copy")
-    called = _run_prepare(tmp_path / "copy", "call")
-    assert called["traces"] == 0 and called["misses"] == 0
-    np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
-                               rtol=1e-14)
+    _assert_served(_run_prepare(tmp_path / "copy", "call"))
