@@ -585,14 +585,16 @@ def optimal_tunings(
     # command line started them already) so that they load while the initial tuning is
     # solved, one of them compiling the stages' program meanwhile (for the first moving
     # lane, with placeholder orbits) or, where it is kept on disk, loading it.
-    warm_up, compiling = None, False
+    warm_up, kept = None, True
     if moving.size:
         placeholder = _placeholder_orbits(k0, c0, bands, settings)
         lanes = _lanes_of(moving[:1], (systems, amps, bands, u, placeholder, hessian_inv))
-        compiling = not _optimise_stage.is_kept(*_stage_arguments(lanes, stages[0]))
+        kept = _optimise_stage.is_kept(*_stage_arguments(lanes, stages[0]))
         warm_up = (_prepare_stage, (lanes, stages[0]))
-    # (The stages wait for a compiling worker, and start at once beside a loading one.)
-    start_workers(amps.size, warm_up, serves=_stage_lanes if compiling else None)
+    # (The stages wait for a compiling worker, and start at once beside a loading one.
+    # Without the compilation cache no worker warms up: none is compiling.)
+    compiling = start_workers(amps.size, warm_up,
+                              serves=None if kept else _stage_lanes) and not kept
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)

@@ -68,7 +68,7 @@ def process_count(lanes: int) -> int:
 
 
 def start_workers(lanes: int, warm_up: tuple[Callable, tuple] | None = None, *,
-                  serves: Callable | None = None) -> None:
+                  serves: Callable | None = None) -> bool:
     """Start the worker processes that `run_lanes` will use for `lanes` lanes, so that
     they load while this process computes. With `warm_up = (function, task)` and the
     compilation cache on, a worker not already warming up runs `function(*task)`
@@ -77,13 +77,17 @@ def start_workers(lanes: int, warm_up: tuple[Callable, tuple] | None = None, *,
     computes something else. `run_lanes` of `serves` waits for it before it deals out
     tasks, then finds them in the cache; `run_lanes` of any other function deals that
     worker tasks once it has ended. Where every worker is warming up, the warm-up is
-    dropped: this process compiles those programs when it needs them."""
+    dropped: this process compiles those programs when it needs them.
+
+    Returns whether a worker started the warm-up (never without the cache, whose
+    programs the warm-up would leave for the others to load)."""
     workers = _workers(process_count(lanes) - 1)
     if warm_up is None or cache_folder() is None:
-        return
+        return False
     idle = [worker for worker in workers if not worker.warming_up()]
     if idle:
         idle[0].warm_up(*warm_up, serves=warm_up[0] if serves is None else serves)
+    return bool(idle)
 
 
 def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = False) -> list:
@@ -99,8 +103,10 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
     last task first, compiling them (or loading them from the cache), and a worker about
     to compile a program (or trace one to keep it) waits for that task to end, then
     loads the program from the cache if it is there by then, instead of compiling it at
-    the same time; programs found in the cache it loads at once. Without the cache, a
-    worker waits for that task before it takes its first task of `function`.
+    the same time; programs found in the cache it loads at once. Where the worker
+    cannot watch its compilations, it waits for that task before it takes its first
+    task of `function`. Without the cache there is nothing to share: every process
+    compiles its own programs, at once.
     """
     tasks = list(tasks)
     for worker in _pool:
@@ -121,9 +127,11 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
 
     def serve(worker: "_Worker"):
         worker.settle()  # a warm-up for another function
-        # A worker that cannot tell what it will compile (no cache to look in) waits
-        # before it takes its first task of `function`.
-        if compiles and not worker.watched and function not in worker.ran:
+        # A worker that cannot tell what it will compile (no watch on the cache it
+        # shares) waits before it takes its first task of `function`. (Without the
+        # cache it compiles its own programs: at once, beside this process.)
+        if (compiles and cache_folder() is not None and not worker.watched
+                and function not in worker.ran):
             compiled_here.wait()
         while (i := take()) is not None:
             try:
