@@ -130,8 +130,7 @@ def run_lanes(function: Callable, tasks: Sequence[tuple], *, compiles: bool = Fa
         # A worker that cannot tell what it will compile (no watch on the cache it
         # shares) waits before it takes its first task of `function`. (Without the
         # cache it compiles its own programs: at once, beside this process.)
-        if (compiles and cache_folder() is not None and not worker.watched
-                and function not in worker.ran):
+        if compiles and worker.cached and not worker.watched and function not in worker.ran:
             compiled_here.wait()
         while (i := take()) is not None:
             try:
@@ -206,8 +205,10 @@ class _Worker:
         self.warming_for: Callable | None = None  # the function it prepares
         self.ran: set[Callable] = set()  # the functions it has run (programs loaded)
         folder = cache_folder()
-        # Whether it sees its compilations coming (and asks to wait before each).
-        self.watched = folder is not None and compiles_watchable()
+        # Whether it shares this process's compilation cache (the folder it is sent), and
+        # whether it sees its compilations coming (and asks to wait before each).
+        self.cached = folder is not None
+        self.watched = self.cached and compiles_watchable()
         self.process = process if process is not None else spawn_worker(
             x64=jax.config.jax_enable_x64, on_error=equinox._errors.EQX_ON_ERROR)
         self._send(None if folder is None else str(folder))
