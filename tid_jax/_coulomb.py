@@ -23,6 +23,7 @@ velocities in omega A / K.
 """
 
 import functools as ft
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -65,10 +66,22 @@ class _Period(eqx.Module):
     done: Bool[Array, ""]
 
 
-def _quantities(p):
-    mass, stiffness, damping, inertance, friction, k, c, *_, amplitude, omega = p
+class _Quantities(NamedTuple):
+    """The parameters of `p` that the modes and events use (the friction per unit A / K),
+    taken out of `p` once for a period."""
+
+    mass: Float[Array, ""]
+    stiffness: Float[Array, ""]
+    k: Float[Array, ""]
+    c: Float[Array, ""]
+    omega: Float[Array, ""]
+    friction: Float[Array, ""]
+
+
+def _quantities(p) -> _Quantities:
+    mass, stiffness, _, _, friction, k, c, *_, amplitude, omega = p
     scale = amplitude / stiffness
-    return mass, stiffness, damping, inertance, k, c, omega, friction / scale
+    return _Quantities(mass, stiffness, k, c, omega, friction / scale)
 
 
 def _slip_matrix(p):
@@ -77,37 +90,45 @@ def _slip_matrix(p):
     return jnp.stack(linear_part(jnp.eye(4, dtype=p.dtype), p))
 
 
-def _forcing(p):
-    mass, stiffness, _, _, _, _, omega, _ = _quantities(p)
-    zero = jnp.zeros_like(mass)
-    return jnp.stack([zero, stiffness / (mass * omega**2), zero, zero])
+def _forcing(q: _Quantities):
+    zero = jnp.zeros_like(q.mass)
+    return jnp.stack([zero, q.stiffness / (q.mass * q.omega**2), zero, zero])
 
 
-def _modes(p, grid) -> tuple[_Mode, _Mode]:
+def _modes(p, q: _Quantities, grid) -> tuple[_Mode, _Mode]:
     """The slipping mode (both signs share it) and the stuck mode, whose homogeneous part
     moves only the host (the terminal's rows are zero), with their powers over the
     uniform phase `grid` (from 0)."""
     powers = lambda eigenvalues: jnp.exp(eigenvalues[None, :] * grid[:, None])
     matrix = _slip_matrix(p)
-    forcing = _forcing(p).astype(complex)
-    eye = jnp.eye(4, dtype=complex)
+    forcing = _forcing(q).astype(complex)
     # The motion depends on the eigenvectors only through `vectors diag(.) vectors^-1`,
     # whatever their normalisation, and the modes' eigenvalues are distinct (a damped
-    # oscillator's complex pair, or two real ones off critical damping).
+    # oscillator's complex pair, or two real ones off critical damping). The harmonic
+    # particular solution H of H' = A H + F: (i - A) H = F, solved in the modal basis.
     eigenvalues, vectors = eigensystem(matrix)
-    slip = _Mode(vectors, jnp.linalg.inv(vectors), eigenvalues,
-                 jnp.linalg.solve(1j * eye - matrix, -1j * forcing), powers(eigenvalues))
-    host = matrix[:2, :2]
-    host_values, host_vectors = eigensystem(host)
+    inverse = jnp.linalg.inv(vectors)
+    harmonic = vectors @ ((inverse @ (-1j * forcing)) / (1j - eigenvalues))
+    slip = _Mode(vectors, inverse, eigenvalues, harmonic, powers(eigenvalues))
+    # The host alone, x'' = a x + b x' (its rows of `matrix`: x' = v, v' = a x + b v,
+    # forcing apart), in closed form: eigenvalues l = b/2 +- sqrt(b^2/4 + a), eigenvectors
+    # (1, l).
+    a, b = matrix[1, 0].astype(complex), matrix[1, 1].astype(complex)
+    root = jnp.sqrt(b**2 / 4 + a)
+    low, high = b / 2 - root, b / 2 + root
+    one, zero = jnp.ones_like(low), jnp.zeros_like(low)
+    host_vectors = jnp.stack([jnp.stack([one, one]), jnp.stack([low, high])])
+    host_inverse = jnp.stack([jnp.stack([high, -one]), jnp.stack([-low, one])]) / (high - low)
+    # (i - [[0, 1], [a, b]]) h = -i (0, f): h = (1, i) (-i f) / (-1 - a - i b)
+    host_harmonic = jnp.stack([one, 1j * one]) * (-1j * forcing[1]) / (-1 - a - 1j * b)
 
     def embed(block, rest):
         return jnp.zeros((4, 4), complex).at[:2, :2].set(block).at[2:, 2:].set(rest)
 
-    host_harmonic = jnp.linalg.solve(1j * eye[:2, :2] - host, -1j * forcing[:2])
-    stuck_values = jnp.concatenate([host_values, jnp.zeros(2, complex)])
+    stuck_values = jnp.stack([low, high, zero, zero])
     stuck = _Mode(
         embed(host_vectors, jnp.eye(2)),
-        embed(jnp.linalg.inv(host_vectors), jnp.eye(2)),
+        embed(host_inverse, jnp.eye(2)),
         stuck_values,
         jnp.concatenate([host_harmonic, jnp.zeros(2, complex)]),
         powers(stuck_values),
@@ -115,16 +136,15 @@ def _modes(p, grid) -> tuple[_Mode, _Mode]:
     return slip, stuck
 
 
-def _spring_force(z, p):
+def _spring_force(z, q: _Quantities):
     """The scaled force of the spring and damper on the terminal (per unit A / K)."""
-    _, _, _, _, k, c, omega, _ = _quantities(p)
-    return k * (z[0] - z[2]) + c * omega * (z[1] - z[3])
+    return q.k * (z[0] - z[2]) + q.c * q.omega * (z[1] - z[3])
 
 
-def _start(sign, theta, z, p, modes) -> _Segment:
+def _start(sign, theta, z, q: _Quantities, modes) -> _Segment:
     """The segment in mode `sign` that starts at phase `theta` in state `z`."""
     slip, stuck = modes
-    _, stiffness, _, _, k, _, _, friction = _quantities(p)
+    stiffness, k, friction = q.stiffness, q.k, q.friction
     is_stuck = sign == _STICK
     z = jnp.where(is_stuck, z.at[3].set(0.0), z)
     # constant particular solutions: static equilibrium under the friction (slipping) or
@@ -170,27 +190,26 @@ def _on_grid(segment: _Segment, mode: _Mode, grid, phasors):
     return jnp.real(harmonic + growth @ mode.vectors.T) + segment.constant
 
 
-def _event_value(segment: _Segment, z, p):
-    """The event function at the state `z`: positive while the mode holds."""
-    friction = _quantities(p)[-1]
+def _event_value(segment: _Segment, z, q: _Quantities, force):
+    """The event function at the state `z`, where the force on the terminal is `force`:
+    positive while the mode holds."""
     stuck = segment.sign == _STICK
-    return jnp.where(stuck, friction - jnp.abs(_spring_force(z, p)), segment.sign * z[3])
+    return jnp.where(stuck, q.friction - jnp.abs(force), segment.sign * z[3])
 
 
-def _event(segment: _Segment, z, dz, p):
+def _event(segment: _Segment, z, dz, q: _Quantities):
     """The event function and its phase derivative (`dz` that of the state)."""
-    force, dforce = _spring_force(z, p), _spring_force(dz, p)
+    force, dforce = _spring_force(z, q), _spring_force(dz, q)
     stuck = segment.sign == _STICK
     dg = jnp.where(stuck, -jnp.sign(force) * dforce, segment.sign * dz[3])
-    return _event_value(segment, z, p), dg
+    return _event_value(segment, z, q, force), dg
 
 
-def _root(segment, mode, p, low, high, active):
+def _root(segment, mode, q: _Quantities, low, high, g_low, g_high, active):
     """The phase in `[low, high]` where the event function changes sign (positive at
-    `low`, negative at `high`), by Newton steps kept inside the shrinking bracket; no
-    iterations where not `active`."""
-    g_of = lambda theta: _event(segment, *_state(segment, mode, theta), p)
-    g_low, g_high = g_of(low)[0], g_of(high)[0]
+    `low`, negative at `high`), by Newton steps kept inside the shrinking bracket from the
+    secant of the values `g_low`, `g_high` there; no iterations where not `active`."""
+    g_of = lambda theta: _event(segment, *_state(segment, mode, theta), q)
     secant = g_low / jnp.where(g_low == g_high, 1.0, g_low - g_high)
     first = low + (high - low) * jnp.clip(secant, 0.1, 0.9)
     tol = 1e-14 * 2 * np.pi
@@ -215,43 +234,64 @@ def _root(segment, mode, p, low, high, active):
     return theta
 
 
-def _differentiable_root(segment, mode, p, theta0):
+def _differentiable_root(segment, mode, q: _Quantities, theta0):
     """`theta0`, a root of the event function, with the forward derivative of one Newton
     step from it: the implicit derivative -dg / (dg/dtheta) of the event time (the value
     stays `theta0`)."""
     theta0 = jax.lax.stop_gradient(theta0)
-    g, dg = _event(segment, *_state(segment, mode, theta0), p)
+    g, dg = _event(segment, *_state(segment, mode, theta0), q)
     dg = jax.lax.stop_gradient(jnp.where(dg == 0, 1.0, dg))
     return theta0 - (g - jax.lax.stop_gradient(g)) / dg
 
 
-def _transition(segment: _Segment, z, p):
+def _transition(segment: _Segment, z, q: _Quantities):
     """The mode after an event of `segment` in state `z`: a stuck terminal slips with the
     sign of the force on it; a slipping one sticks where the force is within ff, else
     slips back."""
-    slip_sign, held = _held_by_friction(z, p)
+    slip_sign, held = _held_by_friction(z, q)
     return jnp.where(segment.sign == _STICK, slip_sign, jnp.where(held, _STICK, slip_sign))
 
 
-def _held_by_friction(z, p):
+def _held_by_friction(z, q: _Quantities):
     """For a terminal at rest in state `z`: the sign it slips with (that of the force on
     it) and whether the friction holds it (the force within ff)."""
-    force = _spring_force(z, p)
-    return jnp.where(force >= 0, 1, -1), jnp.abs(force) <= _quantities(p)[-1]
+    force = _spring_force(z, q)
+    return jnp.where(force >= 0, 1, -1), jnp.abs(force) <= q.friction
 
 
-def _initial_sign(z, p):
-    slip_sign, held = _held_by_friction(z, p)
+def _initial_sign(z, q: _Quantities):
+    slip_sign, held = _held_by_friction(z, q)
     at_rest = jnp.where(held, _STICK, slip_sign)
     return jnp.where(z[3] > 0, 1, jnp.where(z[3] < 0, -1, at_rest))
+
+
+class Flow(eqx.Module):
+    """What every period at one parameter vector shares: its quantities and its modes
+    (their eigen-decompositions and powers over the sample grid), computed once for the
+    many periods that shooting integrates at the same parameters (`flow`)."""
+
+    quantities: _Quantities
+    modes: tuple[_Mode, _Mode]
+
+
+@ft.partial(jax.jit, static_argnums=1)
+def flow(p: Float[Array, " 10"], samples: int) -> Flow:
+    """The `Flow` at the parameter vector `p` (order `_dynamics.PARAMETERS`) for periods
+    sampled at `samples` phases; differentiable with respect to `p`."""
+    q = _quantities(p)
+    return Flow(q, _modes(p, q, _grid(samples, p.dtype)))
+
+
+def _grid(samples: int, dtype):
+    return jnp.arange(samples + 1, dtype=dtype) * (2 * np.pi / samples)
 
 
 # Traced once for each program that integrates periods (samples, monodromy, derivatives:
 # up to five times in one), its forward derivatives and batches taken of that trace.
 @ft.partial(jax.jit, static_argnums=(2, 3))
-def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
-           keep_samples: bool = True):
-    """One forcing period of the hybrid flow from the scaled state `z0` at phase 0: the
+def period(z0: Float[Array, " 4"], flow: Flow, samples: int, keep_samples: bool = True):
+    """One forcing period of the hybrid flow (`flow`, at the parameters that made it, for
+    `samples` phases) from the scaled state `z0` at phase 0: the
     states at the `samples` phases `2 pi j / samples` (rows `(x, x', y, y')`), the state
     after the period, the number of stick-slip transitions (mode changes) in it, and the
     largest |y| at a transition. Every extremum of y is at a transition (where y' turns
@@ -260,8 +300,8 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
     segments. Without `keep_samples`, the samples (zeros) are not formed and only find
     the transitions, and derivatives reach the state after the period alone."""
     dtype = z0.dtype
-    grid = jnp.arange(samples + 1, dtype=dtype) * (2 * np.pi / samples)
-    modes = _modes(p, grid)
+    grid = _grid(samples, dtype)
+    q, modes = flow.quantities, flow.modes
     phasors = jnp.exp(1j * grid)
     guard = 1e-9 * (2 * np.pi / samples)
 
@@ -272,21 +312,28 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
         zs = _on_grid(on_grid, mode, grid, phasors)
         # The event is located on the values alone (its derivative is that of one Newton
         # step from it, `_differentiable_root`): no tangents enter the search.
-        fixed = jax.lax.stop_gradient((segment, mode, p, zs))
-        g = jax.vmap(lambda z: _event_value(fixed[0], z, fixed[2]))(fixed[3])
+        fixed = jax.lax.stop_gradient((segment, mode, q, zs))
+        states = fixed[3].T  # rows x, x', y, y' over the grid
+        g = _event_value(fixed[0], states, fixed[2], _spring_force(states, fixed[2]))
         crossing = (grid > fixed[0].start + guard) & (g < 0)
         ends = jnp.any(crossing)
         j = jnp.argmax(crossing)
-        low = jnp.maximum(grid[jnp.maximum(j - 1, 0)], fixed[0].start)
+        before = jnp.maximum(j - 1, 0)
+        low = jnp.maximum(grid[before], fixed[0].start)
         high = jnp.where(ends, grid[j], low + 1.0)
-        theta = _root(*fixed[:3], low, high, ends)
-        theta = _differentiable_root(segment, mode, p, theta)
+        # The event values on the grid bracket the root; where the bracket starts at the
+        # segment's start (between two samples), the event function is 0 there (the
+        # terminal came to rest, or the force reached ff) or above it.
+        g_low = jnp.where(grid[before] >= fixed[0].start, g[before], 0.0)
+        theta = _root(*fixed[:3], low, high, jnp.maximum(g_low, 0.0), jnp.minimum(g[j], 0.0),
+                      ends)
+        theta = _differentiable_root(segment, mode, q, theta)
         theta = jnp.where(ends, theta, 2 * np.pi)
         own = (grid[:-1] >= segment.start) & (grid[:-1] < theta)
         samples = jnp.where(own[:, None], zs[:-1], state.samples) if keep_samples else state.samples
         z, _ = _state(segment, mode, theta)
         z = jnp.where(segment.sign == _STICK, z, z.at[3].set(0.0))
-        following = _start(_transition(segment, z, p), theta, z, p, modes)
+        following = _start(_transition(segment, z, q), theta, z, q, modes)
         transitions = state.transitions + ends
         too_many = transitions >= MAX_SEGMENTS
         return _Period(
@@ -299,7 +346,7 @@ def period(z0: Float[Array, " 4"], p: Float[Array, " 10"], samples: int,
             done=~ends | too_many,
         )
 
-    first = _start(_initial_sign(z0, p), jnp.zeros((), dtype), z0, p, modes)
+    first = _start(_initial_sign(z0, q), jnp.zeros((), dtype), z0, q, modes)
     no_samples = jnp.zeros((samples if keep_samples else 0, 4), dtype)
     start = _Period(first, no_samples, jnp.zeros(4, dtype),
                     jnp.zeros((), int), jnp.zeros((), dtype), jnp.asarray(False))

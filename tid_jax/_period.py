@@ -45,13 +45,26 @@ def _phases(settings: SolverSettings, dtype):
     return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
 
 
-def period_samples(z0, p, settings: SolverSettings):
+def flow(p, settings: SolverSettings) -> _coulomb.Flow | None:
+    """What every period at the parameters `p` shares, for the functions below
+    (`modes=`), computed once where many periods are integrated at the same `p`: with
+    exact friction the modes of the stick-slip flow (`_coulomb.flow`); None for smoothed
+    friction (its integrations share nothing)."""
+    return _coulomb.flow(p, settings.samples) if settings.exact_friction else None
+
+
+def _flow(p, settings: SolverSettings, given):
+    return flow(p, settings) if given is None else given
+
+
+def period_samples(z0, p, settings: SolverSettings, modes=None):
     """x, y and the velocity of the friction's body (y' of a rigid device, q' of a
     compliant one) sampled over one period from `z0`, the state after the period, the
     largest |y| at a stick-slip transition and the number of transitions (exact friction;
-    else 0)."""
+    else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
-        states, z_end, transitions, y_events = _coulomb.period(z0, p, settings.samples)
+        states, z_end, transitions, y_events = _coulomb.period(
+            z0, _flow(p, settings, modes), settings.samples)
         return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
                 transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
@@ -71,13 +84,15 @@ def _field_and_tangents(theta, y, p):
     return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
 
 
-def period_tangents(z, p, settings: SolverSettings):
+def period_tangents(z, p, settings: SolverSettings, modes=None):
     """The state after one period from `z` and its Jacobian with respect to `z` (the
     monodromy matrix), by the variational equations (their step sizes follow the error of
     the state alone: accurate enough for Newton's iterations, whose answer does not depend
-    on them). With exact friction, the forward derivatives of the hybrid period map."""
+    on them). With exact friction, the forward derivatives of the hybrid period map.
+    `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
-        end = lambda z0: _coulomb.period(z0, p, settings.samples, keep_samples=False)[1]
+        modes = _flow(p, settings, modes)
+        end = lambda z0: _coulomb.period(z0, modes, settings.samples, keep_samples=False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
@@ -181,9 +196,10 @@ def transient(z, p, settings: SolverSettings, periods=None):
         return z
     if settings.exact_friction:
         count = settings.transient_periods if periods is None else periods
+        modes = flow(p, settings)
 
         def step(_, z):
-            return _coulomb.period(z, p, settings.samples, keep_samples=False)[1]
+            return _coulomb.period(z, modes, settings.samples, keep_samples=False)[1]
 
         end = jax.lax.fori_loop(0, count, step, z)
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)

@@ -10,6 +10,7 @@ from jaxtyping import Array, Bool, Complex, Float, Int
 from ._eigen import eigenvalues
 from ._peaks import parabola_top
 from ._period import (
+    flow,
     initial_state,
     period_samples,
     period_tangents,
@@ -92,11 +93,12 @@ def _chord_lane(z0, monodromy, settings: SolverSettings) -> _ChordLane:
     return _ChordLane(z0, lu, z0, inf, no_samples, inf, jnp.asarray(False))
 
 
-def _chord_step(lane: _ChordLane, p, settings: SolverSettings) -> _ChordLane:
+def _chord_step(lane: _ChordLane, p, settings: SolverSettings, modes) -> _ChordLane:
     """One chord iteration for z* = Phi_T(z*) with the fixed Jacobian of `lane`: one
-    integration without tangents, which also samples the orbit over the period. The next
-    iterate stays where the residual is within `settings.periodicity_tol` or not finite."""
-    samples = Samples(*period_samples(lane.z, p, settings))
+    integration without tangents (of the flow `modes` at `p`: `_period.flow`), which
+    also samples the orbit over the period. The next iterate stays where the residual is
+    within `settings.periodicity_tol` or not finite."""
+    samples = Samples(*period_samples(lane.z, p, settings, modes))
     residual = _residual(samples, lane.z)
     improved = residual < lane.best_residual
 
@@ -123,6 +125,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
     `settings.periodicity_tol` or after `settings.max_newton_steps` iterations. Returns
     the last iterate while the residuals fall, else the best one evaluated (`z0` if none
     is finite), and the x samples of the best iterate evaluated."""
+    modes = flow(p, settings)
 
     def cond(carry):
         lane, steps = carry
@@ -131,7 +134,7 @@ def _chord(z0, p, settings: SolverSettings, monodromy):
 
     def body(carry):
         lane, steps = carry
-        return _chord_step(lane, p, settings), steps + 1
+        return _chord_step(lane, p, settings, modes), steps + 1
 
     lane, _ = jax.lax.while_loop(cond, body, (_chord_lane(z0, monodromy, settings), 0))
     z = jnp.where(lane.improved & jnp.all(jnp.isfinite(lane.z)), lane.z, lane.best)
@@ -154,8 +157,8 @@ class _Newton(eqx.Module):
     residual: Float[Array, ""]  # max |Phi_T(z) - z|, inf where not finite
 
 
-def _newton(z, p, settings: SolverSettings) -> _Newton:
-    z_end, monodromy = period_tangents(z, p, settings)
+def _newton(z, p, settings: SolverSettings, modes) -> _Newton:
+    z_end, monodromy = period_tangents(z, p, settings, modes)
     residual = z_end - z
     update = jnp.linalg.solve(fixed_point_matrix(monodromy), residual)
     finite = jnp.all(jnp.isfinite(update))
@@ -242,19 +245,20 @@ def _work_queue(start, step, data, order, count, slots: int, max_steps: int, out
     return lanes.out, lanes.out_steps
 
 
-def _newton_phase(z0, p, settings: SolverSettings, order, count, slots, switch):
+def _newton_phase(z0, p, modes, settings: SolverSettings, order, count, slots, switch):
     """Newton's iterations integrated with `settings` for the points `order[:count]`,
     from `z0`, until the residual is within `switch`: each point's last evaluation
-    (`_Newton`, its update not applied) and the evaluations used."""
+    (`_Newton`, its update not applied) and the evaluations used. `modes`: the points'
+    flows (`_period.flow`)."""
 
     def step(z, d):
-        newton = _newton(z, d[1], settings)
+        newton = _newton(z, d[1], settings, d[2])
         return _limited(newton.z, newton.update), newton.residual <= switch, newton
 
     size, n = z0.shape
     out = _Newton(z0, jnp.zeros_like(z0), jnp.zeros((size, n, n), z0.dtype),
                   jnp.full(size, jnp.inf, z0.dtype))
-    return _work_queue(lambda d: d[0], step, (z0, p), order, count, slots,
+    return _work_queue(lambda d: d[0], step, (z0, p, modes), order, count, slots,
                        settings.max_newton_steps, out)
 
 
@@ -265,7 +269,7 @@ def _next_iterate(newton: _Newton, settings: SolverSettings):
                      _limited(newton.z, newton.update))
 
 
-def _chord_phase(newton: _Newton, p, settings: SolverSettings, order, count, slots):
+def _chord_phase(newton: _Newton, p, modes, settings: SolverSettings, order, count, slots):
     """Chord iterations (`_chord_step`) with each point's last Newton matrix held, from
     where its Newton iterations leave it (`_next_iterate`), each one integration without
     tangents that also samples the orbit and verifies it. They stop at the periodicity
@@ -273,18 +277,18 @@ def _chord_phase(newton: _Newton, p, settings: SolverSettings, order, count, slo
     (`_ChordLane`, its best iterate) and the integrations used."""
 
     def start(d):
-        last, _ = d
+        last = d[0]
         return _chord_lane(_next_iterate(last, settings), last.monodromy, settings)
 
     def step(lane, d):
-        lane_next = _chord_step(lane, d[1], settings)
+        lane_next = _chord_step(lane, d[1], settings, d[2])
         residual = lane_next.last_residual
         # (the first evaluation follows `last_residual` inf: it stops only if not finite)
         done = (residual <= settings.periodicity_tol) | ~(residual < 0.5 * lane.last_residual)
         return lane_next, done, lane_next
 
-    out = jax.vmap(start)((newton, p))
-    return _work_queue(start, step, (newton, p), order, count, slots,
+    out = jax.vmap(start)((newton, p, modes))
+    return _work_queue(start, step, (newton, p, modes), order, count, slots,
                        settings.max_newton_steps, out)
 
 
@@ -306,22 +310,25 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     order = jnp.argsort(~valid, stable=True)
     count = jnp.sum(valid)
     z, coarse_steps = z0, 0
+    # (the coarse settings integrate the same flows: they differ in tolerances alone)
+    modes = jax.vmap(lambda q: flow(q, settings))(p)
     if settings.coarse() is not settings:
-        coarse, coarse_steps = _newton_phase(z0, p, settings.coarse(), order, count, slots,
-                                             settings.coarse_residual)
+        coarse, coarse_steps = _newton_phase(z0, p, modes, settings.coarse(), order, count,
+                                             slots, settings.coarse_residual)
         z = jax.vmap(lambda last: _next_iterate(last, settings))(coarse)
-    newton, newton_steps = _newton_phase(z, p, settings, order, count, slots,
+    newton, newton_steps = _newton_phase(z, p, modes, settings, order, count, slots,
                                          settings.chord_residual)
-    chord, chord_steps = _chord_phase(newton, p, settings, order, count, slots)
+    chord, chord_steps = _chord_phase(newton, p, modes, settings, order, count, slots)
     return Shots(chord.best, chord.best_samples, newton.monodromy, chord.best_residual,
                  coarse_steps + newton_steps + chord_steps)
 
 
 def verified_samples(z: Float[Array, " states"], p: Float[Array, " params"],
-                     settings: SolverSettings):
+                     settings: SolverSettings, modes=None):
     """x, y, y' sampled over the period from `z`, and the residual |Phi_T(z) - z| of that
-    integration (inf where it is not finite)."""
-    samples = Samples(*period_samples(z, p, settings))
+    integration (inf where it is not finite). `modes`: the flow at `p` (`_period.flow`),
+    if computed already."""
+    samples = Samples(*period_samples(z, p, settings, modes))
     return samples, _residual(samples, z)
 
 
@@ -430,9 +437,10 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
         orbit = _Periodic(last.z + last.update, samples, last.of_state.z_end, last.of_state,
                           last.of_parameters)
         return orbit, last.residual, steps
-    last, steps = _iterate(lambda z: _newton(z, p, settings), z0, settings)
+    modes = flow(p, settings)
+    last, steps = _iterate(lambda z: _newton(z, p, settings, modes), z0, settings)
     z = last.z  # as in `shoot_queue`: the last iterate evaluated, without its update
-    samples, residual = verified_samples(z, p, settings)
+    samples, residual = verified_samples(z, p, settings, modes)
     return _Periodic(z, samples, last.monodromy, None, None), residual, steps
 
 
