@@ -105,7 +105,8 @@ def _modes(p, q: _Quantities, grid) -> tuple[_Mode, _Mode]:
     # The motion depends on the eigenvectors only through `vectors diag(.) vectors^-1`,
     # whatever their normalisation, and the modes' eigenvalues are distinct (a damped
     # oscillator's complex pair, or two real ones off critical damping). The harmonic
-    # particular solution H of H' = A H + F: (i - A) H = F, solved in the modal basis.
+    # particular solution Re(H e^{i theta}) under the forcing F sin(theta) =
+    # Re(-i F e^{i theta}): (i - A) H = -i F, solved in the modal basis.
     eigenvalues, vectors = eigensystem(matrix)
     inverse = jnp.linalg.inv(vectors)
     harmonic = vectors @ ((inverse @ (-1j * forcing)) / (1j - eigenvalues))
