@@ -289,10 +289,10 @@ def _grid(samples: int, dtype):
 
 # Traced once for each program that integrates periods (samples, monodromy, derivatives:
 # up to five times in one), its forward derivatives and batches taken of that trace.
-@ft.partial(jax.jit, static_argnums=(2, 3))
-def period(z0: Float[Array, " 4"], flow: Flow, samples: int, keep_samples: bool = True):
+@ft.partial(jax.jit, static_argnums=2)
+def period(z0: Float[Array, " 4"], flow: Flow, keep_samples: bool = True):
     """One forcing period of the hybrid flow (`flow`, at the parameters that made it, for
-    `samples` phases) from the scaled state `z0` at phase 0: the
+    the number of samples it was made for) from the scaled state `z0` at phase 0: the
     states at the `samples` phases `2 pi j / samples` (rows `(x, x', y, y')`), the state
     after the period, the number of stick-slip transitions (mode changes) in it, and the
     largest |y| at a transition. Every extremum of y is at a transition (where y' turns
@@ -301,8 +301,9 @@ def period(z0: Float[Array, " 4"], flow: Flow, samples: int, keep_samples: bool 
     segments. Without `keep_samples`, the samples (zeros) are not formed and only find
     the transitions, and derivatives reach the state after the period alone."""
     dtype = z0.dtype
-    grid = _grid(samples, dtype)
     q, modes = flow.quantities, flow.modes
+    samples = modes[0].powers.shape[0] - 1  # the grid's phases, 2 pi included
+    grid = _grid(samples, dtype)
     phasors = jnp.exp(1j * grid)
     guard = 1e-9 * (2 * np.pi / samples)
 

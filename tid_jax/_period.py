@@ -64,7 +64,7 @@ def period_samples(z0, p, settings: SolverSettings, modes=None):
     else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
         states, z_end, transitions, y_events = _coulomb.period(
-            z0, _flow(p, settings, modes), settings.samples)
+            z0, _flow(p, settings, modes))
         return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
                 transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
@@ -92,7 +92,7 @@ def period_tangents(z, p, settings: SolverSettings, modes=None):
     `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
         modes = _flow(p, settings, modes)
-        end = lambda z0: _coulomb.period(z0, modes, settings.samples, keep_samples=False)[1]
+        end = lambda z0: _coulomb.period(z0, modes, keep_samples=False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
@@ -199,7 +199,7 @@ def transient(z, p, settings: SolverSettings, periods=None):
         modes = flow(p, settings)
 
         def step(_, z):
-            return _coulomb.period(z, modes, settings.samples, keep_samples=False)[1]
+            return _coulomb.period(z, modes, keep_samples=False)[1]
 
         end = jax.lax.fori_loop(0, count, step, z)
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
