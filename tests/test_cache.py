@@ -72,10 +72,11 @@ def test_programs_are_kept_on_disk_and_reused_without_tracing(tmp_path):
     # Kept once run, for those arguments only (another static value or shape is not).
     assert first["kept"] == [False, True, False, False]
     kept = sorted(path.name for path in (tmp_path / "programs").iterdir())
-    # Two programs of `plain` (powers 2 and 3); the host callback cannot be kept, and is
-    # marked so that later runs do not try again.
+    # Two programs of `plain` (powers 2 and 3), each with its executable; the host
+    # callback cannot be kept, and is marked so that later runs do not try again.
     named = [(name.split("-")[0], name.rsplit(".", 1)[1]) for name in kept]
-    assert named == [("callback", "skip"), ("plain", "bin"), ("plain", "bin")], kept
+    assert named == [("callback", "skip"), ("plain", "bin"), ("plain", "exe"),
+                     ("plain", "bin"), ("plain", "exe")], kept
     second = _run(tmp_path)
     # The second process loads both programs: `plain` is not traced again.
     assert second["traces"] == {"plain": 0, "callback": 1}
@@ -102,20 +103,43 @@ def test_programs_unused_for_a_month_are_deleted(tmp_path):
         os.utime(path, (month_ago, month_ago))
     again = _run(tmp_path)
     assert not old.exists() and recent.exists()
-    # The programs this run used were deleted too (last used a month ago) and kept again.
+    # The programs this run used were deleted too (last used a month ago) and kept again
+    # (their executables, compiled afresh, only: these come from JAX's cache).
     assert again["traces"]["plain"] == 2
-    assert sorted(programs.iterdir()) == sorted([*kept, recent])
+    assert sorted(programs.iterdir()) == sorted(
+        [*(path for path in kept if path.suffix != ".exe"), recent])
 
 
 def test_a_damaged_program_file_is_replaced(tmp_path):
     _run(tmp_path)
     for path in (tmp_path / "programs").iterdir():
-        if path.suffix == ".bin":
+        if path.suffix in (".bin", ".exe"):
             path.write_bytes(b"not a program")
     # Unreadable programs are not used: the functions are traced afresh, results unchanged.
     again = _run(tmp_path)
     assert again["traces"]["plain"] == 2
     assert again["y"] == _run("off")["y"]
+
+
+def test_a_damaged_or_foreign_executable_is_compiled_again_from_its_program(tmp_path):
+    _run_prepare(tmp_path, "prepare")
+    [executable] = (tmp_path / "programs").glob("*.exe")
+    data = executable.read_bytes()
+    # One byte changed (a damaged file), or the digest of another machine: the program is
+    # loaded and compiled, here from JAX's cache, not traced.
+    for changed in (data[:-1] + bytes([data[-1] ^ 1]), bytes(32) + data[32:]):
+        executable.write_bytes(changed)
+        called = _run_prepare(tmp_path, "call")
+        assert called["traces"] == 0 and called["hits"] == 1 and called["misses"] == 0
+        np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
+                                   rtol=1e-14)
+    # Compiled afresh (JAX's cache emptied), its executable is kept again and serves the
+    # next process.
+    for entry in tmp_path.glob("*-cache"):
+        entry.unlink()
+    called = _run_prepare(tmp_path, "call")
+    assert called["traces"] == 0 and called["misses"] == 1
+    _assert_served(_run_prepare(tmp_path, "call"))
 
 
 # `prepare` in one process; in the next, the call of the same program.
@@ -139,7 +163,7 @@ PREPARE_SCRIPT = textwrap.dedent(
         return jnp.cos(x) ** power
 
     tj.enable_compilation_cache(sys.argv[1])
-    x = jnp.linspace(0.0, 1.0, 5)
+    x = np.linspace(0.0, 1.0, 5)  # no program of its own
     out = None
     if sys.argv[2] == "prepare":
         scaled.prepare(x, 3)
@@ -147,6 +171,7 @@ PREPARE_SCRIPT = textwrap.dedent(
         out = np.asarray(scaled(x, 3)).tolist()
     print(json.dumps({"traces": len(traces), "kept": scaled.is_kept(x, 3),
                       "misses": events.count("/jax/compilation_cache/cache_misses"),
+                      "hits": events.count("/jax/compilation_cache/cache_hits"),
                       "out": out}))
     """
 )
@@ -160,17 +185,18 @@ def _run_prepare(folder, mode) -> dict:
 
 
 def _assert_served(called: dict) -> None:
-    """A `_run_prepare(..., "call")` that neither traced nor compiled its program and
-    computed it right."""
-    assert called["traces"] == 0 and called["misses"] == 0
+    """A `_run_prepare(..., "call")` that neither traced nor compiled its program, nor
+    looked it up in JAX's cache (its executable was loaded as it is kept), and computed it
+    right."""
+    assert called["traces"] == 0 and called["misses"] == 0 and called["hits"] == 0
     np.testing.assert_allclose(called["out"], np.cos(np.linspace(0.0, 1.0, 5)) ** 3,
                                rtol=1e-14)
 
 
 def test_a_prepared_program_is_kept_and_compiled_for_the_next_process(tmp_path):
     prepared = _run_prepare(tmp_path, "prepare")
-    # Traced once, kept and compiled (misses of the compilation cache), not run.
-    assert prepared["traces"] == 1 and prepared["kept"] and prepared["misses"] >= 2
+    # Traced once, kept and compiled (a miss of the compilation cache), not run.
+    assert prepared["traces"] == 1 and prepared["kept"] and prepared["misses"] == 1
     assert prepared["out"] is None
     # The next process neither traces nor compiles it: its executable is in the cache.
     _assert_served(_run_prepare(tmp_path, "call"))

@@ -6,9 +6,11 @@ most of a short run. With the cache on, every program is kept on disk twice over
 - JAX's persistent compilation cache keeps the compiled executable;
 - `compiled` keeps the traced and lowered program itself (a serialized `jax.export`),
   under a key made of its static arguments, the shapes and dtypes of its arrays, the
-  sources of this package and the versions of JAX and its libraries.
+  sources of this package and the versions of JAX and its libraries, and beside it the
+  program's executable for this machine (`jax.experimental.serialize_executable`).
 
-A later run on the same machine then neither traces nor compiles it again.
+A later run on the same machine then neither traces nor compiles it again, and loads the
+executable without lowering the program again to find it in JAX's cache.
 """
 
 import functools as ft
@@ -17,7 +19,9 @@ import importlib.metadata
 import inspect
 import os
 import pickle
+import platform
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,6 +29,7 @@ from pathlib import Path
 import equinox as eqx
 import equinox._errors
 import jax
+from jax.experimental import serialize_executable
 
 CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
 _OFF = ("", "0", "off", "false", "no", "none")
@@ -38,6 +43,20 @@ _before_compiling: Callable[[], None] | None = None
 # Kept programs unused for this long are deleted (those of older sources or library
 # versions, which no key can reach again), when the cache is turned on.
 STALE_DAYS = 30
+
+
+# Whether this thread's last compilation missed JAX's cache (compiled afresh): an
+# executable loaded from that cache serializes without its compiled functions, so that
+# only one compiled afresh is kept (`_Program._compile`).
+_compilation = threading.local()
+
+
+def _note_cache_miss(event: str, **_) -> None:
+    if event == "/jax/compilation_cache/cache_misses":
+        _compilation.missed = True
+
+
+jax.monitoring.register_event_listener(_note_cache_miss)
 
 
 def default_cache_dir() -> Path | None:
@@ -137,6 +156,7 @@ def before_compiling(hook: Callable[[], None]) -> None:
             executable, _ = read(module_name, cache_key, compile_options, backend,
                                  executable_devices)
             if executable is not None:
+                _compilation.missed = False  # loaded from the cache after all
                 return executable
         return write(backend, computation, executable_devices, compile_options,
                      host_callbacks, module_name, cache_key)
@@ -200,13 +220,15 @@ class _Program:
         key, static, structure, leaves = self._key(args, kwargs)
         if key not in self.loaded:
             self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
-        run, out_structure = self.loaded[key]
+        run, skeleton = self.loaded[key]
         if run is None:
             return self.jitted(*args, **kwargs)
         # Arrays placed on the device (committed) at every call, as the outputs of an
         # earlier program are: one compilation serves both.
         leaves = jax.device_put(leaves, jax.devices()[0])
-        return jax.tree.unflatten(out_structure, run(*leaves))
+        if not isinstance(run, jax.stages.Compiled):
+            run = self._compile(self._path(folder, key), key, run, skeleton, leaves)
+        return jax.tree.unflatten(jax.tree.structure(skeleton), run(*leaves))
 
     def _key(self, args, kwargs):
         """The key of the program for these arguments, its static part, and the
@@ -242,17 +264,25 @@ class _Program:
         key, static, structure, leaves = self._key(args, kwargs)
         if key not in self.loaded:
             self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
-        run = self.loaded[key][0]
-        if run is not None:  # placed as `__call__` places them: the same executable
-            run.lower(*jax.device_put(leaves, jax.devices()[0])).compile()
+        run, skeleton = self.loaded[key]
+        if run is not None and not isinstance(run, jax.stages.Compiled):
+            # placed as `__call__` places them: the same executable
+            self._compile(self._path(folder, key), key, run, skeleton,
+                          jax.device_put(leaves, jax.devices()[0]))
 
     def _load(self, path: Path, static, structure, leaves):
         """The kept program at `path`, else the program exported now and kept there:
-        `(run, out_structure)`, with `run` None if it cannot be exported."""
+        `(run, skeleton)`, `skeleton` the output with its leaves replaced by 0 and `run`
+        the executable kept beside the program if it loads, else the program to compile,
+        or None if it cannot be exported."""
         skip = path.with_suffix(".skip")  # marks a program that cannot be exported
         if skip.exists():
             _used(skip)
             return None, None
+        executable = _load_executable(path.with_suffix(".exe"))
+        if executable is not None:
+            _used(path)
+            return executable
         if not path.exists() and _before_compiling is not None:
             _before_compiling()
         if not path.exists():
@@ -260,16 +290,31 @@ class _Program:
             if blob is None:
                 skip.touch()
                 return None, None
-            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as file:
-                file.write(blob)
-            os.replace(file.name, path)
+            _write(path, blob)
         # A new program runs as later runs will load it, so that they find it compiled.
         try:
             exported, skeleton = pickle.loads(path.read_bytes())
             _used(path)
-            return jax.jit(jax.export.deserialize(exported).call), jax.tree.structure(skeleton)
+            return jax.jit(jax.export.deserialize(exported).call), skeleton
         except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
             return None, None
+
+    def _compile(self, path: Path, key: str, run, skeleton, leaves) -> jax.stages.Compiled:
+        """Compile the program `run` (from JAX's cache if it holds it) for `leaves`, keep
+        its executable in this process under `key` and, if compiled afresh, beside the
+        program at `path`."""
+        _compilation.missed = False
+        executable = run.lower(*leaves).compile()
+        self.loaded[key] = executable, skeleton
+        if not _compilation.missed:
+            return executable
+        try:
+            payload, in_tree, out_tree = serialize_executable.serialize(executable)
+            blob = pickle.dumps((payload, in_tree, out_tree, skeleton))
+        except (ValueError, TypeError, NotImplementedError, pickle.PicklingError):
+            return executable  # not serializable: compiled (or loaded) afresh in each run
+        _write(path.with_suffix(".exe"), hashlib.sha256(_host() + blob).digest() + blob)
+        return executable
 
     def _export(self, static, structure, leaves) -> bytes | None:
         """The serialized program and the structure of its output, or None for a program
@@ -291,6 +336,61 @@ class _Program:
             return pickle.dumps((exported.serialize(), boxes[-1]))
         except (ImportError, ValueError, TypeError, NotImplementedError, pickle.PicklingError):
             return None
+
+
+@ft.cache
+def _host() -> bytes:
+    """The machine an executable is compiled for: JAX's platform, the processor's
+    architecture and its features (XLA compiles for the processor it runs on)."""
+    text = f"{jax.devices()[0].client.platform_version} {platform.machine()}"
+    try:
+        with open("/proc/cpuinfo") as file:
+            text += next((line for line in file if line.startswith(("flags", "Features"))), "")
+    except OSError:
+        pass
+    return text.encode()
+
+
+def _write(path: Path, blob: bytes) -> None:
+    """Write `blob` to `path` whole or not at all (other processes may be reading it)."""
+    with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as file:
+        file.write(blob)
+    os.replace(file.name, path)
+
+
+@ft.cache
+def _runs_kept_executables() -> bool:
+    """Whether this process can run kept executables: on the CPU, with its LAPACK kernels
+    initialised now (JAX initialises them as it lowers a program that calls them, and a
+    kept executable is never lowered: without them it would crash)."""
+    if jax.default_backend() != "cpu":
+        return False
+    try:
+        from jax._src.lax.linalg import initialize_lapack
+    except ImportError:
+        return False
+    initialize_lapack()
+    return True
+
+
+def _load_executable(path: Path):
+    """The executable kept at `path` and its output's skeleton, or None where there is
+    none, or it is damaged or was compiled on another machine (the digest of this
+    machine and the contents leads the file)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    digest, blob = data[:32], data[32:]
+    if hashlib.sha256(_host() + blob).digest() != digest or not _runs_kept_executables():
+        return None
+    try:
+        payload, in_tree, out_tree, skeleton = pickle.loads(blob)
+        executable = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+    except (EOFError, pickle.UnpicklingError, ValueError, TypeError, jax.errors.JaxRuntimeError):
+        return None
+    _used(path)
+    return executable, skeleton
 
 
 def compiled(function):
