@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tid_jax._device import ForceSettings, Motion, friction_width
 from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
 
 try:
@@ -223,3 +224,23 @@ def test_cli_carries_a_compliant_device_with_its_terminal_mass_to_retune(tmp_pat
     status, _, stderr = run(["identify", path, "--terminal-mass", "-1", "--out",
                              tmp_path / "bad"])
     assert status == 2 and "terminal_mass must be finite and non-negative" in stderr
+
+
+def test_a_term_the_records_would_take_negative_fits_at_zero():
+    """The 4 Hz test of a compliant device alone: the rigid damped model's least squares
+    would take a negative friction force (the ringing on the mounts read as a force
+    against the motion). The friction fits at zero, and the other two terms at their
+    least squares with it zero (linear in them: `numpy.linalg.lstsq`)."""
+    [record] = _records(COMPLIANT_DEVICE)[-1:]
+    motion = Motion.from_samples(record.time, record.displacement)
+    velocity, force = np.asarray(motion.velocity), np.asarray(record.force)
+    width = float(friction_width(motion, ForceSettings()))
+    columns = np.stack([np.asarray(motion.acceleration), np.tanh(velocity / width), velocity],
+                       axis=1)
+    assert np.linalg.lstsq(columns, force, rcond=None)[0][1] < 0
+    b, cp = np.linalg.lstsq(columns[:, [0, 2]], force, rcond=None)[0]
+    damped = tj.identify_inerter([record], model="damped")
+    assert bool(damped.converged) and damped.comparison.models == ("ideal", "damped")
+    estimates = np.asarray(damped.estimates)
+    assert 0 <= estimates[1] < 1e-6 * np.max(np.abs(force))
+    np.testing.assert_allclose(estimates[[0, 2]], [b, cp], rtol=1e-6)

@@ -39,6 +39,7 @@ _TERMS = ("inertance", "friction_force", "parasitic_damping", "series_stiffness"
 MODEL_PARAMETERS = {model: _TERMS[: i + 2] for i, model in enumerate(MODELS)}
 MIN_SAMPLES = 32
 SUPPORT_BIC = 10.0  # a term is supported where it lowers the BIC by more than this
+_NEGLIGIBLE = 1e-3  # a start below this fraction of its term's typical size is scaled by the latter
 
 
 class InerterRecord(eqx.Module):
@@ -125,10 +126,15 @@ class IdentifySettings(eqx.Module):
     force: ForceSettings = ForceSettings()
 
 
+_SQUARED = ("friction_force", "parasitic_damping")  # terms that are squares of unknowns
+
+
 class _Scales(eqx.Module):
     """The map between the least-squares unknowns and the device's parameters: linear
-    for inertance, friction and damping, logarithmic for the series stiffness, the
-    magnitude for the backlash."""
+    for the inertance, logarithmic for the series stiffness, the square for the friction
+    force and the damping, the magnitude for the backlash. None is ever negative: where
+    the records ask for less (as a model without a term they need may), that term fits
+    at zero, which a squared unknown reaches smoothly."""
 
     parameters: tuple[str, ...] = eqx.field(static=True)
     scales: Float[Array, " parameters"]
@@ -139,6 +145,8 @@ class _Scales(eqx.Module):
         for i, name in enumerate(self.parameters):
             if name == "series_stiffness":
                 values[name] = self.scales[i] * jnp.exp(x[i])
+            elif name in _SQUARED:
+                values[name] = self.scales[i] * x[i] ** 2
             elif name == "backlash":
                 values[name] = self.scales[i] * jnp.abs(x[i])
             else:
@@ -153,7 +161,11 @@ class _Scales(eqx.Module):
         out = []
         for i, name in enumerate(self.parameters):
             ratio = values[i] / self.scales[i]
-            out.append(jnp.log(ratio) if name == "series_stiffness" else ratio)
+            if name == "series_stiffness":
+                ratio = jnp.log(ratio)
+            elif name in _SQUARED:
+                ratio = jnp.sqrt(jnp.abs(ratio))
+            out.append(ratio)
         return jnp.stack(out)
 
 
@@ -264,8 +276,10 @@ def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings,
     if any(name not in start for name in parameters):
         values = _scanned_start(parameters, values, motions, forces, force_scale, settings,
                                 typical, stiffness_limit, terminal_mass)
-    scales = np.array([abs(v) if v != 0 else typical[name] for name, v in
-                       zip(parameters, values, strict=True)])
+    # each unknown scaled by its start, or by its typical size where the start is (next
+    # to) zero: a term a simpler model fitted at zero can grow again
+    scales = np.array([abs(v) if abs(v) > _NEGLIGIBLE * typical[name] else typical[name]
+                       for name, v in zip(parameters, values, strict=True)])
     scales = _Scales(parameters, jnp.asarray(scales), terminal_mass)
     x0 = scales.unknowns(jnp.asarray(values))
     x, residual, jacobian, chain, ok, steps = _solve(x0, scales, motions, forces,
