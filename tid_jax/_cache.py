@@ -17,6 +17,7 @@ import functools as ft
 import hashlib
 import importlib.metadata
 import inspect
+import io
 import os
 import pickle
 import platform
@@ -29,6 +30,8 @@ from pathlib import Path
 import equinox as eqx
 import equinox._errors
 import jax
+from jax._src.lib import _jax
+from jax._src.lib import xla_client as xc
 from jax.experimental import serialize_executable
 
 CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
@@ -45,15 +48,34 @@ _before_compiling: Callable[[], None] | None = None
 STALE_DAYS = 30
 
 
-# Whether this thread's last compilation missed JAX's cache (compiled afresh): an
-# executable loaded from that cache serializes without its compiled functions, so that
-# only one compiled afresh is kept (`_Program._compile`).
+# This thread's last compilation: whether it missed JAX's cache (compiled afresh), and
+# the serialized executable that cache gave it, if any. An executable loaded from that
+# cache serializes again without its compiled functions: one loaded is kept as the cache
+# held it (`_Program._compile`).
 _compilation = threading.local()
 
 
 def _note_cache_miss(event: str, **_) -> None:
     if event == "/jax/compilation_cache/cache_misses":
         _compilation.missed = True
+
+
+def _watch_cache_reads() -> None:
+    """Have every read of JAX's cache in this process leave the serialized executable it
+    found in `_compilation.read`."""
+    from jax._src import compilation_cache
+
+    extract = compilation_cache.extract_executable_and_time
+    if getattr(extract, "watched", False):
+        return
+
+    def watched(executable_and_time):
+        serialized, compile_time = extract(executable_and_time)
+        _compilation.read = serialized
+        return serialized, compile_time
+
+    watched.watched = True
+    compilation_cache.extract_executable_and_time = watched
 
 
 jax.monitoring.register_event_listener(_note_cache_miss)
@@ -108,6 +130,7 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     jax.config.update("jax_persistent_cache_enable_xla_caches", None)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    _watch_cache_reads()
     _programs_folder = folder / PROGRAMS
     _prune(_programs_folder, time.time() - STALE_DAYS * 86400)
     return folder
@@ -301,18 +324,19 @@ class _Program:
 
     def _compile(self, path: Path, key: str, run, skeleton, leaves) -> jax.stages.Compiled:
         """Compile the program `run` (from JAX's cache if it holds it) for `leaves`, keep
-        its executable in this process under `key` and, if compiled afresh, beside the
-        program at `path`."""
-        _compilation.missed = False
+        its executable in this process under `key` and beside the program at `path`."""
+        _compilation.missed, _compilation.read = False, None
         executable = run.lower(*leaves).compile()
         self.loaded[key] = executable, skeleton
-        if not _compilation.missed:
-            return executable
+        read = None if _compilation.missed else _compilation.read
+        if not _compilation.missed and read is None:
+            return executable  # compiled earlier in this process: kept then
         try:
-            payload, in_tree, out_tree = serialize_executable.serialize(executable)
+            payload, in_tree, out_tree = _serialized(executable, read)
             blob = pickle.dumps((payload, in_tree, out_tree, skeleton))
-        except (ValueError, TypeError, NotImplementedError, pickle.PicklingError):
-            return executable  # not serializable: compiled (or loaded) afresh in each run
+        except (AttributeError, ValueError, TypeError, NotImplementedError,
+                pickle.PicklingError):
+            return executable  # not serializable: loaded from JAX's cache in each run
         _write(path.with_suffix(".exe"), hashlib.sha256(_host() + blob).digest() + blob)
         return executable
 
@@ -336,6 +360,27 @@ class _Program:
             return pickle.dumps((exported.serialize(), boxes[-1]))
         except (ImportError, ValueError, TypeError, NotImplementedError, pickle.PicklingError):
             return None
+
+
+def _serialized(executable: jax.stages.Compiled, read: bytes | None):
+    """`jax.experimental.serialize_executable.serialize(executable)`, with the XLA
+    executable's own bytes `read` where given (as JAX's cache held them)."""
+
+    class Pickler(serialize_executable._JaxPjrtPickler):
+        def persistent_id(self, obj):
+            if read is not None and isinstance(obj, xc.LoadedExecutable | _jax.Executable):
+                return "exec", read
+            return super().persistent_id(obj)
+
+    unloaded = executable._executable._unloaded_executable
+    if getattr(unloaded, "mut", None) and unloaded.mut.in_mut:
+        raise ValueError("a program with mutable array references is not kept")
+    if executable._params.const_args:
+        raise NotImplementedError("a program with constant arguments is not kept")
+    args_info, in_tree = jax.tree.flatten(executable.args_info)
+    with io.BytesIO() as file:
+        Pickler(file).dump((unloaded, args_info, executable._no_kwargs))
+        return file.getvalue(), in_tree, executable.out_tree
 
 
 @ft.cache
