@@ -30,8 +30,6 @@ from pathlib import Path
 import equinox as eqx
 import equinox._errors
 import jax
-from jax._src.lib import _jax
-from jax._src.lib import xla_client as xc
 from jax.experimental import serialize_executable
 
 CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
@@ -65,9 +63,9 @@ def _watch_cache_reads() -> None:
     found in `_compilation.read`."""
     from jax._src import compilation_cache
 
-    extract = compilation_cache.extract_executable_and_time
-    if getattr(extract, "watched", False):
-        return
+    extract = getattr(compilation_cache, "extract_executable_and_time", None)
+    if extract is None or getattr(extract, "watched", False):
+        return  # (without it, executables JAX's cache serves are not kept)
 
     def watched(executable_and_time):
         serialized, compile_time = extract(executable_and_time)
@@ -366,13 +364,14 @@ def _serialized(executable: jax.stages.Compiled, read: bytes | None):
     """`jax.experimental.serialize_executable.serialize(executable)`, with the XLA
     executable's own bytes `read` where given (as JAX's cache held them)."""
 
+    unloaded = executable._executable._unloaded_executable
+
     class Pickler(serialize_executable._JaxPjrtPickler):
         def persistent_id(self, obj):
-            if read is not None and isinstance(obj, xc.LoadedExecutable | _jax.Executable):
+            if read is not None and obj is unloaded.xla_executable:
                 return "exec", read
             return super().persistent_id(obj)
 
-    unloaded = executable._executable._unloaded_executable
     if getattr(unloaded, "mut", None) and unloaded.mut.in_mut:
         raise ValueError("a program with mutable array references is not kept")
     if executable._params.const_args:
