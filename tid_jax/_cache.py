@@ -329,6 +329,8 @@ class _Program:
         read = None if _compilation.missed else _compilation.read
         if not _compilation.missed and read is None:
             return executable  # compiled earlier in this process: kept then
+        if not _runs_kept_executables():
+            return executable  # no later run would load it
         try:
             payload, in_tree, out_tree = _serialized(executable, read)
             blob = pickle.dumps((payload, in_tree, out_tree, skeleton))
@@ -421,12 +423,14 @@ def _load_executable(path: Path):
     """The executable kept at `path` and its output's skeleton, or None where there is
     none, or it is damaged or was compiled on another machine (the digest of this
     machine and the contents leads the file)."""
+    if not _runs_kept_executables():
+        return None
     try:
         data = path.read_bytes()
     except OSError:
         return None
     digest, blob = data[:32], data[32:]
-    if hashlib.sha256(_host() + blob).digest() != digest or not _runs_kept_executables():
+    if hashlib.sha256(_host() + blob).digest() != digest:
         return None
     try:
         payload, in_tree, out_tree, skeleton = pickle.loads(blob)
