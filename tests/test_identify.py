@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tid_jax import _identify, _workers
 from tid_jax._device import ForceSettings, Motion, friction_width
+from tid_jax._launch import WORKERS_ENVIRONMENT_VARIABLE
+from tid_jax._workers import run_lanes
 from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
 
 try:
@@ -97,6 +100,38 @@ def test_compliance_leaves_a_residual_that_the_compliant_model_removes():
     # ... which the compliant model removes, down to the noise
     assert rms[2] < 1.1 * noise
     assert np.all(np.asarray(fit.comparison.supported))
+
+
+class _Captured(Exception):
+    pass
+
+
+def test_the_start_scan_is_shared_with_a_worker_as_computed_here(monkeypatch):
+    """The compliant model's scan of starting values, dealt out to this process and a
+    worker process: every candidate's sum of squares is the one this process computes
+    alone (the same compiled program, its arguments sent to the worker)."""
+    scans = []
+
+    def capture(function, tasks, **options):
+        scans.append((function, tasks))
+        raise _Captured
+
+    monkeypatch.setattr(_identify, "run_lanes", capture)
+    with pytest.raises(_Captured):
+        tj.identify_inerter(_records(COMPLIANT_DEVICE), model="compliant")
+    [(function, tasks)] = scans
+    assert len(tasks) >= 3  # the series stiffness's candidates, a few to a task
+    tasks = tasks[:3]
+    here = [function(*task) for task in tasks]
+    monkeypatch.setenv(WORKERS_ENVIRONMENT_VARIABLE, "2")
+    try:
+        shared = run_lanes(function, tasks, compiles=True)
+        assert len(_workers._pool) == 1  # a worker was started beside this process
+    finally:
+        _workers._stop_workers()
+    for mine, theirs in zip(here, shared, strict=True):
+        assert np.all(np.isfinite(mine))
+        np.testing.assert_array_equal(theirs, mine)
 
 
 @pytest.mark.parametrize(

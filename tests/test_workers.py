@@ -275,6 +275,7 @@ def test_a_worker_ends_when_its_parent_is_killed_in_the_middle_of_a_task():
     (["sensitivity", "--amplitudes", "100"], {}, 1),
     (["robust", "--workers", "3"], {}, 2),
     (["robust", "--workers=1"], {}, 0),
+    (["identify", "records.csv", "--model", "backlash"], {}, 1),
     (["retune"], {WORKERS_ENVIRONMENT_VARIABLE: "4"}, 3),
     (["retune", "--workers", "2"], {WORKERS_ENVIRONMENT_VARIABLE: "4"}, 1),
     (["retune", "--workers", "two"], {}, 0),  # the command refuses it

@@ -32,6 +32,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ._cache import compiled
 from ._checks import check_precision, choice, integer, real_scalar
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
+from ._workers import run_lanes
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
 # each model the one before and one more term of `InerterDevice`
@@ -238,13 +239,15 @@ def _sum_of_squares(x, scales, motions, forces, force_scale, settings: ForceSett
 # stiffness, and rattles through a backlash, so that the least squares in them have many
 # local minima.
 _SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspace(0.1, 30, 7)}
+_SCAN_TASK = 8  # starting values per task of the processes that share the scan
 
 
 def _scanned_start(parameters, values, motions, forces, force_scale,
                    settings: IdentifySettings, typical, stiffness_limit, terminal_mass):
     """`values` with the scanned terms (`_SCAN`) of the model at the best of their
     scanned starting values, tried together (a term fitted before also keeps its value
-    as a candidate; no series stiffness above `stiffness_limit`), the others held."""
+    as a candidate; no series stiffness above `stiffness_limit`), the others held; the
+    candidates dealt out to this process and its workers (`_workers.run_lanes`)."""
     scanned = [name for name in parameters if name in _SCAN]
     if not scanned:
         return values
@@ -254,17 +257,28 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     # a series stiffness whose resonance the records cannot resolve is not tried
     candidates = [c[c <= stiffness_limit] if name == "series_stiffness" else c
                   for name, c in zip(scanned, candidates, strict=True)]
-    scales = _Scales(parameters, jnp.asarray([typical[name] for name in parameters]),
-                     terminal_mass)
-    best, best_values = np.inf, values
-    for point in itertools.product(*candidates):
-        trial = values.copy()
-        trial[index] = point
-        cost = float(_sum_of_squares(scales.unknowns(jnp.asarray(trial)), scales, motions,
-                                     forces, force_scale, settings.force))
-        if cost < best:
-            best, best_values = cost, trial
-    return best_values
+    trials = np.repeat(values[None], math.prod(c.size for c in candidates), axis=0)
+    trials[:, index] = list(itertools.product(*candidates))
+    # the candidates dealt out to this process and its workers, a few to a task
+    shared = jax.tree.map(np.asarray, (np.array([typical[name] for name in parameters]),
+                                       terminal_mass, motions, forces, force_scale))
+    costs = np.concatenate(run_lanes(_scan_costs, [
+        (trials[start : start + _SCAN_TASK], parameters, *shared, settings.force)
+        for start in range(0, len(trials), _SCAN_TASK)], compiles=True))
+    # the first of the lowest costs, in the product's order
+    return trials[int(np.argmin(costs))] if np.isfinite(costs).any() else values
+
+
+def _scan_costs(trials, parameters, typical, terminal_mass, motions, forces, force_scale,
+                settings: ForceSettings):
+    """The sum of squares at each of `trials` (parameter values, the unknowns scaled by
+    their `typical` sizes): a task of `run_lanes` (NumPy arguments)."""
+    (typical, terminal_mass, motions, forces, force_scale) = jax.tree.map(
+        jnp.asarray, (typical, terminal_mass, motions, forces, force_scale))
+    scales = _Scales(parameters, typical, terminal_mass)
+    return np.array([float(_sum_of_squares(scales.unknowns(jnp.asarray(trial)), scales,
+                                           motions, forces, force_scale, settings))
+                     for trial in trials])
 
 
 def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 # The commands whose computations are dealt out to worker processes (`_workers.run_lanes`).
-COMMANDS_WITH_WORKERS = ("retune", "sensitivity", "robust")
+COMMANDS_WITH_WORKERS = ("retune", "sensitivity", "robust", "identify")
 
 # The thresholds of Python's cyclic garbage collector in this package's own processes (the
 # command and its worker processes), set before they import JAX: its youngest generation

@@ -213,7 +213,7 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         metavar="N",
         help=f"processes that share the work on a CPU (the optimised amplitudes, the "
-        "batches of steady states), this one included "
+        "batches of steady states, identify's scan of starting values), this one included "
         f"(default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: this "
         "process alone)",
     )
