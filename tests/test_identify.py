@@ -134,6 +134,21 @@ def test_the_start_scan_is_shared_with_a_worker_as_computed_here(monkeypatch):
         np.testing.assert_array_equal(theirs, mine)
 
 
+def test_the_scan_starts_from_the_first_of_the_lowest_finite_costs(monkeypatch):
+    """A candidate whose sum of squares is NaN or infinite (a failed integration) is never
+    the start; of equal costs, the first in the scan's order is."""
+    costs = [np.array([np.nan, 3.0, np.inf, 2.0]), np.array([2.0, np.nan])]
+    monkeypatch.setattr(_identify, "run_lanes", lambda function, tasks, **options: costs)
+    monkeypatch.setattr(_identify, "_SCAN", {"series_stiffness": np.arange(1.0, 6.0)})
+    parameters = _identify.MODEL_PARAMETERS["compliant"]
+    typical = dict.fromkeys(parameters, 1.0)
+    values = np.array([75.0, 20.0, 300.0, 10.0])  # the fitted value, a sixth candidate
+    motion = Motion.from_samples(np.arange(4.0), np.arange(4.0) ** 2)
+    start = _identify._scanned_start(parameters, values, [motion], [np.zeros(4)], 1.0,
+                                     _identify.IdentifySettings(), typical, 1e9, 0.0)
+    np.testing.assert_array_equal(start, [75.0, 20.0, 300.0, 4.0])
+
+
 @pytest.mark.parametrize(
     "change, message",
     [

@@ -265,7 +265,8 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     costs = np.concatenate(run_lanes(_scan_costs, [
         (trials[start : start + _SCAN_TASK], parameters, *shared, settings.force)
         for start in range(0, len(trials), _SCAN_TASK)], compiles=True))
-    # the first of the lowest costs, in the product's order
+    # the first of the lowest finite costs, in the product's order
+    costs[~np.isfinite(costs)] = np.inf
     return trials[int(np.argmin(costs))] if np.isfinite(costs).any() else values
 
 
