@@ -149,6 +149,19 @@ def test_the_scan_starts_from_the_first_of_the_lowest_finite_costs(monkeypatch):
     np.testing.assert_array_equal(start, [75.0, 20.0, 300.0, 4.0])
 
 
+def test_the_scan_keeps_the_start_where_no_series_stiffness_is_resolved(monkeypatch):
+    """Records sampled too coarsely for any scanned series stiffness (all above the
+    limit): nothing is tried and the start stays."""
+    monkeypatch.setattr(_identify, "run_lanes", lambda function, tasks, **options: [])
+    parameters = _identify.MODEL_PARAMETERS["backlash"]
+    values = np.array([75.0, 20.0, 300.0, 10.0, 1e-3])
+    motion = Motion.from_samples(np.arange(4.0), np.arange(4.0) ** 2)
+    start = _identify._scanned_start(parameters, values, [motion], [np.zeros(4)], 1.0,
+                                     _identify.IdentifySettings(),
+                                     dict.fromkeys(parameters, 1.0), 1e-3, 0.0)
+    np.testing.assert_array_equal(start, values)
+
+
 @pytest.mark.parametrize(
     "change, message",
     [

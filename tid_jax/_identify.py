@@ -257,6 +257,8 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     # a series stiffness whose resonance the records cannot resolve is not tried
     candidates = [c[c <= stiffness_limit] if name == "series_stiffness" else c
                   for name, c in zip(scanned, candidates, strict=True)]
+    if not all(c.size for c in candidates):
+        return values  # none to try (records too coarse for any series stiffness)
     trials = np.repeat(values[None], math.prod(c.size for c in candidates), axis=0)
     trials[:, index] = list(itertools.product(*candidates))
     # the candidates dealt out to this process and its workers, a few to a task
