@@ -293,7 +293,9 @@ def test_a_term_the_records_would_take_negative_fits_at_zero():
     """The 4 Hz test of a compliant device alone: the rigid damped model's least squares
     would take a negative friction force (the ringing on the mounts read as a force
     against the motion). The friction fits at zero, and the other two terms at their
-    least squares with it zero (linear in them: `numpy.linalg.lstsq`)."""
+    least squares with it zero (linear in them: `numpy.linalg.lstsq`). The standard
+    errors are those of that linear model, the friction's included (not zero): the
+    noise variance from the residual of the fit, times the diagonal of (X^T X)^-1."""
     [record] = _records(COMPLIANT_DEVICE)[-1:]
     motion = Motion.from_samples(record.time, record.displacement)
     velocity, force = np.asarray(motion.velocity), np.asarray(record.force)
@@ -307,3 +309,7 @@ def test_a_term_the_records_would_take_negative_fits_at_zero():
     estimates = np.asarray(damped.estimates)
     assert 0 <= estimates[1] < 1e-6 * np.max(np.abs(force))
     np.testing.assert_allclose(estimates[[0, 2]], [b, cp], rtol=1e-6)
+    residual = force - columns[:, [0, 2]] @ [b, cp]
+    variance = residual @ residual / (force.size - 3)
+    errors = np.sqrt(variance * np.diag(np.linalg.inv(columns.T @ columns)))
+    np.testing.assert_allclose(np.asarray(damped.standard_errors), errors, rtol=1e-5)

@@ -12,9 +12,9 @@ the force (the paper's Figures 2-3). The models are nested, each adding one term
 Each model is fitted by Levenberg-Marquardt (optimistix) on the residual force of all
 records together, from the model before it (the first two are linear in their
 parameters and start from their linear least-squares solution). The standard errors are
-those of the linearised problem with the noise variance of each record estimated from
-its residual; the comparison says which terms the data support by the Bayesian
-information criterion.
+those of the linearised problem in the parameters themselves (a term fitted at zero has
+one too), with the noise variance of each record estimated from its residual; the
+comparison says which terms the data support by the Bayesian information criterion.
 """
 
 import itertools
@@ -185,7 +185,12 @@ def _records(records) -> tuple[InerterRecord, ...]:
 def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: ForceSettings):
     """The force residuals of every record, over `force_scale`, and whether every
     integration succeeded."""
-    device = scales.device(x)
+    return _device_residuals(scales.device(x), motions, forces, force_scale, settings)
+
+
+def _device_residuals(device: InerterDevice, motions, forces, force_scale,
+                      settings: ForceSettings):
+    """`_residuals` of `device`."""
     out, ok = [], jnp.asarray(True)
     for motion, force in zip(motions, forces, strict=True):
         model, success = device_force(device, motion, settings)
@@ -205,11 +210,17 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
                              throw=False)
     x = sol.value
     residual, ok = fn(x, None)
-    # the Jacobian in the parameters' own units, for their covariance: that in the scaled
-    # unknowns (well conditioned) and the derivatives of the parameters in them
-    jacobian = jax.jacfwd(lambda x: fn(x, None)[0] * force_scale)(x)
-    chain = jnp.diag(jax.jacfwd(scales.values)(x))
-    return x, residual * force_scale, jacobian, chain, \
+    # the Jacobian in the parameters themselves, for their covariance: defined where a
+    # term is at its bound 0 too, where the unknowns' map (a square, a magnitude) is flat
+    values = scales.values(x)
+
+    def in_values(values):
+        device = InerterDevice(**dict(zip(scales.parameters, values, strict=True)),
+                               terminal_mass=scales.terminal_mass)
+        return _device_residuals(device, motions, forces, force_scale, settings.force)[0]
+
+    jacobian = jax.jacfwd(in_values)(values) * force_scale
+    return x, residual * force_scale, jacobian, \
         ok & (sol.result == optx.RESULTS.successful), sol.stats["num_steps"]
 
 
@@ -299,10 +310,9 @@ def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings,
                        for name, v in zip(parameters, values, strict=True)])
     scales = _Scales(parameters, jnp.asarray(scales), terminal_mass)
     x0 = scales.unknowns(jnp.asarray(values))
-    x, residual, jacobian, chain, ok, steps = _solve(x0, scales, motions, forces,
-                                                     force_scale, settings)
-    return (scales, x, np.asarray(residual), np.asarray(jacobian), np.asarray(chain),
-            bool(ok), int(steps))
+    x, residual, jacobian, ok, steps = _solve(x0, scales, motions, forces, force_scale,
+                                              settings)
+    return scales, x, np.asarray(residual), np.asarray(jacobian), bool(ok), int(steps)
 
 
 def _covariance(jacobian, pieces, p):
@@ -381,7 +391,7 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
         if name in ("ideal", "damped"):
             start = dict(zip(parameters, _linear_start(parameters, motions, mechanism_forces,
                                                        width), strict=True))
-        scales, x, residual, jacobian, chain, ok, steps = _fit(
+        scales, x, residual, jacobian, ok, steps = _fit(
             name, start, motions, forces, force_scale, settings, typical, stiffness_limit,
             held_mass)
         values = np.asarray(scales.values(x))
@@ -389,7 +399,9 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
         rss = float(np.sum(residual**2))
         p = len(parameters)
         pieces = np.split(residual, np.cumsum(sizes)[:-1])
-        covariance = chain[:, None] * _covariance(jacobian, pieces, p) * chain[None, :]
+        # in units of each term's scale, where the Jacobian is well conditioned
+        size = np.asarray(scales.scales)
+        covariance = size[:, None] * _covariance(jacobian * size, pieces, p) * size[None, :]
         errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
             correlations = covariance / np.outer(errors, errors)
