@@ -142,21 +142,26 @@ class _Scales(eqx.Module):
     terminal_mass: Float[Array, ""]  # kg, known and held
 
     def device(self, x) -> InerterDevice:
-        values = {}
-        for i, name in enumerate(self.parameters):
-            if name == "series_stiffness":
-                values[name] = self.scales[i] * jnp.exp(x[i])
-            elif name in _SQUARED:
-                values[name] = self.scales[i] * x[i] ** 2
-            elif name == "backlash":
-                values[name] = self.scales[i] * jnp.abs(x[i])
-            else:
-                values[name] = self.scales[i] * x[i]
-        return InerterDevice(**values, terminal_mass=self.terminal_mass)
+        return self.device_of(self.values(x))
+
+    def device_of(self, values) -> InerterDevice:
+        """The device with its parameters at `values` (their own units)."""
+        return InerterDevice(**dict(zip(self.parameters, values, strict=True)),
+                             terminal_mass=self.terminal_mass)
 
     def values(self, x) -> Float[Array, " parameters"]:
-        device = self.device(x)
-        return jnp.stack([getattr(device, name) for name in self.parameters])
+        out = []
+        for i, name in enumerate(self.parameters):
+            if name == "series_stiffness":
+                ratio = jnp.exp(x[i])
+            elif name in _SQUARED:
+                ratio = x[i] ** 2
+            elif name == "backlash":
+                ratio = jnp.abs(x[i])
+            else:
+                ratio = x[i]
+            out.append(self.scales[i] * ratio)
+        return jnp.stack(out)
 
     def unknowns(self, values) -> Float[Array, " parameters"]:
         out = []
@@ -212,14 +217,9 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
     residual, ok = fn(x, None)
     # the Jacobian in the parameters themselves, for their covariance: defined where a
     # term is at its bound 0 too, where the unknowns' map (a square, a magnitude) is flat
-    values = scales.values(x)
-
-    def in_values(values):
-        device = InerterDevice(**dict(zip(scales.parameters, values, strict=True)),
-                               terminal_mass=scales.terminal_mass)
-        return _device_residuals(device, motions, forces, force_scale, settings.force)[0]
-
-    jacobian = jax.jacfwd(in_values)(values) * force_scale
+    jacobian = jax.jacfwd(lambda values: _device_residuals(
+        scales.device_of(values), motions, forces, force_scale, settings.force)[0])(
+        scales.values(x)) * force_scale
     return x, residual * force_scale, jacobian, \
         ok & (sol.result == optx.RESULTS.successful), sol.stats["num_steps"]
 
