@@ -339,6 +339,29 @@ def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
     assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))
 
 
+def test_the_peaks_programs_serve_any_number_of_lanes():
+    # The peaks of seventeen amplitudes in one call (two chunks of lanes, the second
+    # padded) are those of each amplitude alone, and one program of each kind of the
+    # peaks' location serves both numbers of lanes (the stencils: of five points and of
+    # one).
+    paper = tj.paper_system()
+    band = np.linspace(0.8, 1.25, 13) * float(paper.host_frequency)
+    amplitudes = np.linspace(150.0, 3000.0, 17)
+    from tid_jax import _band
+
+    programs = (_band._selection, _band._stencils, _band._newton_steps, _band._peaks_found)
+    before = [set(program.loaded) for program in programs]
+    together = tj.peaks(paper, amplitudes, band)
+    assert bool(np.all(together.converged))
+    for i in (0, 9, 16):
+        alone = tj.peaks(paper, amplitudes[i : i + 1], band)
+        for field in ("x_peak", "y_peak", "omega_x", "omega_y", "at_edge"):
+            np.testing.assert_allclose(np.asarray(getattr(together, field))[i],
+                                       np.asarray(getattr(alone, field))[0], rtol=1e-12)
+    new = [len(set(program.loaded) - keys) for program, keys in zip(programs, before)]
+    assert new[0] <= 1 and new[1] <= 2 and new[2] <= 1 and new[3] <= 1
+
+
 def test_peak_response_is_compiled_once_for_every_amplitude(system, monkeypatch):
     # The amplitude, given as a Python number, is an argument of the compiled program, not
     # a constant of it: later amplitudes run the program of the first, traced at most once

@@ -41,6 +41,12 @@ from ._system import TIDSystem
 # for TID frequencies from well below to 25% above Den Hartog's.
 BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
+# The peaks' programs (`_selection`, `_stencils`, `_newton_steps`, `_peaks_found`) run on
+# chunks of this many lanes (`_in_chunks`), so that one compiled program serves any
+# number of lanes: a run meets many (a retune's checks, a design's stencils, their
+# shares among the processes), each of which compiled a program of its own.
+LANE_CHUNK = 16
+
 
 def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Array, " freqs"]:
     """The default frequency band: 0.65-1.4 times the host frequency.
@@ -108,17 +114,45 @@ def locate_peaks(systems: TIDSystem, response: FrequencyResponse,
     `PEAK_NEWTON_STEPS` Newton steps on its slope (`_peaks.newton_peak`): every step's
     stencils of every lane solved in one batch, each steady state shot from the grid's
     orbits, interpolated."""
-    omegas, states, converged, index, centre, valid, lower, upper, interior = _selection(
-        response, systems.host_stiffness)
-    converged = np.array(converged)
+    response = _lane_grids(response)
+    omegas, states, converged, index, centre, valid, lower, upper, interior = _in_chunks(
+        _selection, response, np.asarray(systems.host_stiffness))
     estimate = np.full(centre.shape, np.nan)
     for _ in range(PEAK_NEWTON_STEPS):
-        at, warm = _stencils(centre, interior, states, omegas, STENCIL_POINTS)
+        at, warm = _in_chunks(_stencils, centre, interior, states, omegas, STENCIL_POINTS)
         values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
         converged &= ok
-        estimate, centre = _newton_steps(values, at, lower, upper, interior)
-    return Located(*(np.asarray(a) for a in (omegas, states, index, estimate, centre, valid,
-                                              interior)), converged)
+        estimate, centre = _in_chunks(_newton_steps, values, at, lower, upper, interior)
+    return Located(omegas, states, index, estimate, centre, valid, interior, converged)
+
+
+def _lane_grids(response: FrequencyResponse) -> FrequencyResponse:
+    """`response` (lanes x frequencies) with its frequencies as one row per lane, on the
+    host: every array of it then has a leading axis of lanes (`_in_chunks`)."""
+    omegas = np.broadcast_to(np.asarray(response.omegas), np.shape(response.x_max))
+    return eqx.tree_at(lambda r: r.omegas, response, omegas)
+
+
+def _in_chunks(program, *args):
+    """`program(*args)` (each array of `args` and of its results has a leading axis of
+    lanes) run on `LANE_CHUNK` lanes at a time, the last chunk padded with copies of the
+    last lane; the results put back together as NumPy arrays."""
+    lanes = len(next(leaf for leaf in jax.tree.leaves(args) if eqx.is_array(leaf)))
+    if lanes == 0:
+        return jax.tree.map(np.asarray, program(*args))
+    padded = -(-lanes // LANE_CHUNK) * LANE_CHUNK
+
+    def pad(leaf):
+        if not eqx.is_array(leaf):
+            return leaf
+        leaf = np.asarray(leaf)
+        return np.concatenate([leaf, np.repeat(leaf[-1:], padded - lanes, axis=0)])
+
+    args = jax.tree.map(pad, args)
+    parts = [program(*jax.tree.map(lambda a: a[i : i + LANE_CHUNK] if eqx.is_array(a) else a,
+                                   args))
+             for i in range(0, padded, LANE_CHUNK)]
+    return jax.tree.map(lambda *chunks: np.concatenate(chunks)[:lanes], *parts)
 
 
 def _solve_at(systems, amplitudes, at, settings, warm):
@@ -139,10 +173,14 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
     changes, which Newton steps on its slope would miss). NaN where a steady state in the
     band, or of a stencil, did not converge."""
     found = locate_peaks(systems, response, settings)
-    at, warm = _stencils(found.centre, found.interior, found.states, found.omegas, 1)
+    at, warm = _in_chunks(_stencils, found.centre, found.interior, found.states,
+                          found.omegas, 1)
     values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
-    return _peaks_found(response, found.omegas, found.index, found.valid, found.centre,
-                        found.estimate, values[..., 0], found.converged & ok)
+    peaks_found = _in_chunks(_peaks_found, _lane_grids(response), found.omegas, found.index,
+                             found.valid, found.centre, found.estimate, values[..., 0],
+                             found.converged & ok)
+    # (placed on the device as they are: `jnp.asarray` would compile a program per shape)
+    return jax.tree.map(jax.device_put, peaks_found)
 
 
 @compiled
