@@ -202,3 +202,38 @@ def test_a_copied_cache_folder_serves_its_programs(tmp_path):
     _run_prepare(tmp_path / "original", "prepare")
     shutil.copytree(tmp_path / "original", tmp_path / "copy")
     _assert_served(_run_prepare(tmp_path / "copy", "call"))
+
+
+def test_a_program_is_compiled_with_the_options_its_arguments_give(monkeypatch):
+    # The options reach XLA with the cache on (this session's) and off (in memory): one
+    # that XLA does not know fails the compilation, a known one computes the same.
+    import jax
+    import jax.numpy as jnp
+    import pytest
+
+    import tid_jax as tj
+    from tid_jax import _cache
+    from tid_jax._system import compiler_options
+
+    seen = []
+
+    def options(x, unknown):
+        seen.append(unknown)
+        return {"xla_no_such_option": True} if unknown else {"xla_cpu_use_fusion_emitters": False}
+
+    x = np.linspace(0.0, 1.0, 5)
+    for folder in (_cache._programs_folder, None):
+        monkeypatch.setattr(_cache, "_programs_folder", folder)
+
+        @_cache.compiled(options=options)
+        def scaled(x, unknown):
+            return jnp.sin(x) * 2
+
+        np.testing.assert_allclose(np.asarray(scaled(x, False)), 2 * np.sin(x), rtol=1e-15)
+        with pytest.raises(jax.errors.JaxRuntimeError, match="xla_no_such_option"):
+            scaled(x, True)
+    assert True in seen and False in seen
+    # The fusion emitters are off for exact friction only, wherever its system is.
+    exact, smoothed = tj.paper_system(), tj.paper_system(friction_width=None)
+    assert compiler_options(1.0, systems=[exact]) == {"xla_cpu_use_fusion_emitters": False}
+    assert compiler_options(smoothed, 2.0) == {}

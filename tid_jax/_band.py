@@ -35,7 +35,7 @@ from ._response import (
     scaled_states,
 )
 from ._settings import SolverSettings
-from ._system import TIDSystem
+from ._system import TIDSystem, compiler_options
 
 # Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
 # for TID frequencies from well below to 25% above Den Hartog's.
@@ -315,7 +315,7 @@ def peak_response(
     return _peak_response(system, amplitude, band, response == "host", settings)
 
 
-@compiled
+@compiled(options=compiler_options)
 def _peak_response(system, amplitude, omegas, host, settings):
     xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
     if host:

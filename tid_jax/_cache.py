@@ -224,21 +224,28 @@ def _is_traced(tree) -> bool:
 
 class _Program:
     """`eqx.filter_jit(function)` whose traced programs are kept on disk while the cache
-    is on (`enable_compilation_cache`). Calls inside a transformation (arguments that are
-    tracers), on several devices, or of programs that cannot be exported (holding host
-    callbacks) go to `eqx.filter_jit` as usual."""
+    is on (`enable_compilation_cache`), each compiled with the XLA options that
+    `options(*args, **kwargs)` gives (if `options` is given; then also while the cache is
+    off, in memory). Calls inside a transformation (arguments that are tracers), on
+    several devices, or of programs that cannot be exported (holding host callbacks) go
+    to `eqx.filter_jit` as usual."""
 
-    def __init__(self, function):
+    def __init__(self, function, options: Callable[..., dict] | None = None):
         self.function = function
         self.jitted = eqx.filter_jit(function)
+        self.options = options
         self.loaded = {}
         ft.update_wrapper(self, function)
 
     def __call__(self, *args, **kwargs):
         folder = _programs_folder
-        if folder is None or len(jax.devices()) > 1 or _is_traced((args, kwargs)):
+        if len(jax.devices()) > 1 or _is_traced((args, kwargs)):
             return self.jitted(*args, **kwargs)
-        key, static, structure, leaves = self._key(args, kwargs)
+        if folder is None:
+            if self.options is None:
+                return self.jitted(*args, **kwargs)
+            return self._in_memory(args, kwargs)
+        key, static, structure, leaves, options = self._key(args, kwargs)
         if key not in self.loaded:
             self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
         run, skeleton = self.loaded[key]
@@ -248,20 +255,33 @@ class _Program:
         # earlier program are: one compilation serves both.
         leaves = jax.device_put(leaves, jax.devices()[0])
         if not isinstance(run, jax.stages.Compiled):
-            run = self._compile(self._path(folder, key), key, run, skeleton, leaves)
+            run = self._compile(self._path(folder, key), key, run, skeleton, leaves, options)
+        return jax.tree.unflatten(jax.tree.structure(skeleton), run(*leaves))
+
+    def _in_memory(self, args, kwargs):
+        """The call, its program compiled with its options and kept in this process."""
+        key, static, structure, leaves, options = self._key(args, kwargs)
+        leaves = jax.device_put(leaves, jax.devices()[0])
+        if key not in self.loaded:
+            flat, skeletons = self._flat(static, structure)
+            self.loaded[key] = (jax.jit(flat).lower(*leaves).compile(compiler_options=options),
+                                skeletons[-1])
+        run, skeleton = self.loaded[key]
         return jax.tree.unflatten(jax.tree.structure(skeleton), run(*leaves))
 
     def _key(self, args, kwargs):
-        """The key of the program for these arguments, its static part, and the
-        structure and leaves of its arrays."""
+        """The key of the program for these arguments, its static part, the structure
+        and leaves of its arrays, and its XLA options (a dict, or None)."""
         dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
         leaves, structure = jax.tree.flatten(dynamic)
+        options = None if self.options is None else self.options(*args, **kwargs) or None
         description = [
             _fingerprint(), self.function.__module__, self.function.__qualname__,
             str(structure), str(jax.tree.structure(static)), repr(jax.tree.leaves(static)),
+            repr(sorted((options or {}).items())),
         ] + [f"{leaf.shape} {leaf.dtype} {getattr(leaf, 'weak_type', False)}" for leaf in leaves]
         key = hashlib.sha256("\n".join(description).encode()).hexdigest()[:32]
-        return key, static, structure, leaves
+        return key, static, structure, leaves, options
 
     def _path(self, folder: Path, key: str) -> Path:
         return folder / f"{self.function.__name__}-{key}.bin"
@@ -282,14 +302,14 @@ class _Program:
         folder = _programs_folder
         if folder is None or len(jax.devices()) > 1:
             return
-        key, static, structure, leaves = self._key(args, kwargs)
+        key, static, structure, leaves, options = self._key(args, kwargs)
         if key not in self.loaded:
             self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
         run, skeleton = self.loaded[key]
         if run is not None and not isinstance(run, jax.stages.Compiled):
             # placed as `__call__` places them: the same executable
             self._compile(self._path(folder, key), key, run, skeleton,
-                          jax.device_put(leaves, jax.devices()[0]))
+                          jax.device_put(leaves, jax.devices()[0]), options)
 
     def _load(self, path: Path, static, structure, leaves):
         """The kept program at `path`, else the program exported now and kept there:
@@ -320,11 +340,13 @@ class _Program:
         except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
             return None, None
 
-    def _compile(self, path: Path, key: str, run, skeleton, leaves) -> jax.stages.Compiled:
-        """Compile the program `run` (from JAX's cache if it holds it) for `leaves`, keep
-        its executable in this process under `key` and beside the program at `path`."""
+    def _compile(self, path: Path, key: str, run, skeleton, leaves,
+                 options: dict | None) -> jax.stages.Compiled:
+        """Compile the program `run` (from JAX's cache if it holds it) for `leaves` with
+        the XLA `options`, keep its executable in this process under `key` and beside the
+        program at `path`."""
         _compilation.missed, _compilation.read = False, None
-        executable = run.lower(*leaves).compile()
+        executable = run.lower(*leaves).compile(compiler_options=options)
         self.loaded[key] = executable, skeleton
         read = None if _compilation.missed else _compilation.read
         if not _compilation.missed and read is None:
@@ -344,22 +366,28 @@ class _Program:
         """The serialized program and the structure of its output, or None for a program
         that cannot be exported (holding a host callback, or an output that cannot be
         pickled)."""
-        boxes = []
+        flat, skeletons = self._flat(static, structure)
+        try:
+            exported = jax.export.export(jax.jit(flat))(*leaves)
+            return pickle.dumps((exported.serialize(), skeletons[-1]))
+        except (ImportError, ValueError, TypeError, NotImplementedError, pickle.PicklingError):
+            return None
+
+    def _flat(self, static, structure):
+        """The function of the arrays' leaves that the program computes, returning its
+        output's leaves, and a list that each trace of it extends with the output's
+        skeleton: the output with its leaves replaced by 0 (the treedef of an equinox
+        Module does not survive pickling, the Module does)."""
+        skeletons = []
 
         def flat(*dynamic_leaves):
             dynamic = jax.tree.unflatten(structure, dynamic_leaves)
             args, kwargs = eqx.combine(dynamic, static)
             out = self.function(*args, **kwargs)
-            # The output's structure is kept as the output with its leaves replaced by 0:
-            # the treedef of an equinox Module does not survive pickling, the Module does.
-            boxes.append(jax.tree.map(lambda _: 0, out))
+            skeletons.append(jax.tree.map(lambda _: 0, out))
             return jax.tree.leaves(out)
 
-        try:
-            exported = jax.export.export(jax.jit(flat))(*leaves)
-            return pickle.dumps((exported.serialize(), boxes[-1]))
-        except (ImportError, ValueError, TypeError, NotImplementedError, pickle.PicklingError):
-            return None
+        return flat, skeletons
 
 
 def _serialized(executable: jax.stages.Compiled, read: bytes | None):
@@ -441,7 +469,11 @@ def _load_executable(path: Path):
     return executable, skeleton
 
 
-def compiled(function):
+def compiled(function=None, *, options: Callable[..., dict] | None = None):
     """Decorator: `eqx.filter_jit`, with the traced program kept on disk while the cache
-    is on (see `enable_compilation_cache`)."""
-    return _Program(function)
+    is on (see `enable_compilation_cache`). With `options`, `@compiled(options=f)`: each
+    program is compiled with the XLA options (a dict, empty for XLA's defaults) that
+    `f` gives for the call's arguments."""
+    if function is None:
+        return ft.partial(compiled, options=options)
+    return _Program(function, options)

@@ -34,7 +34,7 @@ from ._retune import (
     tuning_of_design,
 )
 from ._settings import SolverSettings
-from ._system import FIELD_NAMES, TIDSystem
+from ._system import FIELD_NAMES, TIDSystem, compiler_options
 from ._workers import run_lanes, run_shares, start_workers
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
@@ -227,7 +227,7 @@ def _prepare_chunk(*task):
     _evaluate_points.prepare(*_kernel_arguments(*task))
 
 
-@compiled
+@compiled(options=compiler_options)
 def _evaluate_points(system, thetas, scales, ratio_grid, settings, grids, located):
     """`_CHUNK` points, one after another, from their responses over the band `grids`
     and their located host peaks `located` (see `_point_curves`): for each, the log

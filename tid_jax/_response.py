@@ -20,7 +20,7 @@ from ._steady_state import (
     solve_orbit,
     y_peak,
 )
-from ._system import TIDSystem
+from ._system import TIDSystem, compiler_options
 
 
 class FrequencyResponse(eqx.Module):
@@ -119,7 +119,7 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (stiffness, damping))
 
 
-@compiled
+@compiled(options=compiler_options)
 def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
     (one per point, its fields batched): shooting on work queues (`shoot_queue`,

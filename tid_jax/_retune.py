@@ -43,7 +43,7 @@ from ._response import (
 from ._settings import SolverSettings
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
-from ._system import TIDSystem
+from ._system import TIDSystem, compiler_options
 from ._workers import run_lanes, run_shares, start_workers
 
 
@@ -265,7 +265,7 @@ class _BFGS(optx.AbstractBFGS):
     verbose: Callable[..., None] = optx.BFGS(rtol=1.0, atol=1.0).verbose
 
 
-@compiled
+@compiled(options=compiler_options)
 def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
                     max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
                     small_cuts_end):
