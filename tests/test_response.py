@@ -358,7 +358,7 @@ def test_the_peaks_programs_serve_any_number_of_lanes():
         for field in ("x_peak", "y_peak", "omega_x", "omega_y", "at_edge"):
             np.testing.assert_allclose(np.asarray(getattr(together, field))[i],
                                        np.asarray(getattr(alone, field))[0], rtol=1e-12)
-    new = [len(set(program.loaded) - keys) for program, keys in zip(programs, before)]
+    new = [len(set(program.loaded) - keys) for program, keys in zip(programs, before, strict=True)]
     assert new[0] <= 1 and new[1] <= 2 and new[2] <= 1 and new[3] <= 1
 
 

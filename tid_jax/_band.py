@@ -149,9 +149,12 @@ def _in_chunks(program, *args):
         return np.concatenate([leaf, np.repeat(leaf[-1:], padded - lanes, axis=0)])
 
     args = jax.tree.map(pad, args)
-    parts = [program(*jax.tree.map(lambda a: a[i : i + LANE_CHUNK] if eqx.is_array(a) else a,
-                                   args))
-             for i in range(0, padded, LANE_CHUNK)]
+
+    def chunk(start):
+        return jax.tree.map(lambda a: a[start : start + LANE_CHUNK] if eqx.is_array(a) else a,
+                            args)
+
+    parts = [program(*chunk(start)) for start in range(0, padded, LANE_CHUNK)]
     return jax.tree.map(lambda *chunks: np.concatenate(chunks)[:lanes], *parts)
 
 
