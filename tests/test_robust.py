@@ -70,6 +70,17 @@ def test_best_tunings(system, best):
     assert k[1] == pytest.approx(1.09, abs=0.02) and c[1] == pytest.approx(0.45, abs=0.05)
 
 
+def test_best_tunings_are_the_retunes_optima(system, band, best):
+    # One optimum: `best_tunings` is `retune`'s optimiser on the same lanes, so its
+    # tunings are those `retune` reports, to the last bit.
+    retuned = tj.retune(system, ROBUST_AMPLITUDES, omegas=band)
+    np.testing.assert_array_equal(np.asarray(best.tid_stiffness)[0],
+                                  np.asarray(retuned.tid_stiffness))
+    np.testing.assert_array_equal(np.asarray(best.tid_damping)[0],
+                                  np.asarray(retuned.tid_damping))
+    np.testing.assert_array_equal(np.asarray(best.converged)[0], np.asarray(retuned.converged))
+
+
 def test_robust_beats_other_designs_without_stroke_limit(robust_free, other_designs):
     assert int(robust_free.status) == 0, robust_free.status_messages()[0]
     for name, performance in other_designs.items():
