@@ -136,25 +136,18 @@ def _lane_grids(response: FrequencyResponse) -> FrequencyResponse:
 def _in_chunks(program, *args):
     """`program(*args)` (each array of `args` and of its results has a leading axis of
     lanes) run on `LANE_CHUNK` lanes at a time, the last chunk padded with copies of the
-    last lane; the results put back together as NumPy arrays."""
+    last lane (as `_response` pads its blocks); the results put back together as NumPy
+    arrays."""
+    args = jax.tree.map(lambda a: np.asarray(a) if eqx.is_array(a) else a, args)
     lanes = len(next(leaf for leaf in jax.tree.leaves(args) if eqx.is_array(leaf)))
     if lanes == 0:
         return jax.tree.map(np.asarray, program(*args))
-    padded = -(-lanes // LANE_CHUNK) * LANE_CHUNK
-
-    def pad(leaf):
-        if not eqx.is_array(leaf):
-            return leaf
-        leaf = np.asarray(leaf)
-        return np.concatenate([leaf, np.repeat(leaf[-1:], padded - lanes, axis=0)])
-
-    args = jax.tree.map(pad, args)
 
     def chunk(start):
-        return jax.tree.map(lambda a: a[start : start + LANE_CHUNK] if eqx.is_array(a) else a,
-                            args)
+        index = np.minimum(np.arange(start, start + LANE_CHUNK), lanes - 1)
+        return jax.tree.map(lambda a: a[index] if eqx.is_array(a) else a, args)
 
-    parts = [program(*chunk(start)) for start in range(0, padded, LANE_CHUNK)]
+    parts = [program(*chunk(start)) for start in range(0, lanes, LANE_CHUNK)]
     return jax.tree.map(lambda *chunks: np.concatenate(chunks)[:lanes], *parts)
 
 
