@@ -233,7 +233,12 @@ def test_a_program_is_compiled_with_the_options_its_arguments_give(monkeypatch):
         with pytest.raises(jax.errors.JaxRuntimeError, match="xla_no_such_option"):
             scaled(x, True)
     assert True in seen and False in seen
-    # The fusion emitters are off for exact friction only, wherever its system is.
+    # The fusion emitters are off for exact friction and for a compliant device only,
+    # wherever its system is.
     exact, smoothed = tj.paper_system(), tj.paper_system(friction_width=None)
-    assert compiler_options(1.0, systems=[exact]) == {"xla_cpu_use_fusion_emitters": False}
+    compliant = smoothed.replace(series_stiffness=3e5, terminal_mass=2.0)
+    off = {"xla_cpu_use_fusion_emitters": False}
+    assert compiler_options(1.0, systems=[exact]) == off
+    assert compiler_options(compliant, 2.0) == off
     assert compiler_options(smoothed, 2.0) == {}
+    assert compiler_options(smoothed.replace(terminal_mass=2.0)) == {}
