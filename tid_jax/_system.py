@@ -269,10 +269,11 @@ def compiler_options(*args, **kwargs) -> dict:
     fusion emitters off. Exact friction's period map is the closed-form stick-slip flow
     (`_coulomb`), whose programs compile in about two thirds of the time without them and
     run as fast. The compliant device's six-state integrations run faster without them:
-    on the paper's system with a compliant device, its frequency response a quarter
-    faster, three times with backlash, and its sensitivities four times, their programs
-    compiled in half the time. The rigid device's integrations of smoothed friction run
-    about a third slower without them, and keep XLA's defaults (an empty dict)."""
+    on the paper's system with a compliant device, its frequency response takes three
+    quarters of the time (a third with backlash) and its sensitivities a quarter, their
+    programs compiled in half the time. The rigid device's integrations of smoothed
+    friction run about a third slower without them, and keep XLA's defaults (an empty
+    dict)."""
     systems = [leaf for leaf in jax.tree.leaves((args, kwargs),
                                                 is_leaf=lambda x: isinstance(x, TIDSystem))
                if isinstance(leaf, TIDSystem)]
