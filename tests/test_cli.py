@@ -101,6 +101,31 @@ def test_frf_writes_parsable_files(frf_run):
     assert leftovers(out) == []
 
 
+def test_commands_compile_the_programs_of_library_calls(tmp_path, monkeypatch):
+    # The settings reach the compiled programs as a library call with the same settings
+    # passes them (the JSON records them as the system's model takes them): a program a
+    # command compiled serves the library from the cache, and the other way round.
+    import tid_jax._response
+
+    seen = []
+    points = tid_jax._response._points
+
+    def recorded(*args, **kwargs):
+        seen.append(args[3])  # the settings: the programs' static arguments
+        return points(*args, **kwargs)
+
+    monkeypatch.setattr(tid_jax._response, "_points", recorded)
+    status, _, stderr = run(["frf", "--amplitudes", "200", "--band-hz", "3", "5",
+                             "--n-frequencies", "5", "--quiet", "--out", tmp_path])
+    assert status == 0, stderr
+    commanded = set(seen)
+    seen.clear()
+    tj.frequency_response(tj.paper_system(), 2 * np.pi * np.linspace(3, 5, 5), [200.0])
+    assert set(seen) == commanded == {tj.SolverSettings()}
+    data = json.loads((tmp_path / "frf.json").read_text())
+    assert data["solver"] == tj.SolverSettings().for_system(tj.paper_system()).to_dict()
+
+
 def test_frf_json_on_stdout_is_the_saved_json_and_rebuilds_the_system(frf_run):
     status, stdout, _, out = frf_run
     printed = json.loads(stdout)

@@ -377,7 +377,11 @@ def _start(args, *, workers: bool = False) -> _Start:
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)
-    return _Start(inputs, system, _settings(inputs).for_system(system), frequencies_hz, omegas,
+    settings = _settings(inputs)
+    settings.for_system(system)  # settings this system cannot take are refused now
+    # As given (the library fits them to the system): the compiled programs are then those
+    # of a library call with the same settings, and each serves the other from the cache.
+    return _Start(inputs, system, settings, frequencies_hz, omegas,
                   np.asarray(inputs["amplitudes"]), _Output(args))
 
 
@@ -490,7 +494,8 @@ class _Output:
     def document(
         self, command: str, inputs: dict, system: TIDSystem, settings, frequencies_hz, **results
     ) -> dict:
-        """The JSON record of a run: inputs, system, solver settings, version, results."""
+        """The JSON record of a run: inputs, system, solver settings (as the system's model
+        takes them), version, results."""
         k_dh, c_dh = _den_hartog(system)
         return {
             "command": f"{PROG} {command}",
@@ -498,7 +503,7 @@ class _Output:
             "inputs": inputs,
             "system": system.to_dict(),
             "den_hartog": {"tid_stiffness": k_dh, "tid_damping": c_dh},
-            "solver": settings.to_dict(),
+            "solver": settings.for_system(system).to_dict(),
             "frequencies_hz": [float(f) for f in frequencies_hz],
             **results,
             "files": [str(path) for path in self.files],
