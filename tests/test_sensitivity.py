@@ -82,16 +82,25 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     omegas = jax.numpy.asarray(band)
     none = (jax.numpy.zeros(0, int), jax.numpy.zeros(0), jax.numpy.zeros(0, bool))
 
+    @jax.jit
     def every_sample(theta, z):
-        xs, ys, _, _ = sweep(_changed_system(system, theta, 1.0), theta[-1], omegas, settings, z)
-        return _log_candidates(xs, omegas, none), _log_candidates(ys, omegas, none)
+        """The logs of every sample (and their masks), with their Jacobian in `theta`:
+        one compiled program."""
+
+        def logs(theta):
+            xs, ys, _, _ = sweep(_changed_system(system, theta, 1.0), theta[-1], omegas,
+                                 settings, z)
+            (log_x, mask_x), (log_y, mask_y) = (_log_candidates(xs, omegas, none),
+                                                _log_candidates(ys, omegas, none))
+            return (log_x, log_y), (log_x, mask_x, log_y, mask_y)
+
+        return jax.jacfwd(logs, has_aux=True)(theta)
 
     for amplitude, z in zip(amplitudes, z_init, strict=True):
         theta = ctx.theta(k, c, amplitude)
         curves = ctx.evaluate([(theta, 1.0, z)])[0]
         assert curves.converged
-        (log_x, mask_x), (log_y, mask_y) = every_sample(theta, z)
-        jac_x, jac_y = jax.jacfwd(lambda t, z=z: [a[0] for a in every_sample(t, z)])(theta)
+        (jac_x, jac_y), (log_x, mask_x, log_y, mask_y) = every_sample(theta, z)
         for response, values, mask, jac in (("x", log_x, mask_x, jac_x),
                                             ("y", log_y, mask_y, jac_y)):
             kept = getattr(curves, f"peak_{response}")
