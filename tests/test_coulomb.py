@@ -129,6 +129,39 @@ def test_stuck_inerter_is_the_stuck_linear_system():
     assert np.all(np.asarray(response.stable))  # neutral along the position only
 
 
+def test_a_point_that_did_not_converge_is_tried_again_once(monkeypatch):
+    # Exact friction's period map has neither an integration error nor stiff steps: a
+    # point that did not converge, one whose period map failed (residual inf) among them,
+    # is tried again once, with the long transient and more Newton iterations (a more
+    # accurate or an implicit attempt would repeat that computation).
+    import equinox as eqx
+
+    from tid_jax import _response
+
+    [fallback] = tj.SolverSettings().for_system(PAPER).fallbacks()
+    assert fallback.exact_friction and not fallback.implicit
+    assert fallback.transient_periods == 40 and fallback.max_newton_steps == 25
+    attempts = []
+    solve = _response._solve_blocks
+
+    def first_failed(settings, batch, warm=None):
+        out = solve(settings, batch, warm)
+        attempts.append(settings)
+        if len(attempts) == 1:  # as if the first attempt's period map had failed
+            out = eqx.tree_at(lambda o: (o.converged, o.residual), out,
+                              (np.zeros_like(out.converged), np.full_like(out.residual, np.inf)))
+        return out
+
+    monkeypatch.setattr(_response, "_solve_blocks", first_failed)
+    omega = 0.95 * float(PAPER.host_frequency)
+    result = tj.frequency_response(PAPER, omega, 150.0)
+    assert bool(result.converged)
+    assert attempts == [tj.SolverSettings(), fallback]
+    monkeypatch.undo()
+    assert float(result.x_max) == pytest.approx(
+        float(tj.frequency_response(PAPER, omega, 150.0).x_max), rel=1e-9)
+
+
 def test_gradients_match_finite_differences():
     # the peak host displacement over a band, with respect to k, c, ff and A, at a
     # stick-slip and a sliding peak, against central differences (steps too small to

@@ -328,9 +328,10 @@ class Context:
     def evaluate(self, points: Sequence[tuple]) -> list[_Curves]:
         """`_Curves` at each `(theta, scale, z_init)` (z_init None at every point: the
         orbits solved from the linear steady state); points where a steady state did not
-        converge are tried again with each of `SolverSettings.fallbacks()` in turn."""
+        converge are tried again with each of the fallbacks of the settings fitted to the
+        system (`SolverSettings.fallbacks`) in turn."""
         results = self._evaluate(points, self.settings)
-        for settings in self.settings.fallbacks():
+        for settings in self.settings.for_system(self.system).fallbacks():
             failed = [i for i, curves in enumerate(results) if not curves.converged]
             if not failed:
                 break

@@ -239,8 +239,9 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     the tolerance) is first shot on from its own last state with the same settings, up to
     `CONTINUATIONS` times. Points that do not converge are solved again,
     from the equivalent linear steady state (`_period.initial_state`), with each of
-    `settings.fallbacks()` in turn until they do (a point where no period could be
-    integrated skips the explicit ones); the best attempt is kept. Each block of
+    the fallbacks of `settings` fitted to the systems (`SolverSettings.fallbacks`) in turn
+    until they do (a point where no period could be integrated skips the explicit
+    integrations); the best attempt is kept. Each block of
     the batch is sharded over all JAX devices (`sharded_batch`). The solutions are NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
@@ -256,9 +257,9 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
         own = out.state[near] / _state_units(part[0], part[1], part[2].host_stiffness,
                                              out.state.shape[-1])
         out = _keep_better(out, _solve_blocks(settings, part, own), near)
-    for fallback in settings.fallbacks():
+    for fallback in settings.for_system(batch[2]).fallbacks():
         failed = ~out.converged
-        if not fallback.implicit:
+        if not (fallback.implicit or fallback.exact_friction):
             # A point where no period was integrated (residual inf: the explicit steps ran
             # out, or the state blew up) goes straight to the implicit attempt: more
             # accurate explicit steps would only run out sooner.

@@ -83,12 +83,17 @@ class SolverSettings(eqx.Module):
         long transient towards the attracting orbit, then more Newton iterations, first on
         integrations 100 times more accurate (Newton stalls where the integration error of
         the period map exceeds `periodicity_tol`), then with the implicit Kvaerno5 (stiff
-        friction makes an explicit integration run out of steps); none coarse."""
+        friction makes an explicit integration run out of steps); none coarse. Exact
+        friction (these settings fitted to the system: `for_system`) has neither an
+        integration error nor stiff steps: one attempt, the long transient and the more
+        Newton iterations (the others would repeat its computation)."""
         persistent = eqx.tree_at(
             lambda s: (s.transient_periods, s.max_newton_steps),
             self,
             (max(40, 4 * self.transient_periods), max(25, 2 * self.max_newton_steps)),
         )
+        if self.exact_friction:
+            return (persistent.without_coarse(),)
         accurate = eqx.tree_at(lambda s: (s.rtol, s.atol), persistent,
                                (self.rtol / 100, self.atol / 100))
         stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
