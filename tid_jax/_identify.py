@@ -195,13 +195,27 @@ def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: Force
 
 def _device_residuals(device: InerterDevice, motions, forces, force_scale,
                       settings: ForceSettings):
-    """`_residuals` of `device`."""
-    out, ok = [], jnp.asarray(True)
-    for motion, force in zip(motions, forces, strict=True):
-        model, success = device_force(device, motion, settings)
-        out.append((model - force) / force_scale)
-        ok = ok & success
-    return jnp.concatenate(out), ok
+    """`_residuals` of `device`. The records of one length are integrated one after the
+    other in a loop (`jax.lax.map`): a compiled program holds one copy of the mechanism's
+    integration per length of record, not one per record."""
+    models, ok = [None] * len(motions), jnp.asarray(True)
+    for group in _equal_lengths(motions):
+        stacked = jax.tree.map(lambda *a: jnp.stack(a), *(motions[i] for i in group))
+        model, success = jax.lax.map(lambda motion: device_force(device, motion, settings),
+                                     stacked)
+        ok = ok & jnp.all(success)
+        for row, i in enumerate(group):
+            models[i] = model[row]
+    return jnp.concatenate([(model - force) / force_scale
+                            for model, force in zip(models, forces, strict=True)]), ok
+
+
+def _equal_lengths(motions) -> list[list[int]]:
+    """The indices of `motions` grouped by their number of samples, in order."""
+    groups = {}
+    for i, motion in enumerate(motions):
+        groups.setdefault(motion.time.shape[0], []).append(i)
+    return list(groups.values())
 
 
 @compiled
