@@ -377,11 +377,10 @@ def _start(args, *, workers: bool = False) -> _Start:
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)
-    settings = _settings(inputs)
-    settings.for_system(system)  # settings this system cannot take are refused now
-    # As given (the library fits them to the system): the compiled programs are then those
-    # of a library call with the same settings, and each serves the other from the cache.
-    return _Start(inputs, system, settings, frequencies_hz, omegas,
+    # The settings as given (the library fits them to the system, which
+    # `check_steady_state_device` has checked it can): the compiled programs are then
+    # those of a library call with the same settings, each serving the other from the cache.
+    return _Start(inputs, system, _settings(inputs), frequencies_hz, omegas,
                   np.asarray(inputs["amplitudes"]), _Output(args))
 
 
