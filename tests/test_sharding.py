@@ -55,7 +55,21 @@ def measure(chunk: int | None = None) -> dict:
     doubled = jax.jit(lambda a: per_device(lambda part: parts.append(part.shape[0]) or 2 * part,
                                            a))(jax.numpy.arange(8.0))
     sharding = batch_sharding()
+    # The package's programs are compiled with their XLA options on any number of
+    # devices: one that XLA does not know fails the compilation.
+    from tid_jax._cache import compiled
+
+    @compiled(options=lambda a: {"xla_no_such_option": True})
+    def unknown(a):
+        return 2 * a
+
+    try:
+        unknown(jax.numpy.arange(8.0))
+        options_reached = False
+    except jax.errors.JaxRuntimeError as error:
+        options_reached = "xla_no_such_option" in str(error)
     return dict(
+        options_reached=options_reached,
         devices=len(jax.devices()),
         devices_used=1 if sharding is None else len(sharding.mesh.devices.reshape(-1)),
         padded_devices=len(jax.device_put(jax.numpy.arange(12.0), sharding).devices())
@@ -127,6 +141,7 @@ def test_four_devices_match_one(runs):
     assert sharded["part"] == 2 and single["part"] == 8
     assert sharded["doubled"] == single["doubled"] == [2.0 * i for i in range(8)]
     assert sharded["solve_devices"] == 4 and single["solve_devices"] == 1
+    assert sharded["options_reached"] and single["options_reached"]
     assert np.all(single["converged"]) and sharded["converged"] == single["converged"]
     for key in ("x_max", "y_max"):
         np.testing.assert_allclose(sharded[key], single[key], rtol=1e-8, atol=0)

@@ -226,25 +226,27 @@ class _Program:
     """`eqx.filter_jit(function)` whose traced programs are kept on disk while the cache
     is on (`enable_compilation_cache`), each compiled with the XLA options that
     `options(*args, **kwargs)` gives (if `options` is given; then also while the cache is
-    off, in memory). Calls inside a transformation (arguments that are tracers), on
-    several devices, or of programs that cannot be exported (holding host callbacks) go
-    to `eqx.filter_jit` as usual."""
+    off, or on several devices, in memory). Calls inside a transformation (arguments that
+    are tracers), and the others without options (on several devices, or of programs
+    that cannot be exported: holding host callbacks) go to `eqx.filter_jit` as usual."""
 
     def __init__(self, function, options: Callable[..., dict] | None = None):
         self.function = function
         self.jitted = eqx.filter_jit(function)
         self.options = options
         self.loaded = {}
+        self.in_memory = {}
         ft.update_wrapper(self, function)
 
     def __call__(self, *args, **kwargs):
         folder = _programs_folder
-        if len(jax.devices()) > 1 or _is_traced((args, kwargs)):
+        if _is_traced((args, kwargs)):
             return self.jitted(*args, **kwargs)
-        if folder is None:
+        several = len(jax.devices()) > 1
+        if folder is None or several:
             if self.options is None:
                 return self.jitted(*args, **kwargs)
-            return self._in_memory(args, kwargs)
+            return self._in_memory(args, kwargs, place=not several)
         key, static, structure, leaves, options = self._key(args, kwargs)
         if key not in self.loaded:
             self.loaded[key] = self._load(self._path(folder, key), static, structure, leaves)
@@ -258,16 +260,19 @@ class _Program:
             run = self._compile(self._path(folder, key), key, run, skeleton, leaves, options)
         return jax.tree.unflatten(jax.tree.structure(skeleton), run(*leaves))
 
-    def _in_memory(self, args, kwargs):
-        """The call, its program compiled with its options and kept in this process."""
+    def _in_memory(self, args, kwargs, place: bool = True):
+        """The call, its program compiled with its options and kept in this process; its
+        arrays placed on the device first (`place`), or as given (sharded over several
+        devices: compiled for their shardings)."""
         key, static, structure, leaves, options = self._key(args, kwargs)
-        leaves = jax.device_put(leaves, jax.devices()[0])
-        if key not in self.loaded:
+        if place:
+            leaves = jax.device_put(leaves, jax.devices()[0])
+        if key not in self.in_memory:
             flat, skeletons = self._flat(static, structure)
-            self.loaded[key] = (jax.jit(flat).lower(*leaves).compile(compiler_options=options),
-                                skeletons[-1])
-        run, skeleton = self.loaded[key]
-        return jax.tree.unflatten(jax.tree.structure(skeleton), run(*leaves))
+            self.in_memory[key] = jax.jit(flat, compiler_options=options), skeletons
+        run, skeletons = self.in_memory[key]
+        out = run(*leaves)
+        return jax.tree.unflatten(jax.tree.structure(skeletons[-1]), out)
 
     def _key(self, args, kwargs):
         """The key of the program for these arguments, its static part, the structure
