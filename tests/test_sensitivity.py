@@ -1,6 +1,8 @@
 """Sensitivities of the peak response and of the optimal tuning: `tj.sensitivities`
 against finite differences, re-optimised differences and exact scaling laws."""
 
+import functools as ft
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -9,6 +11,7 @@ import pytest
 import tid_jax as tj
 from tid_jax._design import STENCIL_STEP
 from tid_jax._retune import DESIGN_SCALE, design_of_tuning
+from tid_jax._system import compiler_options
 
 SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there
 
@@ -82,10 +85,10 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     omegas = jax.numpy.asarray(band)
     none = (jax.numpy.zeros(0, int), jax.numpy.zeros(0), jax.numpy.zeros(0, bool))
 
-    @jax.jit
+    @ft.partial(jax.jit, compiler_options=compiler_options(system))
     def every_sample(theta, z):
         """The logs of every sample (and their masks), with their Jacobian in `theta`:
-        one compiled program."""
+        one compiled program (with the XLA options of the package's own)."""
 
         def logs(theta):
             xs, ys, _, _ = sweep(_changed_system(system, theta, 1.0), theta[-1], omegas,
