@@ -3,6 +3,7 @@ independent event-driven reference `tests/reference/inerter.py`, 1% force noise)
 `tid-jax identify` on a records file."""
 
 import csv
+import dataclasses
 import json
 import tomllib
 
@@ -160,6 +161,26 @@ def test_the_scan_keeps_the_start_where_no_series_stiffness_is_resolved(monkeypa
                                      _identify.IdentifySettings(),
                                      dict.fromkeys(parameters, 1.0), 1e-3, 0.0)
     np.testing.assert_array_equal(start, values)
+
+
+def test_the_interpolant_of_evenly_spaced_samples_is_that_of_bisection():
+    """The interval of evenly spaced samples (a rig's fixed rate, to within a millionth of
+    the spacing) is read off their grid: the interpolant is the one that bisection
+    finds, at the samples, between them and beyond the ends; uneven samples take
+    bisection."""
+    rng = np.random.default_rng(0)
+    time = 0.25 + np.arange(200) / 1000.0
+    displacement = 0.003 * np.sin(2 * np.pi * 4.0 * time + 0.3)
+    jittered = time + 1e-10 * rng.standard_normal(time.size)
+    t = np.concatenate([time, jittered, rng.uniform(0.2, 0.5, 400), [0.2, time[-1] + 0.01]])
+    for samples in (time, jittered):
+        motion = Motion.from_samples(samples, displacement)
+        assert motion.evenly_spaced
+        bisected = dataclasses.replace(motion, evenly_spaced=False)
+        for got, want in zip(jax.vmap(motion.at)(t), jax.vmap(bisected.at)(t), strict=True):
+            np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-9, atol=1e-15)
+    uneven = time + 2e-4 * rng.uniform(size=time.size)
+    assert not Motion.from_samples(uneven, displacement).evenly_spaced
 
 
 @pytest.mark.parametrize(

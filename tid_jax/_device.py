@@ -69,15 +69,24 @@ class InerterDevice(eqx.Module):
         return not isinstance(stiffness, jax.core.Tracer) and math.isinf(float(stiffness))
 
 
+# Samples count as evenly spaced where every time is within this fraction of the mean
+# spacing from its place on the even grid: the interpolant's interval is then read off the
+# grid, at worst its neighbour's cubic carried that far past their shared sample (the two
+# agree there in value and slope).
+_EVEN_SPACING = 1e-6
+
+
 class Motion(eqx.Module):
     """An imposed motion sampled at `time` (s): displacement (m), velocity (m/s) and
     acceleration (m/s^2), the derivatives by second-order differences of the samples
-    (the acceleration at the ends extrapolated linearly)."""
+    (the acceleration at the ends extrapolated linearly); `evenly_spaced`: whether the
+    samples are (as a test rig's, at a fixed rate)."""
 
     time: Float[Array, " samples"]
     displacement: Float[Array, " samples"]
     velocity: Float[Array, " samples"]
     acceleration: Float[Array, " samples"]
+    evenly_spaced: bool = eqx.field(static=True, default=False)
 
     @classmethod
     def from_samples(cls, time: ArrayLike, displacement: ArrayLike) -> "Motion":
@@ -89,12 +98,16 @@ class Motion(eqx.Module):
         acceleration[0] = acceleration[1] + (acceleration[1] - acceleration[2]) * h[0] / h[1]
         acceleration[-1] = (acceleration[-2]
                             + (acceleration[-2] - acceleration[-3]) * h[-1] / h[-2])
-        return cls(*(jnp.asarray(a) for a in (time, displacement, velocity, acceleration)))
+        even = np.linspace(time[0], time[-1], time.size)
+        evenly_spaced = bool(np.max(np.abs(time - even))
+                             <= _EVEN_SPACING * (time[-1] - time[0]) / (time.size - 1))
+        return cls(*(jnp.asarray(a) for a in (time, displacement, velocity, acceleration)),
+                   evenly_spaced=evenly_spaced)
 
     def at(self, t):
         """Displacement and velocity at time `t`: the cubic Hermite interpolant of the
         samples and their velocities."""
-        i = jnp.clip(jnp.searchsorted(self.time, t) - 1, 0, self.time.shape[0] - 2)
+        i = self.interval(t)
         h = self.time[i + 1] - self.time[i]
         s = (t - self.time[i]) / h
         u0, u1 = self.displacement[i], self.displacement[i + 1]
@@ -105,6 +118,19 @@ class Motion(eqx.Module):
         du = ((6 * s**2 - 6 * s) * u0 + (3 * s**2 - 4 * s + 1) * v0
               + (-6 * s**2 + 6 * s) * u1 + (3 * s**2 - 2 * s) * v1) / h
         return u, du
+
+    def interval(self, t):
+        """The index i of the samples' interval time[i] <= t <= time[i + 1] (the first or
+        the last where t lies beyond the samples): read off the grid of evenly spaced
+        samples, else found by bisection (a loop at every evaluation of the interpolant,
+        which takes most of the time of an integration through the record on a CPU)."""
+        time, last = self.time, self.time.shape[0] - 2
+        if self.evenly_spaced:
+            spacing = (time[-1] - time[0]) / (last + 1)
+            i = jnp.floor((t - time[0]) / spacing).astype(int)
+        else:
+            i = jnp.searchsorted(time, t) - 1
+        return jnp.clip(i, 0, last)
 
 
 class ForceSettings(eqx.Module):

@@ -195,11 +195,11 @@ def _residuals(x, scales: _Scales, motions, forces, force_scale, settings: Force
 
 def _device_residuals(device: InerterDevice, motions, forces, force_scale,
                       settings: ForceSettings):
-    """`_residuals` of `device`. The records of one length are integrated one after the
-    other in a loop (`jax.lax.map`): a compiled program holds one copy of the mechanism's
-    integration per length of record, not one per record."""
+    """`_residuals` of `device`. The records of one length (and spacing) are integrated
+    one after the other in a loop (`jax.lax.map`): a compiled program holds one copy of
+    the mechanism's integration per kind of record, not one per record."""
     models, ok = [None] * len(motions), jnp.asarray(True)
-    for group in _equal_lengths(motions):
+    for group in _alike(motions):
         stacked = jax.tree.map(lambda *a: jnp.stack(a), *(motions[i] for i in group))
         model, success = jax.lax.map(lambda motion: device_force(device, motion, settings),
                                      stacked)
@@ -210,11 +210,12 @@ def _device_residuals(device: InerterDevice, motions, forces, force_scale,
                             for model, force in zip(models, forces, strict=True)]), ok
 
 
-def _equal_lengths(motions) -> list[list[int]]:
-    """The indices of `motions` grouped by their number of samples, in order."""
+def _alike(motions) -> list[list[int]]:
+    """The indices of `motions` grouped by their number of samples and whether they are
+    evenly spaced, in order."""
     groups = {}
     for i, motion in enumerate(motions):
-        groups.setdefault(motion.time.shape[0], []).append(i)
+        groups.setdefault((motion.time.shape[0], motion.evenly_spaced), []).append(i)
     return list(groups.values())
 
 
