@@ -215,16 +215,22 @@ def test_retuned_design_is_optimal_on_the_reference():
     k, c = float(result.tid_stiffness[0]), float(result.tid_damping[0])
     omegas = 2 * math.pi * np.linspace(3.0, 5.0, 201)
 
-    def band_peak(k, c):
+    def band_peaks(k, c, at):
         system = PAPER.replace(tid_stiffness=k, tid_damping=c)
-        return max(_reference(system, omega, amplitude)["x_max"] for omega in omegas)
+        return np.array([_reference(system, omega, amplitude)["x_max"] for omega in at])
 
-    optimum = band_peak(k, c)
+    peaks = band_peaks(k, c, omegas)
+    optimum = float(np.max(peaks))
     # the reported peak is located in continuous frequency, the reference's on the grid
     assert optimum <= float(result.x_peak[0]) * (1 + 1e-5)
     assert optimum == pytest.approx(float(result.x_peak[0]), rel=1e-4)
+    # A detuned design's largest peak on the grid points within 0.15 Hz of the optimum's
+    # two peaks is at most its largest over the band: above the optimum's, so is that.
+    interior = np.flatnonzero((peaks[1:-1] > peaks[:-2]) & (peaks[1:-1] > peaks[2:])) + 1
+    assert interior.size == 2
+    near = np.unique(np.clip(interior[:, None] + np.arange(-15, 16), 0, omegas.size - 1))
     for detuned in ((1.02 * k, c), (0.98 * k, c), (k, 1.2 * c), (k, 0.8 * c)):
-        assert band_peak(*detuned) > optimum, detuned
+        assert np.max(band_peaks(*detuned, omegas[near])) > optimum, detuned
 
 
 def test_sensitivities_and_robust_design_take_exact_friction():
