@@ -387,10 +387,18 @@ def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omeg
     # residual is within `coarse_residual`: the orbits are those of a solve at rtol 1e-10
     # to a periodicity residual of 1e-10 (x within 1e-5; y, which a stuck inerter makes
     # small and weakly determined, within 1e-4 of the static displacement).
+    from tid_jax import _response
+
     tight = tj.SolverSettings(rtol=1e-10, atol=1e-10, periodicity_tol=1e-10,
                               max_newton_steps=30)
+    programs = set(_response._points.loaded)  # (this session's cache is on)
     reference = tj.frequency_response(system, omegas, AMPLITUDES, settings=tight)
     assert bool(jnp.all(reference.converged))
+    # Tolerances and Newton iterations are arguments of the compiled program, not part of
+    # it: the tight solve ran the program of the default settings, to its own tolerances.
+    assert set(_response._points.loaded) == programs
+    assert np.max(np.asarray(reference.residual)) <= 1e-10
+    assert np.sum(np.asarray(reference.newton_steps)) > np.sum(np.asarray(nonlinear.newton_steps))
     scale = np.asarray(AMPLITUDES)[:, None] / float(system.host_stiffness)
     np.testing.assert_allclose(nonlinear.x_max, reference.x_max, rtol=1e-5)
     np.testing.assert_allclose(nonlinear.y_max / scale, reference.y_max / scale, atol=1e-4)

@@ -219,12 +219,13 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     if warm is None:
         warm = np.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
     outs = []
+    arrays = settings.with_array_tolerances()  # one program for any of their values
     for start, stop, size in _block_sizes(count):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = np.arange(start, start + size) < stop
         part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))
         out = sharded_batch(
-            lambda b, w, u, v: _points(b[2], b[0], b[1], settings, w, v, u), *part, valid
+            lambda b, w, u, v: _points(b[2], b[0], b[1], arrays, w, v, u), *part, valid
         )
         outs.append(jax.tree.map(lambda value, n=stop - start: np.asarray(value)[:n], out))
     return jax.tree.map(lambda *values: np.concatenate(values), *outs)

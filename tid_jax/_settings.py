@@ -1,8 +1,18 @@
 """The numerical settings of the steady-state solver, with their defaults."""
 
 import equinox as eqx
+import numpy as np
 
 from ._checks import is_positive
+
+# The settings that `SolverSettings.with_array_tolerances` makes arrays (`coarse_rtol`
+# last).
+_ARRAY_FIELDS = ("rtol", "atol", "max_newton_steps", "coarse_residual", "chord_residual",
+                 "periodicity_tol", "exact_periodicity_tol", "coarse_rtol")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, int | float)
 
 
 class SolverSettings(eqx.Module):
@@ -102,10 +112,14 @@ class SolverSettings(eqx.Module):
 
     def coarse(self) -> "SolverSettings":
         """These settings with the coarse integration tolerances (`coarse_rtol`, atol in
-        proportion), or the settings themselves where they are as coarse already, and
-        for exact friction (whose period map has no integration error): a batch then
-        has no coarse Newton iterations (`_steady_state.shoot_queue`)."""
-        if self.coarse_rtol <= self.rtol or self.exact_friction:
+        proportion), or the settings themselves where they are as coarse already (or
+        `coarse_rtol` is None: `with_array_tolerances`), and for exact friction (whose
+        period map has no integration error): a batch then has no coarse Newton
+        iterations (`_steady_state.shoot_queue`)."""
+        if self.exact_friction or self.coarse_rtol is None:
+            return self
+        if _is_number(self.rtol) and _is_number(self.coarse_rtol) and \
+                self.coarse_rtol <= self.rtol:
             return self
         ratio = self.coarse_rtol / self.rtol
         return eqx.tree_at(lambda s: (s.rtol, s.atol), self, (self.coarse_rtol, self.atol * ratio))
@@ -118,6 +132,17 @@ class SolverSettings(eqx.Module):
         return eqx.tree_at(lambda s: (s.rtol, s.atol, s.periodicity_tol), self,
                            (self.rtol / factor, self.atol / factor,
                             self.periodicity_tol / factor))
+
+    def with_array_tolerances(self) -> "SolverSettings":
+        """These settings with their tolerances and Newton iterations as NumPy arrays:
+        a compiled program takes them as arguments, so that one program serves any of
+        their values (the tighter settings of a polish, say); `coarse_rtol` None where
+        there are no coarse Newton iterations (`coarse`)."""
+        coarse = self.coarse() is not self
+        names = _ARRAY_FIELDS if coarse else _ARRAY_FIELDS[:-1]
+        out = eqx.tree_at(lambda s: tuple(getattr(s, name) for name in names), self,
+                          tuple(np.asarray(getattr(self, name)) for name in names))
+        return out if coarse else eqx.tree_at(lambda s: s.coarse_rtol, out, None)
 
     def without_coarse(self) -> "SolverSettings":
         """These settings with every Newton iteration of a batch at `rtol`."""
