@@ -198,10 +198,10 @@ def test_stuck_stroke_is_no_candidate_of_the_worst_case():
     omegas = np.linspace(20.0, 30.0, 6)
     stroke = np.array([0.0, 1e-3, 2e-3, 3e-3, 2e-3, 1e-3])
     none = (np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
-    logs, mask = _log_candidates(stroke, omegas, none)
+    logs, mask = jax.jit(_log_candidates)(stroke, omegas, none)
     assert not mask[0] and np.all(np.isfinite(np.asarray(logs)))
     assert np.asarray(mask)[1:].any()
-    gradient = jax.jacfwd(lambda s: _log_candidates(s, omegas, none)[0])(stroke)
+    gradient = jax.jit(jax.jacfwd(lambda s: _log_candidates(s, omegas, none)[0]))(stroke)
     assert np.all(np.isfinite(np.asarray(gradient)))
 
 
