@@ -31,22 +31,29 @@ def pytest_sessionfinish(session):
         shutil.rmtree(_session_cache, ignore_errors=True)
 
 
-# The modules that take longest (each compiles its own retune, robust design or device
-# programs, or integrates a reference), slowest first, as measured on two cores: the
-# parallel workers (pytest-xdist, one file per worker at a time) start on them, so that
-# they finish together. Every other module follows in its usual order.
+# The modules, slowest first, as measured on two cores (each of the first compiles its
+# own retune, robust design or device programs, or integrates a reference; those from
+# `test_workers` on start processes of their own): the parallel workers (pytest-xdist,
+# one file per worker at a time) take the next in turn, and finish together. Except that
+# `test_coulomb` goes ahead of its turn: it compiles the sensitivity kernel of exact
+# friction on the default band that `test_sensitivity` then loads (run side by side,
+# both compiled it). The modules not named, each a few seconds, follow in their usual
+# order.
 SLOWEST_FIRST = (
     "test_device.py",
     "test_retune.py",
-    "test_response.py",
-    "test_identify.py",
-    "test_robust.py",
-    "test_sensitivity.py",
     "test_coulomb.py",
-    "test_cli.py",
-    "test_gradients.py",
-    "test_sharding.py",
+    "test_identify.py",
+    "test_response.py",
     "test_reach.py",
+    "test_sensitivity.py",
+    "test_gradients.py",
+    "test_workers.py",
+    "test_cli.py",
+    "test_robust.py",
+    "test_sharding.py",
+    "test_substructuring.py",
+    "test_cache.py",
 )
 
 
