@@ -53,6 +53,36 @@ def _assert_recovered(fit, device, sigmas=3.0):
         assert abs(value - device[name]) < sigmas * error, (name, value, error)
 
 
+def test_least_squares_end_where_the_residual_noise_rejects_every_move():
+    """A residual with an integration's error (1e-8, not seen by its Jacobian) about a
+    linear least-squares problem: the fit ends at the first rejected step cut to a move
+    within the tolerance, at the exact least squares (`numpy.linalg.lstsq`) to within
+    that error, in fewer steps than cutting the trust region on until a move is
+    accepted."""
+    import lineax as lx
+    import optimistix as optx
+
+    t = np.linspace(0.0, 1.0, 200)
+    basis = np.stack([np.ones_like(t), t, t**2], axis=1)
+    data = 1.0 + 2.0 * t - 0.5 * t**2 + 0.01 * np.sin(37 * t)
+    exact, *_ = np.linalg.lstsq(basis, data, rcond=None)
+
+    def residual(x, _):
+        noise = jax.lax.stop_gradient(1e-8 * jax.numpy.sin(1e9 * (x[0] + 3 * x[1] + 7 * x[2])
+                                                            + 50 * t))
+        return basis @ x - data + noise
+
+    steps = []
+    for solver in (_identify._LevenbergMarquardt, optx.LevenbergMarquardt):
+        sol = optx.least_squares(residual, solver(rtol=1e-9, atol=1e-9,
+                                                  linear_solver=lx.Normal(lx.Cholesky())),
+                                 np.zeros(3), max_steps=200, throw=False)
+        assert sol.result == optx.RESULTS.successful
+        np.testing.assert_allclose(np.asarray(sol.value), exact, rtol=0, atol=1e-6)
+        steps.append(int(sol.stats["num_steps"]))
+    assert steps[0] < steps[1]
+
+
 def test_paper_device_is_recovered():
     fit = tj.identify_inerter(_records(PAPER_DEVICE), model="ideal")
     assert bool(fit.converged)

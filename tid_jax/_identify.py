@@ -219,13 +219,28 @@ def _alike(motions) -> list[list[int]]:
     return list(groups.values())
 
 
+class _LevenbergMarquardt(optx.LevenbergMarquardt):
+    """`optx.LevenbergMarquardt` that also ends where a step was rejected and the next
+    one is cut to a move within the tolerance (as an accepted step's is measured). At
+    the optimum the residual's integration error (the mechanism's integration at
+    `ForceSettings.rtol`) rejects the moves that would count, and the trust region would
+    be cut on towards zero, a Jacobian of every record at each cut, until a move small
+    enough to change no residual by more than the tolerance is accepted."""
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        move = jnp.abs(state.y_eval - y) / (self.atol + self.rtol * jnp.abs(y))
+        settled = (state.num_steps_since_acceptance > 0) & (self.norm(move) < 1)
+        return done | settled, result
+
+
 @compiled
 def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings):
     fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings.force)
     # the damped steps by Cholesky on the normal equations (few, well-scaled unknowns),
     # whose LAPACK call, unlike QR's, can be kept in the program cache
-    solver = optx.LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol,
-                                     linear_solver=lx.Normal(lx.Cholesky()))
+    solver = _LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol,
+                                 linear_solver=lx.Normal(lx.Cholesky()))
     sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=settings.max_steps,
                              throw=False)
     x = sol.value
