@@ -61,14 +61,18 @@ def compliant_peaks(case: dict, *, rtol: float = 1e-10, max_periods: int = 600,
     amplitudes = np.linalg.solve(stiffness, np.array([A, 0.0, 0.0]))  # x = Im(X e^{iwt})
     state = np.ravel([[z.imag, (jw * z).imag] for z in amplitudes])
     t0 = 0.0
+    atol = rtol * scale * np.array([1, omega] * 3)
     for periods in range(1, max_periods + 1):
         sol = solve_ivp(rhs, (t0, t0 + period), state, method="DOP853", rtol=rtol,
-                        atol=rtol * scale * np.array([1, omega] * 3), dense_output=True)
+                        atol=atol)
         new = sol.y[:, -1]
         change = np.max(np.abs(new - state) / (scale * np.array([1, omega] * 3)))
-        state, t0 = new, t0 + period
+        start, state, t0 = state, new, t0 + period
         if change < tol:
             break
+    # the last period again, the same steps, with its dense output
+    sol = solve_ivp(rhs, (t0 - period, t0), start, method="DOP853", rtol=rtol, atol=atol,
+                    dense_output=True)
     ts = np.linspace(t0 - period, t0, 4096, endpoint=False)
     xs, _, ys, *_ = sol.sol(ts)
     return dict(x_max=float(np.max(np.abs(xs))), y_max=float(np.max(np.abs(ys))),
