@@ -31,10 +31,10 @@ def pytest_sessionfinish(session):
         shutil.rmtree(_session_cache, ignore_errors=True)
 
 
-# The modules, slowest first, as measured on two cores (each of the first compiles its
-# own retune, robust design or device programs, or integrates a reference; those from
-# `test_workers` on start processes of their own): the parallel workers (pytest-xdist,
-# one file per worker at a time) take the next in turn, and finish together. Except that
+# The modules, slowest first, as measured on two cores (each compiles programs of its
+# own, integrates a reference or starts processes of its own): the parallel workers
+# (pytest-xdist, one file per worker at a time) take the next in turn, and finish
+# together. Except that
 # `test_coulomb` goes ahead of its turn: it compiles the sensitivity kernel of exact
 # friction on the default band that `test_sensitivity` then loads (run side by side,
 # both compiled it). The modules not named, each a few seconds, follow in their usual
