@@ -34,11 +34,10 @@ def pytest_sessionfinish(session):
 # The modules, slowest first, as measured on two cores (each compiles programs of its
 # own, integrates a reference or starts processes of its own): the parallel workers
 # (pytest-xdist, one file per worker at a time) take the next in turn, and finish
-# together. Except that
-# `test_coulomb` goes ahead of its turn: it compiles the sensitivity kernel of exact
-# friction on the default band that `test_sensitivity` then loads (run side by side,
-# both compiled it). The modules not named, each a few seconds, follow in their usual
-# order.
+# together. Except that `test_coulomb` goes ahead of its turn: it compiles the
+# sensitivity kernel of exact friction on the default band that `test_sensitivity` then
+# loads (run side by side, both compiled it). The modules not named, each a few seconds,
+# follow in their usual order.
 SLOWEST_FIRST = (
     "test_device.py",
     "test_retune.py",
