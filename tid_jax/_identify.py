@@ -32,6 +32,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ._cache import compiled
 from ._checks import check_precision, choice, integer, real_scalar
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
+from ._stall import cut_within_tolerance
 from ._workers import run_lanes
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
@@ -229,8 +230,7 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 
     def terminate(self, fn, y, args, options, state, tags):
         done, result = super().terminate(fn, y, args, options, state, tags)
-        move = jnp.abs(state.y_eval - y) / (self.atol + self.rtol * jnp.abs(y))
-        settled = (state.num_steps_since_acceptance > 0) & (self.norm(move) < 1)
+        settled = (state.num_steps_since_acceptance > 0) & cut_within_tolerance(self, y, state)
         return done | settled, result
 
 

@@ -41,6 +41,7 @@ from ._response import (
     with_tuning,
 )
 from ._settings import SolverSettings
+from ._stall import cut_within_tolerance
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem, compiler_options
@@ -435,8 +436,7 @@ def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solv
         # converged, and no decrease is found above the noise of the objective. (Where
         # `small_cuts_end` is off, in the last stage, the design goes on creeping by
         # such moves where they are accepted: the optimum that `sensitivities` polishes.)
-        trial = jnp.abs(state.y_eval - u) / (solver.atol + solver.rtol * jnp.abs(u))
-        settled = small_cuts_end & (rejected > 0) & (solver.norm(trial) < 1)
+        settled = small_cuts_end & (rejected > 0) & cut_within_tolerance(solver, u, state)
         return u, state, z, steps + 1, rejected, settled
 
     u, state, z, steps, rejected, settled = jax.lax.while_loop(
