@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tests.lanes import peaks_of
 from tests.reference import hinf
 from tests.reference.compliant import compliant_peaks
 from tests.reference.coulomb import coulomb_steady_state
@@ -89,16 +90,13 @@ def _sensitivities_against_differences(device, band, names):
     assert bool(sens.converged)
     assert sens.parameters[-3:] == (*names, "amplitude")
 
-    def peaks(changed):
-        result = tj.peaks(changed, [amplitude], band)
-        return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
-
-    for name in names:
+    values = {name: float(sens.values[sens.parameters.index(name)]) for name in names}
+    # every name's two steps in one batch
+    at = peaks_of([(device.replace(**{name: values[name] * (1 + s * 1e-3)}), amplitude)
+                   for name in names for s in (1, -1)], band).reshape(len(names), 2, 2)
+    for name, (plus, minus) in zip(names, at, strict=True):
         i = sens.parameters.index(name)
-        value = float(sens.values[i])
-        h = 1e-3 * value
-        fd = (peaks(device.replace(**{name: value + h}))
-              - peaks(device.replace(**{name: value - h}))) / (2 * h)
+        fd = (plus - minus) / (2e-3 * values[name])
         assert float(sens.host_derivative[i]) == pytest.approx(fd[0], rel=1e-3), name
         assert float(sens.stroke_derivative[i]) == pytest.approx(fd[1], rel=1e-3), name
     return sens
@@ -216,13 +214,21 @@ def _minimax_of_receptance(system, band):
     return np.exp(found.x), found.fun
 
 
-def test_retune_of_a_frictionless_compliant_device_is_the_minimax(system):
-    # Without friction the retuned design is the minimax of the linear receptance.
+@pytest.fixture(scope="module")
+def frictionless_compliant(system):
+    """The frictionless compliant TID, a band about its peaks and the minimax of its
+    linear receptance over the band (`_minimax_of_receptance`)."""
     compliant = system.replace(friction_force=0.0, **COMPLIANT)
     band = np.linspace(0.8, 1.25, 21) * float(system.host_frequency)
+    return compliant, band, *_minimax_of_receptance(compliant, band)
+
+
+def test_retune_of_a_frictionless_compliant_device_is_the_minimax(system,
+                                                                  frictionless_compliant):
+    # Without friction the retuned design is the minimax of the linear receptance.
+    compliant, band, (k, c), peak = frictionless_compliant
     result = tj.retune(compliant, [1000.0], omegas=band, tol=1e-6)
     assert bool(result.converged[0])
-    (k, c), peak = _minimax_of_receptance(compliant, band)
     static = 1000.0 / float(system.host_stiffness)
     assert float(result.x_peak[0]) / static == pytest.approx(peak, rel=2e-5)
     assert float(result.tid_stiffness[0]) == pytest.approx(k, rel=1e-3)
@@ -231,14 +237,13 @@ def test_retune_of_a_frictionless_compliant_device_is_the_minimax(system):
     assert k / ideal_k - 1 > 0.05  # the compliance stiffens the optimal spring
 
 
-def test_robust_design_of_a_frictionless_compliant_device_is_the_minimax(system):
+def test_robust_design_of_a_frictionless_compliant_device_is_the_minimax(
+        system, frictionless_compliant):
     # Without friction the response scales with the amplitude: one tuning is best at every
     # amplitude, the minimax of the linear receptance, and the robust design is it.
-    compliant = system.replace(friction_force=0.0, **COMPLIANT)
-    band = np.linspace(0.8, 1.25, 21) * float(system.host_frequency)
+    compliant, band, (k, c), peak = frictionless_compliant
     design = tj.robust_tune(compliant, [500.0, 1000.0], omegas=band, stroke_limit=None)
     assert bool(design.converged)
-    (k, c), peak = _minimax_of_receptance(compliant, band)
     np.testing.assert_allclose(np.asarray(design.best.tid_stiffness), k, rtol=1e-4)
     np.testing.assert_allclose(np.asarray(design.best.tid_damping), c, rtol=1e-4)
     # The robust design judges peaks on the band's grid (parabola-refined): its true peak,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tests.lanes import peaks_of
 from tid_jax._design import STENCIL_STEP
 from tid_jax._retune import DESIGN_SCALE, design_of_tuning
 from tid_jax._system import compiler_options
@@ -32,6 +33,7 @@ def _peaks(system, amplitude, band):
     return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
 
 
+
 # --- sensitivities ---------------------------------------------------------------------
 
 
@@ -47,20 +49,24 @@ def test_sensitivities_match_finite_differences(system, band, sensitivity):
     # TID's own damping and inertance.
     one_sided = {"parasitic_damping": float(system.tid_damping),
                  "terminal_mass": float(system.inertance)}
+    values = dict(zip(sensitivity.parameters, np.asarray(sensitivity.values).tolist(),
+                      strict=True))
+    steps = {name: 5e-4 * one_sided.get(name, value) for name, value in values.items()}
+    multiples = {name: (0, 1, 2) if name in one_sided else (-2, -1, 1, 2) for name in values}
+    # the peaks at every step of every parameter, in one batch
+    cases = [(name, m) for name in values for m in multiples[name]]
+    at = dict(zip(cases, peaks_of([_perturbed(system, SENSITIVITY_AMPLITUDE, name,
+                                               values[name] + m * steps[name])
+                                    for name, m in cases], band), strict=True))
     for i, name in enumerate(sensitivity.parameters):
-        value = float(sensitivity.values[i])
-        h = 5e-4 * (one_sided[name] if name in one_sided else value)
-
-        def f(step, name=name, value=value):
-            changed, amplitude = _perturbed(system, SENSITIVITY_AMPLITUDE, name, value + step)
-            return _peaks(changed, amplitude, band)
-
+        value, h = values[name], steps[name]
+        f = {m: at[name, m] for m in multiples[name]}
         if name in one_sided:
             assert value == 0.0
-            fd = (-3 * f(0.0) + 4 * f(h) - f(2 * h)) / (2 * h)
+            fd = (-3 * f[0] + 4 * f[1] - f[2]) / (2 * h)
             tol = 1e-3  # second order in h, against fourth
         else:
-            fd = (8 * (f(h) - f(-h)) - (f(2 * h) - f(-2 * h))) / (12 * h)
+            fd = (8 * (f[1] - f[-1]) - (f[2] - f[-2])) / (12 * h)
             tol = 1e-4
         assert float(sensitivity.host_derivative[i]) == pytest.approx(fd[0], rel=tol), name
         assert float(sensitivity.stroke_derivative[i]) == pytest.approx(fd[1], rel=tol), name
@@ -375,11 +381,12 @@ def test_optimum_is_a_minimum_of_the_peak(system, band, sensitivity):
     )[0]
     assert at_optimum == pytest.approx(float(optimum.host_peak), rel=1e-7)
     assert at_optimum < float(sensitivity.host_peak)  # better than Den Hartog's
-    for dk, dc in [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]:
-        neighbour = system.replace(
-            tid_stiffness=k * (1 + 0.03 * dk), tid_damping=c * (1 + 0.06 * dc)
-        )
-        assert _peaks(neighbour, SENSITIVITY_AMPLITUDE, band)[0] > at_optimum, (dk, dc)
+    moves = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]
+    neighbours = peaks_of([(system.replace(tid_stiffness=k * (1 + 0.03 * dk),
+                                            tid_damping=c * (1 + 0.06 * dc)),
+                             SENSITIVITY_AMPLITUDE) for dk, dc in moves], band)
+    for (dk, dc), (peak, _) in zip(moves, neighbours, strict=True):
+        assert peak > at_optimum, (dk, dc)
 
 
 def test_sensitivities_reject_bad_input(system):

@@ -3,6 +3,7 @@ band, a sweep over it, and the peaks of the host (true maxima over frequency) an
 the inerter terminal (`peaks`, `peak_response`)."""
 
 import functools as ft
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import equinox as eqx
@@ -277,11 +278,11 @@ def peak_response(
     amplitude: ArrayLike,
     omegas: ArrayLike | None = None,
     *,
-    response: str = "host",
+    response: str | Sequence[str] = "host",
     settings: SolverSettings = SolverSettings(),
-) -> Float[Array, ""]:
+) -> Float[Array, ""] | Float[Array, " responses"]:
     """Peak steady-state displacement over a frequency band at one forcing amplitude, of
-    the host (max |x|) or of the inerter terminal (max |y|, the stroke). Differentiable
+    the host (max |x|), of the inerter terminal (max |y|, the stroke) or both. Differentiable
     with respect to every field of `system` and `amplitude` (implicit differentiation
     through the periodic orbits; envelope theorem at the peak). The host's peak is the
     maximum in continuous frequency, the inerter's the grid's refined by a parabola (see
@@ -292,14 +293,19 @@ def peak_response(
     - `system`: the `TIDSystem`.
     - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (scalar; may be traced).
     - `omegas`: the band's grid, rad/s, increasing (default `default_omegas(system)`).
-    - `response`: `"host"` or `"inerter"`.
+    - `response`: `"host"` or `"inerter"`, or a tuple (or list) of them: their peaks from
+      one sweep of the band (the steady states and their derivatives shared).
     - `settings`: `SolverSettings` of the steady states.
 
-    **Returns:** the peak, m; NaN where a steady state in the band did not converge.
+    **Returns:** the peak, m (for a tuple of responses, an array of their peaks in its
+    order); NaN where a steady state in the band did not converge.
     """
     check_system(system)
-    if response not in ("host", "inerter"):
-        raise ValueError(f"response must be 'host' or 'inerter', got {response!r}")
+    responses = (response,) if isinstance(response, str) else (
+        tuple(response) if isinstance(response, tuple | list) else ())
+    if not (responses and all(name in ("host", "inerter") for name in responses)):
+        raise ValueError(
+            f"response must be 'host' or 'inerter', or a tuple of them, got {response!r}")
     if not isinstance(amplitude, jax.core.Tracer):
         check_grid("amplitude", amplitude)
         if np.ndim(amplitude) != 0:
@@ -308,13 +314,17 @@ def peak_response(
     # An array, traced by the compiled program: a Python number would be one of its
     # static arguments, compiled anew for every amplitude.
     amplitude = jnp.asarray(amplitude, band.dtype)
-    return _peak_response(system, amplitude, band, response == "host", settings)
+    return _peak_response(system, amplitude, band,
+                          response if isinstance(response, str) else responses, settings)
 
 
 @compiled(options=compiler_options)
-def _peak_response(system, amplitude, omegas, host, settings):
+def _peak_response(system, amplitude, omegas, response: str | tuple[str, ...], settings):
+    """The peak of `response` (a scalar), or of each of a tuple of them (an array)."""
+    responses = (response,) if isinstance(response, str) else response
     xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
-    if host:
+    peaks = {}
+    if "host" in responses:
         def solve(at, last):
             del last
             z0 = interpolated(states, omegas, at)
@@ -325,9 +335,11 @@ def _peak_response(system, amplitude, omegas, host, settings):
             return jnp.where(ok, x, jnp.nan).reshape(at.shape)
 
         selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
-        _, peaks, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
-        peak = jnp.max(jnp.where(valid, peaks, -jnp.inf))
-    else:
-        peak = grid_peak(ys, omegas)[0]  # see `response_peaks`
+        _, located, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
+        peaks["host"] = jnp.max(jnp.where(valid, located, -jnp.inf))
+    if "inerter" in responses:
+        peaks["inerter"] = grid_peak(ys, omegas)[0]  # see `response_peaks`
     # The maximum over a band with an orbit that was not found is unknown.
-    return jnp.where(jnp.all(converged), peak, jnp.nan)
+    found = jnp.stack([peaks[name] for name in responses])
+    found = found[0] if isinstance(response, str) else found
+    return jnp.where(jnp.all(converged), found, jnp.nan)
