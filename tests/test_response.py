@@ -522,8 +522,9 @@ def test_tighter_settings():
 
 def test_a_program_holds_one_copy_of_each_newton_evaluation(monkeypatch):
     # Newton's shooting traces its evaluation once (its first iterate is the loop's first
-    # iteration), and a batch of exact friction has no coarse Newton stage, which would
-    # repeat the next one: each is a copy of the differentiated period map in a program.
+    # iteration); a batch traces its Newton stages once, smoothed friction's coarse and
+    # full-accuracy stages as a loop over their tolerances (exact friction has no coarse
+    # stage): each trace is a copy of the differentiated period map in a program.
     from tid_jax import _steady_state
     from tid_jax._dynamics import parameter_vector
 
@@ -550,8 +551,8 @@ def test_a_program_holds_one_copy_of_each_newton_evaluation(monkeypatch):
     counts.clear()
     batch = (jnp.zeros((8, 4)), jnp.broadcast_to(p, (8, p.shape[0])))
     jax.eval_shape(lambda z, q: _steady_state.shoot_queue(z, q, settings, 4), *batch)
-    assert counts["_newton_phase"] == 2  # smoothed friction: coarse, then full accuracy
+    assert counts == {"_newton_phase": 1, "_newton": 1}  # coarse, then full accuracy
     counts.clear()
     exact = tj.SolverSettings().for_system(tj.paper_system())
     jax.eval_shape(lambda z, q: _steady_state.shoot_queue(z, q, exact, 4), *batch)
-    assert counts["_newton_phase"] == 1
+    assert counts == {"_newton_phase": 1, "_newton": 1}

@@ -255,11 +255,16 @@ def _newton_phase(z0, p, modes, settings: SolverSettings, order, count, slots, s
         newton = _newton(z, d[1], settings, d[2])
         return _limited(newton.z, newton.update), newton.residual <= switch, newton
 
-    size, n = z0.shape
-    out = _Newton(z0, jnp.zeros_like(z0), jnp.zeros((size, n, n), z0.dtype),
-                  jnp.full(size, jnp.inf, z0.dtype))
     return _work_queue(lambda d: d[0], step, (z0, p, modes), order, count, slots,
-                       settings.max_newton_steps, out)
+                       settings.max_newton_steps, _not_evaluated(z0))
+
+
+def _not_evaluated(z: Float[Array, "points states"]) -> _Newton:
+    """The states `z` as Newton evaluations not made: no update, no monodromy matrix, the
+    residual inf."""
+    size, n = z.shape
+    return _Newton(z, jnp.zeros_like(z), jnp.zeros((size, n, n), z.dtype),
+                   jnp.full(size, jnp.inf, z.dtype))
 
 
 def _next_iterate(newton: _Newton, settings: SolverSettings):
@@ -309,18 +314,33 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     valid = jnp.ones(size, bool) if valid is None else valid
     order = jnp.argsort(~valid, stable=True)
     count = jnp.sum(valid)
-    z, coarse_steps = z0, 0
     # (the coarse settings integrate the same flows: they differ in tolerances alone)
     modes = jax.vmap(lambda q: flow(q, settings))(p)
-    if settings.coarse() is not settings:
-        coarse, coarse_steps = _newton_phase(z0, p, modes, settings.coarse(), order, count,
-                                             slots, settings.coarse_residual)
-        z = jax.vmap(lambda last: _next_iterate(last, settings))(coarse)
-    newton, newton_steps = _newton_phase(z, p, modes, settings, order, count, slots,
-                                         settings.chord_residual)
+    coarse = settings.coarse()
+    if coarse is settings:
+        newton, newton_steps = _newton_phase(z0, p, modes, settings, order, count, slots,
+                                             settings.chord_residual)
+    else:
+        # The two stages of Newton's iterations, one after the other, as the iterations
+        # of a loop over their tolerances: a compiled program holds one copy of the
+        # variational integration.
+        def stage(carry, tolerances):
+            newton, steps = carry
+            rtol, atol, switch = tolerances
+            staged = eqx.tree_at(lambda s: (s.rtol, s.atol), settings, (rtol, atol))
+            z = jax.vmap(lambda last: _next_iterate(last, settings))(newton)
+            newton, used = _newton_phase(z, p, modes, staged, order, count, slots, switch)
+            return (newton, steps + used), None
+
+        stages = [(coarse.rtol, coarse.atol, settings.coarse_residual),
+                  (settings.rtol, settings.atol, settings.chord_residual)]
+        stages = jax.tree.map(lambda *values: jnp.stack(jnp.broadcast_arrays(*values)),
+                              *stages)
+        (newton, newton_steps), _ = jax.lax.scan(
+            stage, (_not_evaluated(z0), jnp.zeros(size, int)), stages)
     chord, chord_steps = _chord_phase(newton, p, modes, settings, order, count, slots)
     return Shots(chord.best, chord.best_samples, newton.monodromy, chord.best_residual,
-                 coarse_steps + newton_steps + chord_steps)
+                 newton_steps + chord_steps)
 
 
 def verified_samples(z: Float[Array, " states"], p: Float[Array, " params"],
