@@ -244,13 +244,17 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
     sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=settings.max_steps,
                              throw=False)
     x = sol.value
-    residual, ok = fn(x, None)
+
     # the Jacobian in the parameters themselves, for their covariance: defined where a
-    # term is at its bound 0 too, where the unknowns' map (a square, a magnitude) is flat
-    jacobian = jax.jacfwd(lambda values: _device_residuals(
-        scales.device_of(values), motions, forces, force_scale, settings.force)[0])(
-        scales.values(x)) * force_scale
-    return x, residual * force_scale, jacobian, \
+    # term is at its bound 0 too, where the unknowns' map (a square, a magnitude) is flat;
+    # the residuals from the same integrations
+    def residuals(values):
+        residual, ok = _device_residuals(scales.device_of(values), motions, forces,
+                                         force_scale, settings.force)
+        return residual, (residual, ok)
+
+    jacobian, (residual, ok) = jax.jacfwd(residuals, has_aux=True)(scales.values(x))
+    return x, residual * force_scale, jacobian * force_scale, \
         ok & (sol.result == optx.RESULTS.successful), sol.stats["num_steps"]
 
 
