@@ -258,8 +258,8 @@ def test_a_point_whose_integration_ran_out_of_steps_is_retried_implicitly(system
 
 def test_a_near_miss_is_shot_on_from_its_own_state_before_any_fallback(system, monkeypatch):
     # One Newton iteration from the linear steady state falls short (a finite residual):
-    # shot on from its last state with the same settings, it converges, and no fallback
-    # (another program) is tried.
+    # shot on from its last state, integrated more accurately (the same program: its
+    # tolerances are arguments), it converges, and no fallback (another program) is tried.
     attempts = _recorded_attempts(monkeypatch)
     omega = 0.95 * float(system.host_frequency)
     settings = tj.SolverSettings(transient_periods=0, max_newton_steps=1)
@@ -268,12 +268,32 @@ def test_a_near_miss_is_shot_on_from_its_own_state_before_any_fallback(system, m
     (first, cold, missed), *on = attempts
     assert not cold and np.all(np.isfinite(missed))
     assert missed > first.for_system(system).exact_periodicity_tol
-    assert on and all(again == first and warm for again, warm, _ in on)
+    assert on and all(again == first.more_accurate() and warm for again, warm, _ in on)
     assert on[-1][2] < missed
-    # The same steady state as with Newton's iterations enough to converge at once.
-    reference = tj.frequency_response(system, omega, 100.0)
+    # The same steady state as with Newton's iterations enough to converge at once (as
+    # accurately integrated as the continuations).
+    reference = tj.frequency_response(system, omega, 100.0,
+                                      settings=tj.SolverSettings().more_accurate())
     np.testing.assert_allclose(result.x_max, reference.x_max, rtol=1e-9)
     np.testing.assert_allclose(result.y_max, reference.y_max, rtol=1e-8)
+
+
+def test_a_near_miss_stalled_at_the_integration_error_converges_integrated_more_accurately(
+        monkeypatch):
+    # Integrated at rtol 1e-5, the period map errs by more than a periodicity tolerance of
+    # 1e-6 (at 1000 N, by 2e-5 to 5e-4): Newton's iterations stall at a finite residual.
+    # Shot on from there, integrated 100 times more accurately (the same program: its
+    # tolerances are arguments), every point converges, without a fallback.
+    attempts = _recorded_attempts(monkeypatch)
+    smoothed = tj.paper_system(friction_width=None)
+    settings = tj.SolverSettings(rtol=1e-5, atol=1e-5, coarse_rtol=1e-5, periodicity_tol=1e-6)
+    omegas = np.array([0.8, 1.0, 1.2]) * float(smoothed.host_frequency)
+    result = tj.frequency_response(smoothed, omegas, [1000.0], settings=settings)
+    assert bool(np.all(result.converged))
+    (first, _, missed), *on = attempts
+    assert first == settings and np.all(np.isfinite(missed))
+    assert np.all(missed > 10 * settings.periodicity_tol)
+    assert on and all(again == settings.more_accurate() and warm for again, warm, _ in on)
 
 
 def _orbit_at(system, amplitude, omega, directions=()):

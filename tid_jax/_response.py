@@ -237,8 +237,8 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     systems `systems` (one per point: its fields are arrays, entry i for point i; see
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
     (e.g. the orbit of a nearby design). A near miss (a finite periodicity residual above
-    the tolerance) is first shot on from its own last state with the same settings, up to
-    `CONTINUATIONS` times. Points that do not converge are solved again,
+    the tolerance) is first shot on from its own last state, integrated 100 times more
+    accurately (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do not converge are solved again,
     from the equivalent linear steady state (`_period.initial_state`), with each of
     the fallbacks of `settings` fitted to the systems (`SolverSettings.fallbacks`) in turn
     until they do (a point where no period could be integrated skips the explicit
@@ -247,9 +247,10 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out
-    # on an orbit that converges slowly) is shot on from its own last state with the same
-    # settings, and the same compiled program, up to `CONTINUATIONS` times before any
-    # fallback.
+    # on an orbit that converges slowly, or stalled at the integration error of its
+    # period map) is shot on from its own last state, integrated 100 times more
+    # accurately, in the same compiled program (whose tolerances are its arguments), up
+    # to `CONTINUATIONS` times before any fallback.
     for _ in range(CONTINUATIONS):
         near = np.flatnonzero(~out.converged & np.isfinite(out.residual))
         if not near.size:
@@ -257,7 +258,7 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
         part = jax.tree.map(lambda b, near=near: b[near], batch)
         own = out.state[near] / _state_units(part[0], part[1], part[2].host_stiffness,
                                              out.state.shape[-1])
-        out = _keep_better(out, _solve_blocks(settings, part, own), near)
+        out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, own), near)
     for fallback in settings.for_system(batch[2]).fallbacks():
         failed = ~out.converged
         if not (fallback.implicit or fallback.exact_friction):

@@ -104,11 +104,15 @@ class SolverSettings(eqx.Module):
         )
         if self.exact_friction:
             return (persistent.without_coarse(),)
-        accurate = eqx.tree_at(lambda s: (s.rtol, s.atol), persistent,
-                               (self.rtol / 100, self.atol / 100))
-        stiff = eqx.tree_at(lambda s: (s.rtol, s.atol, s.implicit), persistent,
-                            (self.rtol / 10, self.atol / 10, True))
-        return accurate.without_coarse(), stiff.without_coarse()
+        stiff = eqx.tree_at(lambda s: s.implicit, persistent.more_accurate(10), True)
+        return persistent.more_accurate(100).without_coarse(), stiff.without_coarse()
+
+    def more_accurate(self, factor: float = 100.0) -> "SolverSettings":
+        """These settings integrating `factor` times more accurately (`rtol`, `atol`): for
+        Newton's iterations that stall where the integration error of the period map
+        exceeds `periodicity_tol`."""
+        return eqx.tree_at(lambda s: (s.rtol, s.atol), self,
+                           (self.rtol / factor, self.atol / factor))
 
     def coarse(self) -> "SolverSettings":
         """These settings with the coarse integration tolerances (`coarse_rtol`, atol in
