@@ -238,12 +238,13 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
     (e.g. the orbit of a nearby design). A near miss (a finite periodicity residual above
     the tolerance) is first shot on from its own last state, integrated 100 times more
-    accurately (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do not converge are solved again,
-    from the equivalent linear steady state (`_period.initial_state`), with each of
-    the fallbacks of `settings` fitted to the systems (`SolverSettings.fallbacks`) in turn
-    until they do (a point where no period could be integrated skips the explicit
-    integrations); the best attempt is kept. Each block of
-    the batch is sharded over all JAX devices (`sharded_batch`). The solutions are NumPy arrays."""
+    accurately (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do
+    not converge are solved again, from the equivalent linear steady state
+    (`_period.initial_state`), with each of the fallbacks of `settings` fitted to the
+    systems (`SolverSettings.fallbacks`) in turn until they do (a point where no period
+    could be integrated skips the explicit integrations); the best attempt is kept. Each
+    block of the batch is sharded over all JAX devices (`sharded_batch`). The solutions are
+    NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out

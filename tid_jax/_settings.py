@@ -133,9 +133,8 @@ class SolverSettings(eqx.Module):
         exact friction, whose period map has no integration error, keeps its own."""
         if self.exact_friction:
             return self
-        return eqx.tree_at(lambda s: (s.rtol, s.atol, s.periodicity_tol), self,
-                           (self.rtol / factor, self.atol / factor,
-                            self.periodicity_tol / factor))
+        return eqx.tree_at(lambda s: s.periodicity_tol, self.more_accurate(factor),
+                           self.periodicity_tol / factor)
 
     def with_array_tolerances(self) -> "SolverSettings":
         """These settings with their tolerances and Newton iterations as NumPy arrays:
