@@ -33,7 +33,6 @@ def _peaks(system, amplitude, band):
     return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
 
 
-
 # --- sensitivities ---------------------------------------------------------------------
 
 

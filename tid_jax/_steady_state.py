@@ -316,28 +316,24 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     count = jnp.sum(valid)
     # (the coarse settings integrate the same flows: they differ in tolerances alone)
     modes = jax.vmap(lambda q: flow(q, settings))(p)
+    # Newton's stages, one after the other, as the iterations of a loop over their
+    # tolerances: a compiled program holds one copy of the variational integration.
+    stages = [(settings.rtol, settings.atol, settings.chord_residual)]
     coarse = settings.coarse()
-    if coarse is settings:
-        newton, newton_steps = _newton_phase(z0, p, modes, settings, order, count, slots,
-                                             settings.chord_residual)
-    else:
-        # The two stages of Newton's iterations, one after the other, as the iterations
-        # of a loop over their tolerances: a compiled program holds one copy of the
-        # variational integration.
-        def stage(carry, tolerances):
-            newton, steps = carry
-            rtol, atol, switch = tolerances
-            staged = eqx.tree_at(lambda s: (s.rtol, s.atol), settings, (rtol, atol))
-            z = jax.vmap(lambda last: _next_iterate(last, settings))(newton)
-            newton, used = _newton_phase(z, p, modes, staged, order, count, slots, switch)
-            return (newton, steps + used), None
+    if coarse is not settings:
+        stages.insert(0, (coarse.rtol, coarse.atol, settings.coarse_residual))
 
-        stages = [(coarse.rtol, coarse.atol, settings.coarse_residual),
-                  (settings.rtol, settings.atol, settings.chord_residual)]
-        stages = jax.tree.map(lambda *values: jnp.stack(jnp.broadcast_arrays(*values)),
-                              *stages)
-        (newton, newton_steps), _ = jax.lax.scan(
-            stage, (_not_evaluated(z0), jnp.zeros(size, int)), stages)
+    def stage(carry, tolerances):
+        newton, steps = carry
+        rtol, atol, switch = tolerances
+        staged = eqx.tree_at(lambda s: (s.rtol, s.atol), settings, (rtol, atol))
+        z = jax.vmap(lambda last: _next_iterate(last, settings))(newton)
+        newton, used = _newton_phase(z, p, modes, staged, order, count, slots, switch)
+        return (newton, steps + used), None
+
+    stages = jax.tree.map(lambda *values: jnp.stack(jnp.broadcast_arrays(*values)), *stages)
+    (newton, newton_steps), _ = jax.lax.scan(
+        stage, (_not_evaluated(z0), jnp.zeros(size, int)), stages)
     chord, chord_steps = _chord_phase(newton, p, modes, settings, order, count, slots)
     return Shots(chord.best, chord.best_samples, newton.monodromy, chord.best_residual,
                  newton_steps + chord_steps)
