@@ -214,9 +214,6 @@ def test_unconverged_point_is_flagged_and_retried(system):
     assert bool(result.converged)
 
 
-# Too few integration steps for any orbit of the paper's system (explicit ones, at least):
-# one compiled program (of `peak_response`) for its tests of a failed integration.
-STARVED = tj.SolverSettings(max_steps=16, transient_periods=0, max_newton_steps=2)
 # Below the slip threshold (about 23 N) the terminal sticks, where the smoothed friction
 # is stiff: at a width of 1e-6 m/s, no period of the stuck orbit is integrated within the
 # explicit steps allowed (the default limit: the compiled programs of the other tests of
@@ -369,11 +366,34 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
                                                          rel=1e-5)
 
 
-def test_peak_over_a_band_with_a_failed_orbit_is_nan_not_a_number(system):
-    # An integration that runs out of steps leaves an orbit unconverged: the differentiable
-    # peak over frequency reports that band's peak as NaN, never as a finite number.
-    band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
-    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=STARVED)))
+# A band for `peak_response` (as multiples of the host frequency): that of `test_retune`'s
+# derivative-free search, whose compiled program of exact friction these tests share.
+PEAK_BAND = np.linspace(0.8, 1.2, 41)
+
+
+def test_peak_over_a_band_with_an_unconverged_orbit_is_nan_not_a_number():
+    # An orbit that was not found leaves the differentiable peak over frequency NaN, never
+    # a finite number: with exact friction, one Newton iteration from the linear steady
+    # state does not reach the stick-slip orbits at 100 N.
+    paper = tj.paper_system()
+    band = PEAK_BAND * float(paper.host_frequency)
+    once = tj.SolverSettings(max_newton_steps=1)
+    assert np.isnan(float(tj.peak_response(paper, 100.0, band, settings=once)))
+    assert np.isfinite(float(tj.peak_response(paper, 100.0, band)))
+
+
+def test_an_orbit_whose_integration_ran_out_of_steps_is_not_converged(system):
+    # The single orbits of `peak_response`'s sweep (`point_response`), at the stiff stuck
+    # point: the explicit steps ran out; not converged, the peaks inf (and the band's
+    # peak NaN, above).
+    from tid_jax._response import point_response
+
+    stiff = system.replace(friction_width=STIFF_WIDTH)
+    orbit, x_max, y_max = jax.jit(
+        lambda omega: point_response(stiff, omega, STUCK, tj.SolverSettings()))(
+        0.95 * float(system.host_frequency))
+    assert not bool(orbit.converged) and np.isinf(float(orbit.residual))
+    assert np.isposinf(float(x_max)) and np.isposinf(float(y_max))
 
 
 def test_the_peaks_programs_serve_any_number_of_lanes():
@@ -399,24 +419,34 @@ def test_the_peaks_programs_serve_any_number_of_lanes():
     assert new[0] <= 1 and new[1] <= 2 and new[2] <= 1 and new[3] <= 1
 
 
-def test_peak_response_is_compiled_once_for_every_amplitude(system, monkeypatch):
-    # The amplitude, given as a Python number, is an argument of the compiled program, not
-    # a constant of it: later amplitudes run the program of the first, traced at most once
-    # (the band and settings of the test above, whose program it may find compiled).
+def test_peak_response_is_compiled_once_for_every_amplitude_and_tolerance(monkeypatch):
+    # The amplitude, given as a Python number, the system's fields, whether made from
+    # Python or NumPy numbers, and the solver's tolerances and Newton iterations are
+    # arguments of the compiled program, not constants of it: later ones run the program
+    # of the first, traced at most once.
+    from tid_jax import _band
+
     traces = []
-    sweep = tj._band.sweep
+    sweep = _band.sweep
 
     def traced_sweep(*args, **kwargs):  # runs once per tracing of the program
         traces.append(1)
         return sweep(*args, **kwargs)
 
-    monkeypatch.setattr(tj._band, "sweep", traced_sweep)
-    band = np.linspace(0.9, 1.1, 5) * float(system.host_frequency)
-    assert np.isnan(float(tj.peak_response(system, 100.0, band, settings=STARVED)))
+    monkeypatch.setattr(_band, "sweep", traced_sweep)
+    paper = tj.paper_system()
+    band = PEAK_BAND * float(paper.host_frequency)
+    peaks = [float(tj.peak_response(paper, amplitude, band)) for amplitude in (100.0, 150.0)]
     first = len(traces)
-    for amplitude in (150.0, 200.0):
-        assert np.isnan(float(tj.peak_response(system, amplitude, band, settings=STARVED)))
+    peaks.append(float(tj.peak_response(paper, 200.0, band)))
+    tight = tj.SolverSettings(exact_periodicity_tol=1e-13, max_newton_steps=20)
+    assert float(tj.peak_response(paper, 200.0, band, settings=tight)) == pytest.approx(
+        peaks[-1], rel=1e-8)
+    stiffer = paper.replace(tid_stiffness=np.float64(1.01) * float(paper.tid_stiffness),
+                            inertance=np.int64(75))
+    assert np.isfinite(float(tj.peak_response(stiffer, 200.0, band)))
     assert len(traces) == first
+    assert np.all(np.diff(peaks) > 0)
 
 
 def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omegas, nonlinear):

@@ -314,8 +314,10 @@ def peak_response(
     # An array, traced by the compiled program: a Python number would be one of its
     # static arguments, compiled anew for every amplitude.
     amplitude = jnp.asarray(amplitude, band.dtype)
+    # (its tolerances too: one program for any of their values)
     return _peak_response(system, amplitude, band,
-                          response if isinstance(response, str) else responses, settings)
+                          response if isinstance(response, str) else responses,
+                          settings.with_array_tolerances())
 
 
 @compiled(options=compiler_options)

@@ -1,5 +1,7 @@
 """The numerical settings of the steady-state solver, with their defaults."""
 
+import functools as ft
+
 import equinox as eqx
 import numpy as np
 
@@ -140,12 +142,12 @@ class SolverSettings(eqx.Module):
         """These settings with their tolerances and Newton iterations as NumPy arrays:
         a compiled program takes them as arguments, so that one program serves any of
         their values (the tighter settings of a polish, say); `coarse_rtol` None where
-        there are no coarse Newton iterations (`coarse`)."""
-        coarse = self.coarse() is not self
-        names = _ARRAY_FIELDS if coarse else _ARRAY_FIELDS[:-1]
-        out = eqx.tree_at(lambda s: tuple(getattr(s, name) for name in names), self,
-                          tuple(np.asarray(getattr(self, name)) for name in names))
-        return out if coarse else eqx.tree_at(lambda s: s.coarse_rtol, out, None)
+        there are no coarse Newton iterations (`coarse`). Equal settings give the same
+        object (made once: the entry points ask for it on every call)."""
+        try:
+            return _with_array_tolerances(self)
+        except TypeError:  # (unhashable: some of them arrays already)
+            return _with_array_tolerances.__wrapped__(self)
 
     def without_coarse(self) -> "SolverSettings":
         """These settings with every Newton iteration of a batch at `rtol`."""
@@ -178,3 +180,12 @@ class SolverSettings(eqx.Module):
             )
         return eqx.tree_at(lambda s: (s.exact_friction, s.periodicity_tol), self,
                            (True, self.exact_periodicity_tol))
+
+
+@ft.lru_cache(maxsize=64)
+def _with_array_tolerances(settings: SolverSettings) -> SolverSettings:
+    coarse = settings.coarse() is not settings
+    names = _ARRAY_FIELDS if coarse else _ARRAY_FIELDS[:-1]
+    out = eqx.tree_at(lambda s: tuple(getattr(s, name) for name in names), settings,
+                      tuple(np.asarray(getattr(settings, name)) for name in names))
+    return out if coarse else eqx.tree_at(lambda s: s.coarse_rtol, out, None)

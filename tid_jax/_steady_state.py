@@ -460,22 +460,30 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
     return _Periodic(z, samples, last.monodromy, None, None), residual, steps
 
 
-@ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _with_orbit_derivatives(settings, directions, orbit, *p):
+def _with_orbit_derivatives(settings: SolverSettings, directions, orbit, *p):
     """Identity on a converged `orbit`; its JVP is the implicit derivative of the orbit
     with respect to the parameters `p`, using the Jacobians that `_shoot` formed with
-    respect to `p[i]`, `i` in `directions`, where it can."""
-    del p
+    respect to `p[i]`, `i` in `directions`, where it can. The settings' arrays (their
+    tolerances in a compiled program that takes them as arguments:
+    `SolverSettings.with_array_tolerances`) pass as inputs, never differentiated."""
+    arrays, static = eqx.partition(settings, eqx.is_array)
+    return _orbit_identity(static, directions, arrays, orbit, *p)
+
+
+@ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _orbit_identity(static, directions, arrays, orbit, *p):
+    del static, directions, arrays, p
     return orbit
 
 
-def _orbit_jvp(settings, directions, primals, tangents):
+def _orbit_jvp(static, directions, primals, tangents):
     # z* = Phi_T(z*, p) gives dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp, and the samples follow by
     # the chain rule. Only parameters with non-zero tangents are differentiated, and every
     # Jacobian is formed from primals alone: the tangent map is an explicit matrix product,
     # which reverse mode can transpose.
-    orbit, *p = primals
-    _, *p_dot = tangents
+    arrays, orbit, *p = primals
+    _, _, *p_dot = tangents
+    settings = eqx.combine(arrays, static)
     active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
     tangent_out = jax.tree.map(jnp.zeros_like, orbit)
     if not active:
@@ -500,7 +508,7 @@ def _orbit_jvp(settings, directions, primals, tangents):
     return orbit, tangent_out
 
 
-_with_orbit_derivatives.defjvp(_orbit_jvp, symbolic_zeros=True)
+_orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
 
 
 def solve_orbit(

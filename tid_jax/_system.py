@@ -86,10 +86,10 @@ def _as_float_array(name: str, value, allowed: str) -> Array:
     if isinstance(value, jax.core.Tracer):
         return value
     check_values(name, value, allowed)
-    array = jnp.asarray(value)
-    if not jnp.issubdtype(array.dtype, jnp.floating):
-        array = array.astype(jnp.result_type(float))
-    return array
+    # One dtype (not weakly typed) whatever the value given: a Python float, a NumPy
+    # scalar, an integer. The compiled programs that take a system are keyed by its
+    # arrays' types, so that systems made either way share them.
+    return jnp.asarray(value, dtype=jnp.result_type(float))
 
 
 def _is_compliant(stiffness) -> bool:
