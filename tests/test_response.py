@@ -424,7 +424,7 @@ def test_peak_response_is_compiled_once_for_every_amplitude_and_tolerance(monkey
     # The amplitude, given as a Python number, the system's fields, whether made from
     # Python or NumPy numbers, and the solver's tolerances and Newton iterations are
     # arguments of the compiled program, not constants of it: later ones run the program
-    # of the first, traced at most once.
+    # of the first, traced at most once; so do settings fitted to the system beforehand.
     from tid_jax import _band
 
     traces = []
@@ -446,6 +446,8 @@ def test_peak_response_is_compiled_once_for_every_amplitude_and_tolerance(monkey
     stiffer = paper.replace(tid_stiffness=np.float64(1.01) * float(paper.tid_stiffness),
                             inertance=np.int64(75))
     assert np.isfinite(float(tj.peak_response(stiffer, 200.0, band)))
+    fitted = tj.SolverSettings().for_system(paper)
+    assert float(tj.peak_response(paper, 200.0, band, settings=fitted)) == peaks[-1]
     assert len(traces) == first
     assert np.all(np.diff(peaks) > 0)
 

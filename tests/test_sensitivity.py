@@ -82,8 +82,7 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     from tid_jax._band import sweep
     from tid_jax._design import _TANGENT_CANDIDATES, Context, _changed_system, _log_candidates
 
-    # (the default settings, as `sensitivities` passes them: the kernel's compiled program
-    # is theirs)
+    # (the default settings, as `sensitivities` passes them)
     settings = tj.SolverSettings()
     ctx = Context(system, band, settings, locate=False)
     k, c = float(system.tid_stiffness), float(system.tid_damping)

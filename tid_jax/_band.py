@@ -317,7 +317,7 @@ def peak_response(
     # (its tolerances too: one program for any of their values)
     return _peak_response(system, amplitude, band,
                           response if isinstance(response, str) else responses,
-                          settings.with_array_tolerances())
+                          settings.with_array_tolerances(system))
 
 
 @compiled(options=compiler_options)

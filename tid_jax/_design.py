@@ -211,7 +211,7 @@ def _kernel_arguments(system, thetas, scales, ratio_grid, settings, grids, locat
     NumPy arrays: placed on the device by the call (`_cache.compiled`), with no program
     of their own."""
     return (system, np.asarray(thetas), np.asarray(scales), np.asarray(ratio_grid),
-            settings.with_array_tolerances(), tuple(np.asarray(a) for a in grids),
+            settings.with_array_tolerances(system), tuple(np.asarray(a) for a in grids),
             tuple(np.asarray(a) for a in located))
 
 

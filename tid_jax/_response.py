@@ -219,7 +219,7 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     if warm is None:
         warm = np.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
     outs = []
-    arrays = settings.with_array_tolerances()  # one program for any of their values
+    arrays = settings.with_array_tolerances(batch[2])  # one program for any of their values
     for start, stop, size in _block_sizes(count):
         index = np.minimum(np.arange(start, start + size), stop - 1)  # repeat the last point
         valid = np.arange(start, start + size) < stop

@@ -1,6 +1,7 @@
 """The numerical settings of the steady-state solver, with their defaults."""
 
 import functools as ft
+from typing import NamedTuple
 
 import equinox as eqx
 import numpy as np
@@ -138,16 +139,19 @@ class SolverSettings(eqx.Module):
         return eqx.tree_at(lambda s: s.periodicity_tol, self.more_accurate(factor),
                            self.periodicity_tol / factor)
 
-    def with_array_tolerances(self) -> "SolverSettings":
-        """These settings with their tolerances and Newton iterations as NumPy arrays:
-        a compiled program takes them as arguments, so that one program serves any of
-        their values (the tighter settings of a polish, say); `coarse_rtol` None where
-        there are no coarse Newton iterations (`coarse`). Equal settings give the same
-        object (made once: the entry points ask for it on every call)."""
+    def with_array_tolerances(self, system) -> "SolverSettings":
+        """These settings as the compiled programs take them: fitted to the model of
+        `system` (`for_system`), so that settings given fitted or not share a program,
+        with their tolerances and Newton iterations as NumPy arrays, the programs'
+        arguments, so that one program serves any of their values (the tighter settings
+        of a polish, say); `coarse_rtol` None where there are no coarse Newton iterations
+        (`coarse`). Equal settings for equal models give the same object (made once: the
+        entry points ask for it on every call)."""
+        model = _Model(system.compliant, system.exact_friction)
         try:
-            return _with_array_tolerances(self)
+            return _with_array_tolerances(self, model)
         except TypeError:  # (unhashable: some of them arrays already)
-            return _with_array_tolerances.__wrapped__(self)
+            return _with_array_tolerances.__wrapped__(self, model)
 
     def without_coarse(self) -> "SolverSettings":
         """These settings with every Newton iteration of a batch at `rtol`."""
@@ -182,8 +186,16 @@ class SolverSettings(eqx.Module):
                            (True, self.exact_periodicity_tol))
 
 
+class _Model(NamedTuple):
+    """What `SolverSettings.for_system` reads of a system."""
+
+    compliant: bool
+    exact_friction: bool
+
+
 @ft.lru_cache(maxsize=64)
-def _with_array_tolerances(settings: SolverSettings) -> SolverSettings:
+def _with_array_tolerances(settings: SolverSettings, model: _Model) -> SolverSettings:
+    settings = settings.for_system(model)
     coarse = settings.coarse() is not settings
     names = _ARRAY_FIELDS if coarse else _ARRAY_FIELDS[:-1]
     out = eqx.tree_at(lambda s: tuple(getattr(s, name) for name in names), settings,
