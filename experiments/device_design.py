@@ -15,6 +15,7 @@ built) and the retuned k, c, peak and stroke. Writes device_design.csv and
 device_design.png to --out (default docs/figures/) and prints the table."""
 
 import argparse
+import os
 from pathlib import Path
 
 import jax
@@ -39,6 +40,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=Path("docs/figures"))
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     out = parser.parse_args().out

@@ -12,6 +12,7 @@ Writes to --out (default docs/figures/) and prints the tables."""
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import jax
@@ -39,6 +40,9 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

@@ -8,6 +8,7 @@ Writes fig14_substructuring.csv and .png to --out (default docs/figures/)."""
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import jax
@@ -28,6 +29,9 @@ def main() -> None:
     parser.add_argument("--n-frequencies", type=int, default=41)
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

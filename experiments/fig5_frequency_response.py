@@ -6,6 +6,7 @@ Writes fig5_frequency_response.csv and .png to --out (default docs/figures/)."""
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import jax
@@ -18,6 +19,9 @@ def main() -> None:
     parser.add_argument("--n-frequencies", type=int, default=151)
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

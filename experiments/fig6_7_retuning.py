@@ -9,6 +9,7 @@ Writes fig7_retuned_parameters.csv/.png and fig6_retuned_response.csv/.png to --
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import jax
@@ -34,6 +35,9 @@ def main() -> None:
     )
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

@@ -8,6 +8,7 @@ Writes fig8_peak_vs_amplitude.csv and .png to --out (default docs/figures/). Wit
 
 import argparse
 import csv
+import os
 from pathlib import Path
 
 import jax
@@ -30,6 +31,9 @@ def main() -> None:
     )
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

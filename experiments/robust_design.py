@@ -10,6 +10,7 @@ Writes robust_design.csv (per amplitude), robust_design_summary.csv (per design)
 robust_design.png to --out (default docs/figures/)."""
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -34,6 +35,9 @@ def main() -> None:
                         help=f"N (default: the paper's; must include {RETUNED_FOR:g})")
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

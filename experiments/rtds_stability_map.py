@@ -10,6 +10,7 @@ Writes rtds_stability_map.csv and .png to --out (default docs/figures/)."""
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import jax
@@ -35,6 +36,9 @@ def main() -> None:
     parser.add_argument("--delay-step-ms", type=float, default=2.0)
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

@@ -7,6 +7,7 @@ optimum of every amplitude from one batched `best_tunings`).
 Writes sensitivity_vs_amplitude.csv and .png to --out (default docs/figures/)."""
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -21,6 +22,9 @@ def main() -> None:
     parser.add_argument("--amplitudes", type=float, nargs="+", help="N (default: the paper's)")
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
+    # equinox's run-time checks as NaN (read when the library imports equinox): programs
+    # holding them are then kept in the compilation cache; every solve reports its status
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off

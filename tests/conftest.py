@@ -2,15 +2,19 @@ import os
 import shutil
 import tempfile
 
-import jax
-import numpy as np
-import pytest
+# Equinox's run-time checks return NaN rather than raise (its documented switch, read when
+# it is imported), as in the `tid-jax` command: programs holding them can then be kept in
+# the compilation cache, and every solve reports its own status.
+os.environ.setdefault("EQX_ON_ERROR", "nan")
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 # Before the package is imported, so that nothing it makes at import is single precision.
 jax.config.update("jax_enable_x64", True)
 
 import tid_jax as tj  # noqa: E402
-from tid_jax._cache import enable_compilation_cache  # noqa: E402
 
 # Compiled programs are kept on disk for the whole test session, as the command line keeps
 # them for a user: in a folder of this session (made by the first process, shared by the
@@ -20,45 +24,15 @@ _session_cache = None
 if "TID_JAX_CACHE_DIR" not in os.environ:
     _session_cache = tempfile.mkdtemp(prefix="tid_jax_test_cache_")
     os.environ["TID_JAX_CACHE_DIR"] = _session_cache
-enable_compilation_cache()
-# The test workers (pytest-xdist) already take every core: no worker processes of the
-# library's own (`_workers`), unless a test asks for them.
+tj.enable_compilation_cache()
+# The test workers (pytest-xdist) already take every core: the commands run in one process
+# each, unless a test asks for more.
 os.environ.setdefault("TID_JAX_WORKERS", "1")
 
 
 def pytest_sessionfinish(session):
     if _session_cache is not None:
         shutil.rmtree(_session_cache, ignore_errors=True)
-
-
-# The modules, slowest first, as measured on two cores (each compiles programs of its
-# own, integrates a reference or starts processes of its own): the parallel workers
-# (pytest-xdist, one file per worker at a time) take the next in turn, and finish
-# together. Except that `test_coulomb` goes ahead of its turn: it compiles the
-# sensitivity kernel of exact friction on the default band that `test_sensitivity` then
-# loads (run side by side, both compiled it). The modules not named, each a few seconds,
-# follow in their usual order.
-SLOWEST_FIRST = (
-    "test_device.py",
-    "test_retune.py",
-    "test_coulomb.py",
-    "test_identify.py",
-    "test_response.py",
-    "test_reach.py",
-    "test_sensitivity.py",
-    "test_gradients.py",
-    "test_workers.py",
-    "test_cli.py",
-    "test_robust.py",
-    "test_sharding.py",
-    "test_substructuring.py",
-    "test_cache.py",
-)
-
-
-def pytest_collection_modifyitems(items):
-    rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
 @pytest.fixture(scope="module")

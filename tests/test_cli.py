@@ -18,7 +18,9 @@ import pytest
 
 import tid_jax as tj
 from tid_jax import _io
-from tid_jax.cli import FRF_COLUMNS, RETUNE_COLUMNS, main
+from tid_jax.cli import main
+from tid_jax.cli.frf import FRF_COLUMNS
+from tid_jax.cli.retune import RETUNE_COLUMNS
 
 FRF_ARGS = ["frf", "--amplitudes", "200", "600", "--band-hz", "3", "5", "--n-frequencies", "5"]
 FRF_FILES = ("frf.csv", "frf.json", "frf.png", "frf_config.toml")

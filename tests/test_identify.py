@@ -12,10 +12,8 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax import _identify, _workers
+from tid_jax import _identify
 from tid_jax._device import ForceSettings, Motion, friction_width
-from tid_jax._launch import WORKERS_ENVIRONMENT_VARIABLE
-from tid_jax._workers import run_lanes
 from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
 
 try:
@@ -137,29 +135,24 @@ class _Captured(Exception):
     pass
 
 
-def test_the_start_scan_is_shared_with_a_worker_as_computed_here(monkeypatch):
-    """The compliant model's scan of starting values, dealt out to this process and a
-    worker process: every candidate's sum of squares is the one this process computes
-    alone (the same compiled program, its arguments sent to the worker)."""
+def test_the_start_scan_over_processes_is_the_scan_here():
+    """The compliant model's scan of starting values, mapped over two worker processes
+    (`ProcessMap`): every candidate's sum of squares is the one this process computes
+    alone (the same compiled program, its arguments sent to the workers)."""
     scans = []
 
-    def capture(function, tasks, **options):
+    def capture(function, tasks):
         scans.append((function, tasks))
         raise _Captured
 
-    monkeypatch.setattr(_identify, "run_lanes", capture)
     with pytest.raises(_Captured):
-        tj.identify_inerter(_records(COMPLIANT_DEVICE), model="compliant")
+        tj.identify_inerter(_records(COMPLIANT_DEVICE), model="compliant", map_lanes=capture)
     [(function, tasks)] = scans
     assert len(tasks) >= 3  # the series stiffness's candidates, a few to a task
     tasks = tasks[:3]
     here = [function(*task) for task in tasks]
-    monkeypatch.setenv(WORKERS_ENVIRONMENT_VARIABLE, "2")
-    try:
-        shared = run_lanes(function, tasks, compiles=True)
-        assert len(_workers._pool) == 1  # a worker was started beside this process
-    finally:
-        _workers._stop_workers()
+    with tj.ProcessMap(2) as pool:
+        shared = pool(function, tasks)
     for mine, theirs in zip(here, shared, strict=True):
         assert np.all(np.isfinite(mine))
         np.testing.assert_array_equal(theirs, mine)
@@ -169,27 +162,27 @@ def test_the_scan_starts_from_the_first_of_the_lowest_finite_costs(monkeypatch):
     """A candidate whose sum of squares is NaN or infinite (a failed integration) is never
     the start; of equal costs, the first in the scan's order is."""
     costs = [np.array([np.nan, 3.0, np.inf, 2.0]), np.array([2.0, np.nan])]
-    monkeypatch.setattr(_identify, "run_lanes", lambda function, tasks, **options: costs)
     monkeypatch.setattr(_identify, "_SCAN", {"series_stiffness": np.arange(1.0, 6.0)})
     parameters = _identify.MODEL_PARAMETERS["compliant"]
     typical = dict.fromkeys(parameters, 1.0)
     values = np.array([75.0, 20.0, 300.0, 10.0])  # the fitted value, a sixth candidate
     motion = Motion.from_samples(np.arange(4.0), np.arange(4.0) ** 2)
     start = _identify._scanned_start(parameters, values, [motion], [np.zeros(4)], 1.0,
-                                     _identify.IdentifySettings(), typical, 1e9, 0.0)
+                                     _identify.IdentifySettings(), typical, 1e9, 0.0,
+                                     lambda function, tasks: costs)
     np.testing.assert_array_equal(start, [75.0, 20.0, 300.0, 4.0])
 
 
-def test_the_scan_keeps_the_start_where_no_series_stiffness_is_resolved(monkeypatch):
+def test_the_scan_keeps_the_start_where_no_series_stiffness_is_resolved():
     """Records sampled too coarsely for any scanned series stiffness (all above the
     limit): nothing is tried and the start stays."""
-    monkeypatch.setattr(_identify, "run_lanes", lambda function, tasks, **options: [])
     parameters = _identify.MODEL_PARAMETERS["backlash"]
     values = np.array([75.0, 20.0, 300.0, 10.0, 1e-3])
     motion = Motion.from_samples(np.arange(4.0), np.arange(4.0) ** 2)
     start = _identify._scanned_start(parameters, values, [motion], [np.zeros(4)], 1.0,
                                      _identify.IdentifySettings(),
-                                     dict.fromkeys(parameters, 1.0), 1e-3, 0.0)
+                                     dict.fromkeys(parameters, 1.0), 1e-3, 0.0,
+                                     lambda function, tasks: [])
     np.testing.assert_array_equal(start, values)
 
 

@@ -74,33 +74,6 @@ def test_exact_h_infinity_tuning_of_damped_host(system, band):
     assert float(again.x_peak[0]) / _static(system, 1000.0) == pytest.approx(peak, abs=1e-5)
 
 
-def test_a_later_run_checks_in_the_lanes_of_the_first(system, band, monkeypatch):
-    # A first run, which finds the stages' program not kept on disk, checks the initial
-    # tuning while a worker compiles that program; a later run checks it after the
-    # stages. Both check it in lanes of the shapes of the retuned designs' check, so that
-    # the later run finds every program of the check compiled by the first.
-    from tid_jax import _retune
-
-    linear = system.replace(friction_force=0.0)
-    lanes, shapes, results = [], [], []
-    check = _retune._check_lanes
-
-    def recorded(systems, amplitudes, omegas, warm, settings):
-        lanes.append((amplitudes.shape, omegas.shape, warm.shape))
-        return check(systems, amplitudes, omegas, warm, settings)
-
-    monkeypatch.setattr(_retune, "_check_lanes", recorded)
-    for kept in (False, True):
-        monkeypatch.setattr(_retune._optimise_stage, "is_kept", lambda *_, kept=kept: kept)
-        results.append(tj.retune(linear, [1000.0], omegas=band, tol=1e-5))
-        shapes.append(set(lanes))
-        lanes.clear()
-    assert len(shapes[0]) == 1 and shapes[1] == shapes[0]
-    for name in ("x_peak", "x_peak_initial", "tid_stiffness", "status"):
-        np.testing.assert_allclose(getattr(results[1], name), getattr(results[0], name),
-                                   rtol=1e-12, err_msg=name)
-
-
 @pytest.fixture(scope="module")
 def nonlinear(system, band):
     # The twelve paper amplitudes, 100 to 3000 N, in one batched call.
@@ -318,30 +291,14 @@ def test_check_grid_orbits_interpolate_between_design_points():
         np.testing.assert_allclose(np.asarray(z[0]),
                                    np.stack([fine, 2 * fine, -fine, fine + 1], -1))
 
-def test_worker_processes_retune_as_this_process_alone(system, band, monkeypatch):
-    # The amplitudes dealt out to this process and a worker process (which loads the same
-    # compiled programs from the cache): the same designs as one process optimising them
-    # one after another.
-    from tid_jax import _retune
-
-    warm_ups = []
-
-    def start_workers(lanes, warm_up=None, *, serves=None):
-        warm_ups.append((warm_up, serves))
-        return tj._workers.start_workers(lanes, warm_up, serves=serves)
-
-    monkeypatch.setattr(_retune, "start_workers", start_workers)
+def test_worker_processes_retune_as_this_process_alone(system, band):
+    # The amplitudes mapped over two worker processes (which load the same compiled
+    # programs from the cache): the same designs as this process optimising them one
+    # after another.
     amplitudes = [300.0, 1500.0, 3000.0]
-    monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "1")
     alone = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
-    monkeypatch.setenv(tj._workers.WORKERS_ENVIRONMENT_VARIABLE, "2")
-    shared = tj.retune(system, amplitudes, omegas=band, tol=1e-5)
-    assert len(tj._workers._pool) == 1
-    # The stages' program, kept by the first retune, is found for the placeholder orbits
-    # of the second: a worker loads it ahead, and the stages do not wait for it (they do
-    # for a worker that compiles it).
-    (function, _), serves = warm_ups[1]
-    assert function is _retune._prepare_stage and serves is None
+    with tj.ProcessMap(2) as pool:
+        shared = tj.retune(system, amplitudes, omegas=band, tol=1e-5, map_lanes=pool)
     for name in ("tid_stiffness", "tid_damping", "x_peak", "iterations", "status"):
         np.testing.assert_allclose(getattr(shared, name), getattr(alone, name), rtol=1e-12,
                                    err_msg=name)

@@ -125,60 +125,6 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
                                        np.asarray(jac)[kept[grid]], rtol=1e-5, atol=1e-9)
 
 
-def test_the_warm_up_compiles_the_one_program_of_the_evaluations(system, band, monkeypatch):
-    # A worker compiles the kernel for placeholder points while this process retunes: it
-    # must be the program that the real points then run (same static arguments, shapes
-    # and dtypes), or the worker compiles in vain.
-    from tid_jax import _design
-
-    asked, keys = [], []
-    monkeypatch.setattr(_design._evaluate_points, "is_kept", lambda *args: False)
-    monkeypatch.setattr(_design, "start_workers", lambda *args, **kwargs: asked.append(
-        (args, kwargs)))
-    for locate in (True, False):
-        asked.clear()
-        ctx = _design.Context(system, band, tj.SolverSettings(), locate=locate)
-        ctx.warm_up(4)
-        [((lanes, (function, task)), kwargs)] = asked
-        assert lanes == 2 and function is _design._prepare_chunk
-        assert kwargs == {"serves": _design._evaluate_chunk}
-        k, c = float(system.tid_stiffness), float(system.tid_damping)
-        z = ctx.cold_states(k, c, [400.0], 1.0)[0]
-        points = [(ctx.theta(k, c, 400.0), 1.0, z)]
-        [real], _ = ctx._tasks(points, ctx._grids(points, ctx.settings), ctx.settings)
-        assert _kernel_key(task) == _kernel_key(real)
-        keys.append(_kernel_key(real))
-    # Points with located peaks and points without share the program.
-    assert keys[0] == keys[1]
-
-
-def test_the_design_kernel_solves_one_sweep(system, band, monkeypatch):
-    # The kernel takes each point's response over the band and its located peaks as
-    # inputs and solves only the derivatives' sweep: each sweep is a copy of the period
-    # map and its Newton shooting in the compiled program.
-    from tid_jax import _design
-
-    sweeps, asked = [], []
-    sweep = _design.sweep
-    monkeypatch.setattr(_design, "sweep", lambda *args: sweeps.append(args) or sweep(*args))
-    monkeypatch.setattr(_design._evaluate_points, "is_kept", lambda *args: False)
-    monkeypatch.setattr(_design, "start_workers", lambda *args, **kwargs: asked.append(args))
-    _design.Context(system, band, tj.SolverSettings(), locate=True).warm_up(3)
-    [(_, (_, task))] = asked
-    system_, thetas, scales, ratio_grid, settings, grids, located = (
-        _design._kernel_arguments(*task))
-    jax.eval_shape(lambda t, g, p: _design._evaluate_points.function(
-        system_, t, scales, ratio_grid, settings, g, p), thetas, grids, located)
-    assert len(sweeps) == 1
-
-
-def _kernel_key(task):
-    """The key of the kernel's program for a task of `_evaluate_chunk`."""
-    from tid_jax import _design
-
-    return _design._evaluate_points._key(_design._kernel_arguments(*task), {})[0]
-
-
 def test_elasticities_obey_scaling_laws(sensitivity):
     # Exact laws of eq. (12), whatever the solver. Multiplying every mass, stiffness,
     # damping and force by s leaves x and y unchanged: the elasticities sum to 0. The

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax.cli import RTDS_COLUMNS, main
+from tid_jax.cli import main
+from tid_jax.cli.rtds import RTDS_COLUMNS
 
 SYSTEM = tj.paper_system(friction_width=None)  # the test needs smoothed friction
 FRICTIONLESS = SYSTEM.replace(friction_force=0.0)

@@ -1,9 +1,8 @@
 """Design of tuned inerter dampers (TIDs) whose inerter has dry friction.
 
 The public API is the names below, each from the module of its idea. They load when
-first used (`import tid_jax` alone imports neither JAX nor the library's modules), so
-that the `tid-jax` command starts its worker processes before it imports them
-(`_launch`).
+first used: `import tid_jax` alone imports neither JAX nor equinox, so that an entry
+point can set their environment first (the `tid-jax` command's `EQX_ON_ERROR`).
 """
 
 import importlib
@@ -17,6 +16,7 @@ _API = {
     "_device": ("ForceSettings", "InerterDevice"),
     "_identify": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
                   "identify_inerter"),
+    "_parallel": ("ProcessMap",),
     "_linear": ("Breakaway", "LinearReceptance", "breakaway_amplitude", "den_hartog",
                 "den_hartog_tuning", "linear_receptance", "paper_system", "stuck_receptance"),
     "_response": ("FrequencyResponse", "frequency_response"),

@@ -16,6 +16,7 @@ from ._band import _band, locate_peaks, sweep
 from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
 from ._linear import den_hartog_tuning
+from ._parallel import map_shares, serial
 from ._peaks import (
     REFINED_PEAKS,
     interpolated,
@@ -35,7 +36,6 @@ from ._retune import (
 )
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem, compiler_options
-from ._workers import run_lanes, run_shares, start_workers
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
@@ -217,14 +217,8 @@ def _kernel_arguments(system, thetas, scales, ratio_grid, settings, grids, locat
 
 def _evaluate_chunk(*task):
     """`_evaluate_points` on one chunk of points, NumPy arrays in and out: a task of
-    `_workers.run_lanes`."""
+    `map_lanes`."""
     return jax.tree.map(np.asarray, _evaluate_points(*_kernel_arguments(*task)))
-
-
-def _prepare_chunk(*task):
-    """`_evaluate_points` for a chunk of the shapes of `task` traced and compiled into
-    the cache, not run: a worker's warm-up for `_evaluate_chunk`."""
-    _evaluate_points.prepare(*_kernel_arguments(*task))
 
 
 @compiled(options=compiler_options)
@@ -295,10 +289,13 @@ class Context:
     frequency, the solver settings, whether the host's peaks are located in continuous
     frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
     the grid's, refined by parabolas) and the reference tuning of the design variables
-    u = (ln(k / k_ref), sqrt(c / c_ref)) (`_retune.design_of_tuning`, unscaled)."""
+    u = (ln(k / k_ref), sqrt(c / c_ref)) (`_retune.design_of_tuning`, unscaled), and how
+    independent lanes are mapped (`map_lanes`, see `_parallel`)."""
 
-    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool):
+    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool,
+                 map_lanes: Callable = serial):
         self.system = system
+        self.map_lanes = map_lanes
         self.locate = locate
         self.settings = settings
         self.omegas = np.asarray(omegas, dtype=float)
@@ -341,30 +338,15 @@ class Context:
                     results[i] = curves
         return results
 
-    def warm_up(self, points: int) -> None:
-        """Where the program of `evaluate` (for `points` points) is not kept on disk, have
-        a worker process compile it while this process goes on (`_workers`): called
-        before a long computation that precedes the first evaluation, a retune."""
-        k, c = float(self.system.tid_stiffness), float(self.system.tid_damping)
-        states = self.settings.for_system(self.system).states
-        n, peaks = self.omegas.size, REFINED_PEAKS
-        placeholder = _Grid(np.ones(n), np.ones(n), np.ones(n, bool), np.zeros((n, states)),
-                            np.zeros(peaks, int), np.ones(peaks), np.ones(peaks),
-                            np.ones(peaks, bool))
-        # (a task of the shapes of every task)
-        (task,), _ = self._tasks([(self.theta(k, c, 1.0), 1.0)], [placeholder], self.settings)
-        if not _evaluate_points.is_kept(*_kernel_arguments(*task)):
-            start_workers(-(-points // _CHUNK), (_prepare_chunk, task), serves=_evaluate_chunk)
-
     def _grids(self, points: Sequence[tuple], settings: SolverSettings) -> list["_Grid"]:
         """The `_Grid` of each `(theta, scale, z_init)` (`_solve_grids`; z_init None at
-        every point: from the linear steady state), the points shared out to this process
-        and its workers (`_workers.run_shares`)."""
+        every point: from the linear steady state), the points shared out over the
+        processes of `map_lanes` (`_parallel.map_shares`)."""
         thetas, scales, z_inits = ([point[i] for point in points] for i in range(3))
         cold = all(z is None for z in z_inits)
         lanes = (np.stack(thetas), np.stack(scales)) + (() if cold else (np.stack(z_inits),))
-        fields = run_shares(_solve_cold_grids if cold else _solve_grids, lanes,
-                            self.system, self.omegas, settings, self.locate)
+        fields = map_shares(self.map_lanes, _solve_cold_grids if cold else _solve_grids,
+                            lanes, self.system, self.omegas, settings, self.locate)
         return [_Grid(*(field[i] for field in fields)) for i in range(len(points))]
 
     def _tasks(self, points: Sequence[tuple], grids: Sequence["_Grid"],
@@ -389,11 +371,11 @@ class Context:
     def _evaluate(self, points: Sequence[tuple], settings: SolverSettings) -> list[_Curves]:
         """`_Curves` at each point with `settings`: the responses over the band of every
         point in one batch (`_grids`), then the derivatives `_CHUNK` points per compiled
-        call, the calls dealt out to this process and its workers (`_workers.run_lanes`)."""
+        call, the calls mapped by `map_lanes`."""
         tasks, sizes = self._tasks(points, self._grids(points, settings), settings)
         results = []
         for used, ((jac_x, jac_y), out) in zip(
-                sizes, run_lanes(_evaluate_chunk, tasks, compiles=True), strict=True):
+                sizes, self.map_lanes(_evaluate_chunk, tasks), strict=True):
             jac_x, jac_y = np.array(jac_x), np.array(jac_y)
             # Entries without derivatives (`_point_curves`) are no candidates: NaN rows.
             jac_x[~out.tangent_x], jac_y[~out.tangent_y] = np.nan, np.nan
@@ -408,15 +390,15 @@ class Context:
         """Scaled orbit states `[lanes, freqs, 4]`, one lane per amplitude: the tuning k
         (N/m), c (N s/m) at that amplitude (N) with the host frequency times `scale` (over
         the band times `scale`), each given once or once per lane; the lanes shared out
-        to this process and its workers (`_solve_cold_grids`, whose `lane_response`
+        over the processes of `map_lanes` (`_solve_cold_grids`, whose `lane_response`
         retries points that fail to converge)."""
         amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
         k, c, scale = (np.broadcast_to(np.asarray(value, dtype=float), amplitudes.shape)
                        for value in (k, c, scale))
         thetas = np.stack([self.theta(k_i, c_i, amplitude)
                            for k_i, c_i, amplitude in zip(k, c, amplitudes, strict=True)])
-        return run_shares(_solve_cold_grids, (thetas, np.asarray(scale)), self.system,
-                          self.omegas, self.settings, False).states
+        return map_shares(self.map_lanes, _solve_cold_grids, (thetas, np.asarray(scale)),
+                          self.system, self.omegas, self.settings, False).states
 
 
 class _Grid(NamedTuple):
@@ -461,7 +443,7 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
 
 
 def _solve_cold_grids(thetas, scales, system, omegas, settings, locate):
-    """`_solve_grids` from the linear steady state (a task of `run_shares`)."""
+    """`_solve_grids` from the linear steady state (a task of `map_shares`)."""
     return _solve_grids(thetas, scales, None, system, omegas, settings, locate)
 
 
@@ -725,6 +707,7 @@ def best_tunings(
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
+    map_lanes: Callable = serial,
 ) -> BestTunings:
     """The best achievable peak host displacement for each scenario (forcing amplitude and
     host frequency scale) over the band scaled with the host frequency. Every scenario
@@ -740,6 +723,7 @@ def best_tunings(
     - `settings`: `SolverSettings` of every steady state.
     - `max_steps`, `tol`, `retune_settings`: the optimiser's, as in `retune`.
     - `progress`: if given, called with a line as each step of the retune ends.
+    - `map_lanes`: how the independent scenarios are mapped (see `retune`).
 
     **Returns:** a `BestTunings` (arrays `[scales, amps]`).
     """
@@ -754,6 +738,7 @@ def best_tunings(
     result = optimal_tunings(
         _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
         max_steps=max_steps, tol=tol, retune_settings=retune_settings, progress=progress,
+        map_lanes=map_lanes,
     )
     # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
     # which the check grid holds at every `check_refinement`-th point.

@@ -32,8 +32,8 @@ from jaxtyping import Array, Bool, Float, Int
 from ._cache import compiled
 from ._checks import check_precision, choice, integer, real_scalar
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
+from ._parallel import serial
 from ._stall import cut_within_tolerance
-from ._workers import run_lanes
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
 # each model the one before and one more term of `InerterDevice`
@@ -288,11 +288,12 @@ _SCAN_TASK = 8  # starting values per task of the processes that share the scan
 
 
 def _scanned_start(parameters, values, motions, forces, force_scale,
-                   settings: IdentifySettings, typical, stiffness_limit, terminal_mass):
+                   settings: IdentifySettings, typical, stiffness_limit, terminal_mass,
+                   map_lanes):
     """`values` with the scanned terms (`_SCAN`) of the model at the best of their
     scanned starting values, tried together (a term fitted before also keeps its value
     as a candidate; no series stiffness above `stiffness_limit`), the others held; the
-    candidates dealt out to this process and its workers (`_workers.run_lanes`)."""
+    candidates mapped a few to a task by `map_lanes`."""
     scanned = [name for name in parameters if name in _SCAN]
     if not scanned:
         return values
@@ -306,12 +307,12 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
         return values  # none to try (records too coarse for any series stiffness)
     trials = np.repeat(values[None], math.prod(c.size for c in candidates), axis=0)
     trials[:, index] = list(itertools.product(*candidates))
-    # the candidates dealt out to this process and its workers, a few to a task
+    # the candidates mapped a few to a task
     shared = jax.tree.map(np.asarray, (np.array([typical[name] for name in parameters]),
                                        terminal_mass, motions, forces, force_scale))
-    costs = np.concatenate(run_lanes(_scan_costs, [
+    costs = np.concatenate(map_lanes(_scan_costs, [
         (trials[start : start + _SCAN_TASK], parameters, *shared, settings.force)
-        for start in range(0, len(trials), _SCAN_TASK)], compiles=True))
+        for start in range(0, len(trials), _SCAN_TASK)]))
     # the first of the lowest finite costs, in the product's order
     costs[~np.isfinite(costs)] = np.inf
     return trials[int(np.argmin(costs))] if np.isfinite(costs).any() else values
@@ -320,7 +321,7 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
 def _scan_costs(trials, parameters, typical, terminal_mass, motions, forces, force_scale,
                 settings: ForceSettings):
     """The sum of squares at each of `trials` (parameter values, the unknowns scaled by
-    their `typical` sizes): a task of `run_lanes` (NumPy arguments)."""
+    their `typical` sizes): a task of `map_lanes` (NumPy arguments)."""
     (typical, terminal_mass, motions, forces, force_scale) = jax.tree.map(
         jnp.asarray, (typical, terminal_mass, motions, forces, force_scale))
     scales = _Scales(parameters, typical, terminal_mass)
@@ -330,14 +331,14 @@ def _scan_costs(trials, parameters, typical, terminal_mass, motions, forces, for
 
 
 def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings, typical,
-         stiffness_limit, terminal_mass):
+         stiffness_limit, terminal_mass, map_lanes):
     """Least squares for `model` from the parameter values `start` (a dict; where a
     term is missing from it, the scanned terms start from a scan)."""
     parameters = MODEL_PARAMETERS[model]
     values = np.array([start.get(name, typical[name]) for name in parameters])
     if any(name not in start for name in parameters):
         values = _scanned_start(parameters, values, motions, forces, force_scale, settings,
-                                typical, stiffness_limit, terminal_mass)
+                                typical, stiffness_limit, terminal_mass, map_lanes)
     # each unknown scaled by its start, or by its typical size where the start is (next
     # to) zero: a term a simpler model fitted at zero can grow again
     scales = np.array([abs(v) if abs(v) > _NEGLIGIBLE * typical[name] else typical[name]
@@ -364,7 +365,8 @@ def _covariance(jacobian, pieces, p):
 
 def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.0,
                      settings: IdentifySettings = IdentifySettings(),
-                     progress: Callable[[str], None] | None = None) -> InerterFit:
+                     progress: Callable[[str], None] | None = None,
+                     map_lanes: Callable = serial) -> InerterFit:
     """Identify the inerter device from test records; the nested models before `model`
     are fitted first and compared with it.
 
@@ -381,6 +383,8 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
       0, the inertance of a rigid model includes it.
     - `settings`: `IdentifySettings`.
     - `progress`: if given, called with a line as each model is fitted.
+    - `map_lanes`: how the scan of starting values is mapped, a few candidates to a task
+      (default: in this process; see `_parallel`).
 
     **Returns:** an `InerterFit` (SI units).
     """
@@ -427,7 +431,7 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
                                                        width), strict=True))
         scales, x, residual, jacobian, ok, steps = _fit(
             name, start, motions, forces, force_scale, settings, typical, stiffness_limit,
-            held_mass)
+            held_mass, map_lanes)
         values = np.asarray(scales.values(x))
         start = dict(zip(parameters, values, strict=True))
         rss = float(np.sum(residual**2))

@@ -20,6 +20,7 @@ from ._checks import (
 )
 from ._dynamics import PARAMETERS, parameters
 from ._linear import breakaway_amplitude, den_hartog_tuning
+from ._parallel import map_shares, serial
 from ._peaks import (
     REFINED_PEAKS,
     bracket,
@@ -30,7 +31,6 @@ from ._peaks import (
     stencil,
     top_peaks,
 )
-from ._period import initial_state
 from ._response import (
     FrequencyResponse,
     _on_host,
@@ -45,7 +45,6 @@ from ._stall import cut_within_tolerance
 from ._status import Outcomes
 from ._steady_state import refined_peak, settled_state
 from ._system import TIDSystem, compiler_options
-from ._workers import run_lanes, run_shares, start_workers
 
 
 class RetuneSettings(eqx.Module):
@@ -301,14 +300,8 @@ def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_st
 def _stage_lanes(lanes, options: dict):
     """One stage (`_optimise_stage`) of the lane `(systems, amplitudes, bands, designs,
     orbits, inverse Hessians)` (NumPy arrays, with a leading axis of one lane), its
-    results as NumPy arrays: a task of `run_lanes`."""
+    results as NumPy arrays: a task of `map_lanes`."""
     return jax.tree.map(np.asarray, _optimise_stage(*_stage_arguments(lanes, options)))
-
-
-def _prepare_stage(lanes, options: dict):
-    """`_optimise_stage` for `_stage_lanes(lanes, options)` compiled, or loaded from the
-    cache, not run: a worker's warm-up for the stages."""
-    _optimise_stage.prepare(*_stage_arguments(lanes, options))
 
 
 def _stage_arguments(lanes, options: dict):
@@ -323,7 +316,7 @@ def _stage_arguments(lanes, options: dict):
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
     """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
-    its `response_peaks`, as NumPy arrays: a task of `run_shares`."""
+    its `response_peaks`, as NumPy arrays: a task of `map_shares`."""
     response = lane_response(systems, amplitudes, omegas, settings, warm)
     return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
 
@@ -480,12 +473,13 @@ def retune(
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
+    map_lanes: Callable = serial,
 ) -> RetuneResult:
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
-    The amplitudes are optimised one after another (each with its frequencies batched; on
-    a CPU with several cores, one per process at a time: `_workers`) by one compiled
+    The amplitudes are optimised one after another (each with its frequencies batched, or
+    spread over processes by `map_lanes`) by one compiled
     program, whatever their number, so that each optimiser stops as soon as it converges;
     the checks are batched over every amplitude and frequency (and sharded over several
     JAX devices). The non-smooth maximum over frequency is replaced by
@@ -531,6 +525,8 @@ def retune(
     - `progress`: if given, called with a one-line message as each of the
       `retune_settings.progress_steps()` steps ends (the initial tuning's steady states,
       each stage, the check).
+    - `map_lanes`: how the independent amplitudes are mapped (default: one after another
+      in this process; a `ProcessMap` spreads them over processes).
 
     **Returns:** a `RetuneResult`.
     """
@@ -542,7 +538,7 @@ def retune(
     bands = np.broadcast_to(np.asarray(band), amps.shape + band.shape)
     result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
                              max_steps=max_steps, tol=tol, retune_settings=retune_settings,
-                             progress=progress)
+                             progress=progress, map_lanes=map_lanes)
     return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
 
 
@@ -563,11 +559,12 @@ def optimal_tunings(
     tol: float,
     retune_settings: RetuneSettings,
     progress: Callable[[str], None] | None = None,
+    map_lanes: Callable = serial,
 ) -> RetuneResult:
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
     fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
-    frequencies `bands[i]`: the lanes are optimised one after another (one per process at
-    a time), their initial orbits and their check each solved in one batch.
+    frequencies `bands[i]`: the lanes are optimised one per task of `map_lanes`, their
+    initial orbits solved in one batch and their check in one share per process.
     `check_omegas` of the result is one check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
     amps = jax.device_put(np.asarray(amplitudes))
@@ -581,42 +578,19 @@ def optimal_tunings(
     ok = np.zeros(amps.shape, bool)
     stages = [_stage_options(stage, sharpnesses, tol, settings, max_steps, retune_settings)
               for stage in range(1, len(sharpnesses) + 1)]
-    # Several CPU cores: worker processes for the stages below, started now (unless the
-    # command line started them already) so that they load while the initial tuning is
-    # solved, one of them compiling the stages' program meanwhile (for the first moving
-    # lane, with placeholder orbits) or, where it is kept on disk, loading it.
-    warm_up, kept = None, True
-    if moving.size:
-        placeholder = _placeholder_orbits(k0, c0, bands, settings)
-        lanes = _lanes_of(moving[:1], (systems, amps, bands, u, placeholder, hessian_inv))
-        kept = _optimise_stage.is_kept(*_stage_arguments(lanes, stages[0]))
-        warm_up = (_prepare_stage, (lanes, stages[0]))
-    # (The stages wait for a compiling worker, and start at once beside a loading one.
-    # Without the compilation cache no worker warms up: none is compiling.)
-    compiling = start_workers(amps.size, warm_up,
-                              serves=None if kept else _stage_lanes) and not kept
     start = lane_response(systems, amps, bands, settings)
     say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
     orbits = _initial_orbits(start, systems, k0, c0)
-    initial_states = orbits[1]
-    # While a worker compiles the stages' program, this process checks the initial tuning
-    # (which the stages do not change) instead of waiting; else it is checked after the
-    # stages, dealt out to every process. Either way in the shares of the retuned designs'
-    # check (the same programs: a later run compiles none of its own).
-    initial_check = None
-    initial = _check_inputs(systems, amps, bands, initial_states, refinement)
-    if compiling:
-        initial_check = run_shares(_check_lanes, initial, settings, here=True)
+    initial = _check_inputs(systems, amps, bands, orbits[1], refinement)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
             lanes = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
-            # One lane per call, one call per core at a time on a CPU: one compiled
-            # program serves any number of lanes.
-            parts = run_lanes(_stage_lanes, [
+            # One lane per call: one compiled program serves any number of lanes.
+            parts = map_lanes(_stage_lanes, [
                 (jax.tree.map(lambda a, i=i: a[i : i + 1], lanes), options)
                 for i in range(moving.size)
-            ], compiles=True)
+            ])
             new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
                 lambda *values: np.concatenate(values), *parts)
             u, orbits, hessian_inv, ok = _set_lanes(
@@ -627,11 +601,9 @@ def optimal_tunings(
             f"{int(np.max(steps, initial=0))} iterations at most")
     k, c, retuned = _retuned(systems, u, k_ref, c_ref)
     lanes = _check_inputs(retuned, amps, bands, orbits[1], refinement)
-    if initial_check is None:
-        initial_check = run_shares(_check_lanes, initial, settings)
-    # One share of the lanes per process, dealt out in turn.
-    checked = run_shares(_check_lanes, lanes, settings)
-    both, found = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
+    # The initial and retuned designs checked together, one share of both per process.
+    both_lanes = jax.tree.map(lambda *a: np.concatenate(a), initial, lanes)
+    both, found = map_shares(map_lanes, _check_lanes, both_lanes, settings)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
     say(f"checked the initial and retuned designs on {lanes[2].shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
@@ -660,17 +632,6 @@ def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
 def _lanes_of(lanes, values):
     """The entries `lanes` of every array of `values`, as NumPy arrays."""
     return jax.tree.map(lambda a: np.asarray(a)[lanes], values)
-
-
-def _placeholder_orbits(k0, c0, bands, settings: SolverSettings):
-    """Orbits of the shapes and types `_initial_orbits` gives, all states zero: a stage
-    on them runs the program of the stages on the real orbits."""
-    size = jax.eval_shape(lambda q: initial_state(q, settings.compliant),
-                          jax.ShapeDtypeStruct((len(PARAMETERS),), bands.dtype)).shape[0]
-    states = np.zeros(bands.shape + (size,), bands.dtype)
-    return (np.stack([np.asarray(k0), np.asarray(c0)], axis=-1), states,
-            np.zeros(states.shape + (size,), bands.dtype),
-            np.zeros(states.shape + (len(DESIGN_PARAMETERS),), bands.dtype))
 
 
 @eqx.filter_jit

@@ -28,6 +28,7 @@ from ._design import (
     smooth_max,
     term_weights,
 )
+from ._parallel import map_shares, serial
 from ._peaks import (
     lane_grid_peaks,
 )
@@ -37,7 +38,6 @@ from ._settings import SolverSettings
 from ._sqp import Model, finite, minimise_stage, stationary
 from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
-from ._workers import run_shares
 
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
 _MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
@@ -244,10 +244,11 @@ class TuningPerformance(eqx.Module):
     converged: Bool[Array, "scales amps"]
 
 
-def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings):
+def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings, map_lanes):
     """Host and inerter peaks (m; on the grid, refined by parabolas, as the robust design
     judges them) and convergence `[tunings, scales, amps]` of each tuning (k, c) of
-    `tunings`, over `omegas` (rad/s) times each scale: every steady state in one batch."""
+    `tunings`, over `omegas` (rad/s) times each scale: every steady state in one batch,
+    one share per process of `map_lanes`."""
     tunings, scales, amplitudes = (np.asarray(a, dtype=float) for a in (tunings, scales,
                                                                         amplitudes))
     shape = (len(tunings), len(scales), len(amplitudes))
@@ -260,29 +261,30 @@ def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings):
         (float(system.host_stiffness) * lane_scale**2, tunings[lane_tuning, 0],
          tunings[lane_tuning, 1]))
     grids = lane_scale[:, None] * np.asarray(omegas)[None]
-    x, y, ok = run_shares(_lane_peaks, (lanes, lane_amplitude, grids), settings)
+    x, y, ok = map_shares(map_lanes, _lane_peaks, (lanes, lane_amplitude, grids), settings)
     return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
 
 
 def _lane_peaks(lanes, amplitudes, grids, settings):
     """The host and inerter peaks on the grid (refined by parabolas) of each lane's
     `lane_response`, and whether every steady state of it converged, as NumPy arrays: a
-    task of `run_shares`."""
+    task of `map_shares`."""
     response = lane_response(lanes, amplitudes, grids, settings)
     return (np.asarray(lane_grid_peaks(response.x_max, grids)[0]),
             np.asarray(lane_grid_peaks(response.y_max, grids)[0]),
             np.all(np.asarray(response.converged), axis=-1))
 
 
-def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings):
+def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings, map_lanes):
     """`_tuning_peaks` of the one tuning (k, c): `[scales, amps]`."""
     return tuple(a[0] for a in _tuning_peaks(system, [(k, c)], amplitudes, scales, omegas,
-                                             settings))
+                                             settings, map_lanes))
 
 
 
 def tuning_performance(
-    system: TIDSystem, best: BestTunings, *, settings: SolverSettings = SolverSettings()
+    system: TIDSystem, best: BestTunings, *, settings: SolverSettings = SolverSettings(),
+    map_lanes: Callable = serial,
 ) -> TuningPerformance:
     """The system's tuning over the scenarios of `best` (same band, amplitudes and host
     frequency scales): its host and inerter peaks (by `peaks`) and the ratio of its host
@@ -293,6 +295,7 @@ def tuning_performance(
     - `system`: the `TIDSystem` of `best` (rigid device), at the tuning to judge.
     - `best`: a `BestTunings` (the scenarios, the band and the best peaks).
     - `settings`: `SolverSettings` of every steady state.
+    - `map_lanes`: how shares of the steady states are mapped (see `retune`).
 
     **Returns:** a `TuningPerformance`.
     """
@@ -302,7 +305,7 @@ def tuning_performance(
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     amps = np.asarray(best.amplitudes)
     scales = np.asarray(best.host_frequency_scales)
-    x, y, ok = _peaks_per_scale(system, k, c, amps, scales, best.omegas, settings)
+    x, y, ok = _peaks_per_scale(system, k, c, amps, scales, best.omegas, settings, map_lanes)
     ratio = x / np.asarray(best.host_peak)
     i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     return TuningPerformance(
@@ -370,7 +373,8 @@ def _check_stroke_limit(stroke_limit) -> float:
     return float(stroke_limit)
 
 
-def _robust_start(system, best: BestTunings, target, settings) -> tuple[float, float]:
+def _robust_start(system, best: BestTunings, target, settings,
+                  map_lanes) -> tuple[float, float]:
     """The start of the robust search: of the system's tuning and the best tunings of the
     nominal host frequency, the one with the smallest worst-case ratio among those within
     the stroke target, or with the smallest stroke if none is: judged on every other
@@ -387,7 +391,7 @@ def _robust_start(system, best: BestTunings, target, settings) -> tuple[float, f
     )
     scores = []
     xs, ys, _ = _tuning_peaks(system, candidates, np.asarray(best.amplitudes), scales,
-                              np.asarray(best.omegas)[::2], settings)
+                              np.asarray(best.omegas)[::2], settings, map_lanes)
     for x, y in zip(xs, ys, strict=True):
         worst = float(np.max(np.log(x / np.asarray(best.host_peak))))
         excess = float(np.log(np.max(y))) - target if target is not None else 0.0
@@ -409,6 +413,7 @@ def robust_tune(
     retune_settings: RetuneSettings = RetuneSettings(),
     robust_settings: RobustSettings = RobustSettings(),
     progress: Callable[[str], None] | None = None,
+    map_lanes: Callable = serial,
 ) -> RobustDesign:
     """One TID stiffness k and damping c for every scenario (forcing amplitude and host
     frequency scale): the minimiser of the worst case, over the scenarios, of the peak
@@ -446,6 +451,7 @@ def robust_tune(
     - `retune_settings`: `RetuneSettings` of the best tunings.
     - `robust_settings`: `RobustSettings` of this optimiser.
     - `progress`: if given, called with one-line messages.
+    - `map_lanes`: how independent lanes are mapped (see `retune`).
 
     **Returns:** a `RobustDesign`.
     """
@@ -459,16 +465,13 @@ def robust_tune(
         raise ValueError("robust_settings must be a RobustSettings, got "
                          f"{type(robust_settings).__name__}")
     say = progress if progress is not None else (lambda message: None)
-    if best is None:  # a worker compiles the design's program meanwhile, where it is not kept
-        Context(system, _band(system, omegas), settings, locate=False).warm_up(
-            amps.size * scales.size)
     best = _checked_best(system, amps, scales, best, omegas, settings, retune_settings,
-                         progress)
+                         progress, map_lanes)
     band = np.asarray(best.omegas)
     # The worst case over scenarios is of the peaks on the band's grid (refined by
     # parabolas), as its reference `best.objective` is; the stroke limit is then checked
     # on a finer grid.
-    ctx = Context(system, band, settings, locate=False)
+    ctx = Context(system, band, settings, locate=False, map_lanes=map_lanes)
     scenarios = [
         Scenario(float(amplitude), float(scale), float(best.objective[i, j]))
         for i, scale in enumerate(scales)
@@ -477,7 +480,7 @@ def robust_tune(
     margin = robust_settings.stroke_margin
     target = np.log(limit * (1 - margin)) if np.isfinite(limit) else None
     say(f"robust tuning over {len(scenarios)} scenarios, stroke limit {limit:g} m")
-    k, c = _robust_start(system, best, target, settings)
+    k, c = _robust_start(system, best, target, settings, map_lanes)
     say(f"starting from k = {k:.6g} N/m, c = {c:.5g} N s/m")
     options = dict(max_steps=max_steps, tol=tol, say=say, robust_settings=robust_settings)
     minimum = _minimise(ctx, scenarios, ctx.design(k, c, floor=_MIN_DAMPING_START),
@@ -486,7 +489,8 @@ def robust_tune(
     fine = np.linspace(band[0], band[-1], robust_settings.check_refinement * (band.size - 1) + 1)
     for round_ in range(robust_settings.stroke_rounds + 1):
         k, c = ctx.tuning(minimum.evaluation.u)
-        _, check_y, check_ok = _peaks_per_scale(system, k, c, amps, scales, fine, settings)
+        _, check_y, check_ok = _peaks_per_scale(system, k, c, amps, scales, fine, settings,
+                                                map_lanes)
         max_stroke = float(np.max(check_y))
         if max_stroke <= limit or round_ == robust_settings.stroke_rounds:
             break
@@ -497,8 +501,8 @@ def robust_tune(
                             z_inits=states, stages=robust_settings.sharpness[-1:], **options)
         steps += minimum.steps
     performance = tuning_performance(
-        system.replace(tid_stiffness=k, tid_damping=c), best, settings=settings
-    )
+        system.replace(tid_stiffness=k, tid_damping=c), best, settings=settings,
+        map_lanes=map_lanes)
     steady = bool(np.all(performance.converged) and np.all(check_ok))
     outcome = ROBUST_OUTCOMES
     status = (outcome.not_stationary if not minimum.converged
@@ -528,13 +532,14 @@ def robust_tune(
     )
 
 
-def _checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress):
+def _checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress,
+                  map_lanes):
     """`best` after checking that it was computed for this system, these scenarios and
     this band, or, if None, the best tunings found afresh."""
     if best is None:
         return best_tunings(system, amps, host_frequency_scales=scales, omegas=omegas,
                             settings=settings, retune_settings=retune_settings,
-                            progress=progress)
+                            progress=progress, map_lanes=map_lanes)
     check_best(best, system)
     for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
         stored = np.asarray(getattr(best, name))

@@ -26,6 +26,7 @@ from ._design import (
     smooth_max,
     without_jumped_peaks,
 )
+from ._parallel import serial
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
 from ._sqp import Model, decrement, finite, trust_step
@@ -355,13 +356,14 @@ def amplitude_sensitivities(
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
+    map_lanes: Callable = serial,
 ) -> list[Sensitivities]:
     """`sensitivities` at each of the forcing `amplitudes` (N, distinct), the steady
     states of every amplitude solved in the same batches (and, with `optimum=True` and no
     `best`, the optimum of every amplitude found by one `best_tunings`). `progress`, if
     given, is called with a line as each step ends (those of `best_tunings` where it
-    runs, the given tuning's derivatives, the optima's). The other arguments are those of
-    `sensitivities`.
+    runs, the given tuning's derivatives, the optima's); `map_lanes` maps the independent
+    lanes (see `retune`). The other arguments are those of `sensitivities`.
 
     **Returns:** a list of `Sensitivities`, one per amplitude, in their order.
     """
@@ -372,13 +374,11 @@ def amplitude_sensitivities(
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
     check_retune_options(max_steps, tol, retune_settings)
-    ctx = Context(system, band, settings, locate=True)
-    # A worker compiles the derivatives' program meanwhile, where it is not kept.
-    ctx.warm_up(amplitudes.size)
+    ctx = Context(system, band, settings, locate=True, map_lanes=map_lanes)
     if optimum and best is None:
         best = best_tunings(system, amplitudes, omegas=band, settings=settings,
                             max_steps=max_steps, tol=tol, retune_settings=retune_settings,
-                            progress=progress)
+                            progress=progress, map_lanes=map_lanes)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
     given = ctx.evaluate([(theta, 1.0, None) for theta in thetas])
@@ -393,7 +393,8 @@ def amplitude_sensitivities(
         tight = given_settings.tighter(_POLISH_ACCURACY)
         # Exact friction has no integration error to tighten: the context of the given
         # tuning serves (one compiled program, not two that compute the same).
-        accurate = ctx if tight == given_settings else Context(system, band, tight, locate=True)
+        accurate = ctx if tight == given_settings else Context(system, band, tight, locate=True,
+                                                               map_lanes=map_lanes)
         finals, models = _polished(accurate, starts, POLISH_TOL,
                                    retune_settings.sharpness[-1])
         optimal = [

@@ -15,7 +15,7 @@ import matplotlib.ticker as ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._io import atomic_path  # noqa: E402
-from ._workers import run_lanes  # noqa: E402
+from ._parallel import serial  # noqa: E402
 
 LINEAR_STYLE = dict(color="black", linestyle="--", linewidth=2.0, label="linear TID (no friction)")
 HOST_FREQUENCY_STYLE = dict(color="0.5", linestyle=":", linewidth=1.2)
@@ -28,11 +28,12 @@ def save_figure(fig, path: str | os.PathLike) -> None:
     plt.close(fig)
 
 
-def save_figures(figures) -> None:
+def save_figures(figures, *, map_lanes=serial) -> None:
     """Draw and save each of `figures`, `(plot_function, args, kwargs, path)`, as
-    `save_figure(plot_function(*args, **kwargs), path)`: at once in worker processes on
-    several CPU cores (`_workers.run_lanes`; the arguments NumPy arrays)."""
-    run_lanes(_draw_and_save, [tuple(figure) for figure in figures])
+    `save_figure(plot_function(*args, **kwargs), path)`, mapped by `map_lanes` (default:
+    one after another here; a `ProcessMap` draws them at once, the arguments then NumPy
+    arrays)."""
+    map_lanes(_draw_and_save, [tuple(figure) for figure in figures])
 
 
 def _draw_and_save(plot_function, args, kwargs, path) -> None:

@@ -1,107 +1,34 @@
-"""The `tid-jax` command-line tool: argument parsing, configuration files, printing.
+"""The `tid-jax` command-line tool (`main`; the console script `run`).
 
-Each subcommand is a module of this package with a pair `_add_<name>_parser(subparsers)`
-/ `_run_<name>(args) -> int`, registered in `_COMMANDS`. What they share is in
-`_common`: `_add_system_arguments` (the physical parameters, amplitudes, band and
-`--config`), `_add_output_arguments` (`--out`, `--json`, `--quiet`),
-`_inputs`/`_system`/`_settings`/`_frequencies` (from flags and TOML to library objects)
-and `_Output` (output folder, progress, files written). `main` turns any `CLIError`,
-`ValueError` or `OSError` into one line `tid-jax: error: <problem>` on stderr and exit
-status 2.
+Nothing here imports JAX or equinox: `run` first sets `EQX_ON_ERROR=nan` in the
+environment (equinox's documented switch, read when it is imported), so that programs
+holding equinox's run-time checks can be kept in the compilation cache; every solve
+reports its own status, so a failed point is flagged, not raised.
 """
 
-import argparse
 import os
 import sys
-
-import jax
-
-from .. import __version__
-from .._cache import enable_compilation_cache
-from .._workers import WORKERS_ENVIRONMENT_VARIABLE
-from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser
-from .frf import FRF_COLUMNS as FRF_COLUMNS
-from .frf import _add_frf_parser, _run_frf
-from .identify import _add_identify_parser, _run_identify
-from .retune import RETUNE_COLUMNS as RETUNE_COLUMNS
-from .retune import _add_retune_parser, _run_retune
-from .robust import _add_robust_parser, _run_robust
-from .rtds import RTDS_COLUMNS as RTDS_COLUMNS
-from .rtds import _add_rtds_parser, _run_rtds
-from .sensitivity import _add_sensitivity_parser, _run_sensitivity
-
-_COMMANDS = {
-    "retune": (_add_retune_parser, _run_retune),
-    "frf": (_add_frf_parser, _run_frf),
-    "rtds": (_add_rtds_parser, _run_rtds),
-    "sensitivity": (_add_sensitivity_parser, _run_sensitivity),
-    "robust": (_add_robust_parser, _run_robust),
-    "identify": (_add_identify_parser, _run_identify),
-}
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog=PROG,
-        description="Design tuned inerter dampers (TIDs) whose inerter has dry friction.",
-        epilog=f"Run '{PROG} COMMAND --help' for the options of each command.",
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for add_parser, _ in _COMMANDS.values():
-        add_parser(subparsers)
-    return parser
-
-
-def _one_line(error: BaseException) -> str:
-    return " ".join(str(error).split()) or type(error).__name__
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run `tid-jax` with the arguments `argv` (default `sys.argv[1:]`); returns the exit
     status: 0 on success, 2 on bad input (one line on stderr), 130 if interrupted."""
-    jax.config.update("jax_enable_x64", True)
-    parser = build_parser()
-    try:
-        try:
-            args = parser.parse_args(argv)
-        except SystemExit as exit_:  # --help and --version
-            return exit_.code if isinstance(exit_.code, int) else 0
-        if args.command is None:
-            parser.print_help()
-            return 0
-        if not args.no_cache:
-            enable_compilation_cache(args.cache_dir)
-        if args.workers is not None:
-            if args.workers < 1:
-                raise CLIError(f"--workers must be at least 1, got {args.workers}")
-            os.environ[WORKERS_ENVIRONMENT_VARIABLE] = str(args.workers)
-        return _COMMANDS[args.command][1](args)
-    except (CLIError, ValueError, OSError) as error:
-        print(f"{PROG}: error: {_one_line(error)}", file=sys.stderr)
-        return EXIT_ERROR
-    except KeyboardInterrupt:
-        print(
-            f"{PROG}: interrupted; files already written are complete, none is partial",
-            file=sys.stderr,
-        )
-        return EXIT_INTERRUPTED
+    from ._main import main as run_main
+
+    return run_main(argv)
 
 
 def run() -> None:
-    """The `tid-jax` command: `main` on the command line's arguments, then the process
-    ends at once with its exit status. By then every file written is complete and closed;
-    the interpreter's teardown of JAX (about a second) is skipped, and the worker
-    processes (`_workers`) end as their input closes with it. (`python -m tid_jax.cli`
-    exits as usual, for tools that act at exit: profilers, coverage.)"""
+    """The `tid-jax` command: equinox's run-time checks set to NaN (unless
+    `$EQX_ON_ERROR` says otherwise), then `main` on the command line's arguments."""
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     status = main()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except OSError:  # a closed pipe (`tid-jax ... | head`)
             pass
+    # Every file written is complete and closed, and the worker processes have ended: the
+    # interpreter's teardown of JAX (about a second) is skipped. (`python -m tid_jax.cli`
+    # exits as usual, for tools that act at exit: profilers, coverage.)
     os._exit(status)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

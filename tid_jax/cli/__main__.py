@@ -1,5 +1,7 @@
+import os
 import sys
 
 from . import main
 
+os.environ.setdefault("EQX_ON_ERROR", "nan")
 sys.exit(main())

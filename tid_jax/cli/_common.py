@@ -4,6 +4,7 @@ objects), output folder, progress and tables."""
 import argparse
 import contextlib
 import math
+import os
 import shutil
 import sys
 import time
@@ -25,6 +26,7 @@ from .._linear import (
     linear_receptance,
     stuck_receptance,
 )
+from .._parallel import ProcessMap, serial
 from .._settings import SolverSettings
 from .._system import (
     DEFAULT_FRICTION_WIDTH,
@@ -38,9 +40,9 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
-from .._workers import WORKERS_ENVIRONMENT_VARIABLE, start_workers
 
 PROG = "tid-jax"
+WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
 
@@ -366,14 +368,9 @@ class _Start(NamedTuple):
     output: "_Output"
 
 
-def _start(args, *, workers: bool = False) -> _Start:
-    """The inputs of a command and what follows from them. With `workers` (a command
-    that solves its amplitudes as lanes), the worker processes (`_workers`, one per
-    further CPU core) start now, so that they load while this process sets the system
-    up."""
+def _start(args) -> _Start:
+    """The inputs of a command and what follows from them."""
     inputs = _inputs(args)
-    if workers:
-        start_workers(len(inputs["amplitudes"]))
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)
@@ -598,3 +595,54 @@ def _breakaway_line(breakaway) -> str:
     return (f"Breakaway amplitude over the band: {float(breakaway.minimum):.4g} N at "
             f"{float(breakaway.omega_minimum) / (2 * math.pi):.3f} Hz; below it the inerter "
             f"never slips and the TID acts as a spring and damper to ground.")
+
+
+# --- processes ------------------------------------------------------------------------
+
+
+def _cpu_cores() -> int:
+    """The CPU cores this process may use."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def worker_count(args) -> int:
+    """The processes a command spreads its lanes over: `--workers`, else
+    `$TID_JAX_WORKERS`, else one per CPU core; 1 off the CPU or with several JAX devices
+    (whose lanes are sharded over the devices instead)."""
+    given = args.workers
+    if given is None:
+        value = os.environ.get(WORKERS_ENVIRONMENT_VARIABLE)
+        try:
+            given = _cpu_cores() if value is None else int(value)
+        except ValueError:
+            raise CLIError(f"${WORKERS_ENVIRONMENT_VARIABLE} must be a whole number of "
+                           f"processes >= 1, got {value!r}") from None
+    if given < 1:
+        raise CLIError(f"--workers must be at least 1, got {given}")
+    import jax
+
+    if jax.default_backend() != "cpu" or len(jax.devices()) > 1:
+        return 1
+    return given
+
+
+@contextlib.contextmanager
+def lane_map(args):
+    """The `map_lanes` of a command: `serial` for one process, else a `ProcessMap` of
+    `worker_count(args)` processes (computing as this one does), started now and set up
+    as this process computes, shut down when the command ends."""
+    count = worker_count(args)
+    if count == 1:
+        yield serial
+        return
+    with ProcessMap(count, initializer=import_library) as pool:
+        pool.start()
+        yield pool
+
+
+def import_library() -> None:
+    """A worker process's first step: the library's modules imported before its first
+    task, while the command sets its inputs up."""
+    from .. import _design, _identify, _robust  # noqa: F401

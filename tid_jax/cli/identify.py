@@ -131,7 +131,7 @@ def _run_identify(args) -> int:
     models = MODELS[: MODELS.index(args.model) + 1]
     with output.steps(len(models)) as step:
         fit = identify_inerter(records, model=args.model, terminal_mass=terminal_mass,
-                               progress=step)
+                               progress=step, map_lanes=args.map_lanes)
 
     names = list(fit.parameters)
     estimates = {n: float(v) for n, v in zip(names, fit.estimates, strict=True)}

@@ -74,7 +74,7 @@ def _add_retune_parser(subparsers) -> None:
 
 
 def _run_retune(args) -> int:
-    start = _start(args, workers=True)
+    start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     output.say(
         f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies, "
@@ -82,14 +82,16 @@ def _run_retune(args) -> int:
         f"{_describe(system)}"
     )
     with output.steps(RetuneSettings().progress_steps()) as step:
-        result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step)
+        result = retune(system, amplitudes, omegas=omegas, settings=settings, progress=step,
+                        map_lanes=args.map_lanes)
     result = _on_host(result)  # read entry by entry below: no array operation each
     records = _records(result, system, amplitudes, inputs["stroke_limit"])
     save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     write_toml(
         output.path("retune_config.toml"), _config_data(inputs), comment=_config_comment("retune")
     )
-    _save_plots(output, result, system, amplitudes, frequencies_hz, inputs["stroke_limit"])
+    _save_plots(output, result, system, amplitudes, frequencies_hz, inputs["stroke_limit"],
+                args.map_lanes)
     json_path = output.path("retune.json")
     data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
     write_json(json_path, data)
@@ -132,7 +134,8 @@ def _records(result, system, amplitudes, stroke_limit) -> list[dict]:
     ]
 
 
-def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit) -> None:
+def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit,
+                map_lanes) -> None:
     """The frequency responses before and after retuning (on retune's check grid) and the
     summary against amplitude."""
     k_dh, c_dh = _den_hartog(system)
@@ -161,7 +164,7 @@ def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit
             np.asarray(result.y_peak),
         ), dict(stroke_limit=stroke_limit, converged=np.asarray(result.converged)),
          output.path("retune_summary.png")),
-    ])
+    ], map_lanes=map_lanes)
 
 
 def _table(records, system, stroke_limit) -> str:

@@ -70,7 +70,7 @@ def _run_robust(args) -> int:
     tolerance = args.host_frequency_tolerance
     if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
         raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
-    start = _start(args, workers=True)
+    start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
     stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
@@ -89,8 +89,10 @@ def _run_robust(args) -> int:
             omegas=omegas,
             settings=settings,
             progress=step,
+            map_lanes=args.map_lanes,
         )
-    given = tuning_performance(system, result.best, settings=settings)
+    given = tuning_performance(system, result.best, settings=settings,
+                               map_lanes=args.map_lanes)
     result, given = _on_host((result, given))  # read entry by entry below
     records = _records(result, given, scales, amplitudes)
     save_records(output, "robust.csv", ROBUST_COLUMNS, records)

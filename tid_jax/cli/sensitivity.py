@@ -87,7 +87,7 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 
 def _run_sensitivity(args) -> int:
-    start = _start(args, workers=True)
+    start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     optimum = not args.no_optimum
     output.say(
@@ -99,7 +99,8 @@ def _run_sensitivity(args) -> int:
         if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
         results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
-                                          settings=settings, progress=step)
+                                          settings=settings, progress=step,
+                                          map_lanes=args.map_lanes)
     results = _on_host(results)  # read entry by entry below: no array operation each
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
                for record in _records(amplitude, result)]
