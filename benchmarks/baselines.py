@@ -548,7 +548,7 @@ def _self_check(ref_periods=300, fixed_periods=40):
               f"diffrax first call (compile + run) {t_compile:.1f} s, steps/lane "
               f"{int(dinfo['steps'].min())}..{int(dinfo['steps'].max())}, failed lanes {int(np.sum(~dinfo['ok']))}")
     print()
-    print(f"| method | periods | time per orbit (ms) | max rel err x_max | max rel err y_max |")
+    print("| method | periods | time per orbit (ms) | max rel err x_max | max rel err y_max |")
     print("|---|---:|---:|---:|---:|")
     for name, P, ms, ex, ey in rows:
         print(f"| {name} | {P} | {ms:.2f} | {ex:.2e} | {ey:.2e} |")
