@@ -14,7 +14,6 @@ Prints markdown (and, with `--readme`, replaces the `coulomb` block of that file
 """
 
 import argparse
-import datetime
 import os
 import sys
 import time
@@ -115,7 +114,7 @@ def main():
         rows.append((name, seconds / x.size, converged, x_error, y_error))
 
     lines = [
-        f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, JAX "
+        f"{os.cpu_count()} CPU cores, JAX "
         f"{jax.__version__}, float64. Paper system, {amplitudes.size} amplitudes x "
         f"{omegas.size} frequencies, warm `frequency_response` (one call, best of 3); "
         f"errors against the event-driven reference ({reference_s:.0f} s for the surface).",

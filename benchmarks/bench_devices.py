@@ -8,11 +8,10 @@ each device count, on the paper's system (exact friction, the default), the time
 first and of a later `frequency_response` over the 61-frequency x 12-amplitude surface
 (every point in one call; the first compiles), of a first and a later `retune` at 200 and
 600 N on the default band, and the largest difference from the first count's peaks and
-retuned tunings. No worker processes (`TID_JAX_WORKERS=1`) and no compilation cache.
+retuned tunings. One process (no `ProcessMap`) and no compilation cache.
 """
 
 import argparse
-import datetime
 import json
 import os
 import subprocess
@@ -58,7 +57,7 @@ print(json.dumps(out))
 
 
 def measure(devices: int) -> dict:
-    env = dict(os.environ, JAX_PLATFORMS="cpu", TID_JAX_WORKERS="1",
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
                XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
     env.pop("TID_JAX_CACHE_DIR", None)
     done = subprocess.run([sys.executable, "-c", MEASURE], env=env, capture_output=True,
@@ -85,7 +84,7 @@ def main():
         print(f"{count} device(s) done", flush=True)
     first = runs[0]
     lines = [
-        f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, CPU devices "
+        f"{os.cpu_count()} CPU cores, CPU devices "
         f"simulated; paper system (exact friction), no worker processes, no compilation "
         f"cache. `frequency_response`: 61 frequencies x 12 amplitudes in one call; `retune`: "
         f"200 and 600 N on the default band. First call (compiling), then the best of two "

@@ -25,7 +25,6 @@ markdown tables (and, with `--readme`, replaces the tables in that file):
 """
 
 import argparse
-import datetime
 import json
 import os
 import platform
@@ -103,27 +102,31 @@ def choose_tid_settings(system, omegas, amplitudes, reference, default_seconds):
 # The paper retune's variants, side by side: (label, friction_width argument of
 # `paper_system`, processes); the first is the defaults.
 RETUNE_VARIANTS = (
-    ("defaults (exact friction), one process per CPU core", "", None),
-    ("defaults, one process (`TID_JAX_WORKERS=1`)", "", "1"),
-    ("relative friction width (`friction_width=None`), one process per CPU core",
-     "friction_width=None", None),
+    ("defaults (exact friction), `ProcessMap` of one process per CPU core", "", None),
+    ("defaults, this process alone", "", 1),
+    ("relative friction width (`friction_width=None`), `ProcessMap` of one process per "
+     "CPU core", "friction_width=None", None),
 )
 
 
 def run_retune_child(limit_s, system_arguments="", workers=None):
     """The 12-amplitude paper retune on 61 frequencies in a child process (the system
-    `paper_system(system_arguments)`, `workers` processes, default one per core): cold
-    (import and compilation included, no compilation cache), then warm. Returns the wall
+    `paper_system(system_arguments)`, its amplitudes mapped over a `ProcessMap` of
+    `workers` processes, default one per core; 1: this process alone): cold (import and
+    compilation included, no compilation cache), then warm. Returns the wall
     times and the number of amplitudes with status ok, or None if stopped at `limit_s`."""
     code = f"""
-import json, time
+import json, os, time
 start = time.perf_counter()
 import jax
 jax.config.update("jax_enable_x64", True)
 import tid_jax as tj
 system = tj.paper_system({system_arguments})
 omegas = tj.default_omegas(system, {DEFAULT_FREQUENCIES})
-run = lambda: jax.block_until_ready(tj.retune(system, tj.PAPER_AMPLITUDES, omegas=omegas))
+processes = {workers if workers is not None else len(os.sched_getaffinity(0))}
+pool = tj.ProcessMap(processes) if processes > 1 else (lambda f, tasks: [f(*t) for t in tasks])
+run = lambda: jax.block_until_ready(tj.retune(system, tj.PAPER_AMPLITUDES, omegas=omegas,
+                                              map_lanes=pool))
 result = run()
 cold = time.perf_counter() - start
 again = time.perf_counter()
@@ -132,8 +135,6 @@ print(json.dumps(dict(cold=cold, warm=time.perf_counter() - again,
                       ok=int(result.converged.sum()))))
 """
     env = dict(os.environ)
-    if workers is not None:
-        env["TID_JAX_WORKERS"] = workers
     try:
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                               timeout=limit_s, env=env)
@@ -245,7 +246,7 @@ def main():
                         help="only the command-line table (its own block in --readme)")
     args = parser.parse_args()
     if args.cli_only:
-        lines = [f"Date: {datetime.date.today().isoformat()}; {os.cpu_count()} CPU cores, JAX "
+        lines = [f"{os.cpu_count()} CPU cores, JAX "
                  f"{jax.__version__}.", "", *retune_rows(TIME_LIMIT_S), ""]
         lines += cli_table(TIME_LIMIT_S)
         print("\n".join(lines))
@@ -314,7 +315,7 @@ def main():
         cli_rows = cli_table(TIME_LIMIT_S)
     reached = reach(args.reach, 0) if args.reach else None
 
-    say(f"Date: {datetime.date.today().isoformat()}; machine: {platform.processor() or 'x86_64'}"
+    say(f"Machine: {platform.processor() or 'x86_64'}"
         f" CPU, {os.cpu_count()} cores, {len(jax.devices())} JAX device(s); JAX "
         f"{jax.__version__}, float64. Paper system, friction width {WIDTH:g} m/s, "
         f"{amplitudes.size} amplitudes x {surface_omegas.size} frequencies; reference: 300 "
