@@ -214,10 +214,10 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         metavar="N",
-        help=f"processes that share the work on a CPU (the optimised amplitudes, the "
-        "batches of steady states, identify's scan of starting values), this one included "
-        f"(default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: this "
-        "process alone)",
+        help="worker processes that share the independent lanes on a CPU (the optimised "
+        "amplitudes, shares of the batches of steady states, identify's scan of starting "
+        f"values) (default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: "
+        "none, this process computes alone)",
     )
 
 
