@@ -182,36 +182,25 @@ def test_stage_ends_once_its_line_search_cuts_within_the_tolerance(system, band)
     assert float(result.x_peak[0]) == pytest.approx(float(usual.x_peak[0]), rel=1e-6)
 
 
-def test_amplitude_below_breakaway_keeps_the_initial_tuning_and_says_so(band, monkeypatch):
+def test_amplitude_below_breakaway_keeps_the_initial_tuning_and_says_so(band):
     # 15 N is below the paper system's breakaway amplitude over the band (22.8 N): the
     # inerter never slips, and a stiffer damper to ground only lowers the stuck peak
     # further, so there is no TID optimum there. With exact friction (the default), whose
-    # retune takes a fraction of the smoothed model's time.
+    # retune takes a fraction of the smoothed model's time. Such a lane is not optimised
+    # at all (no iteration, the initial tuning returned as it was given); the lanes beside
+    # it are retuned as on their own.
     system = tj.paper_system()
-    # Such a lane is not optimised at all; the lanes beside it are retuned as on their own,
-    # by the same compiled program whatever the number of lanes (that of the module's
-    # other retunes on 21 frequencies).
-    traces = []
-    lane = tj._retune._optimise_lane
-
-    def traced_lane(*args, **kwargs):  # runs once per tracing of the optimiser's program
-        traces.append(1)
-        return lane(*args, **kwargs)
-
-    monkeypatch.setattr(tj._retune, "_optimise_lane", traced_lane)
     assert 15.0 < float(tj.breakaway_amplitude(system, band).minimum)
     result = tj.retune(system, [15.0, 1000.0, 800.0], omegas=band)
-    assert len(traces) <= 1
     assert int(result.status[0]) == 5 and not bool(result.converged[0])
     assert "below the breakaway amplitude" in result.status_messages()[0]
     assert float(result.tid_stiffness[0]) == float(system.tid_stiffness)
     assert float(result.tid_damping[0]) == float(system.tid_damping)
     assert int(result.iterations[0]) == 0
+    assert int(result.iterations[1]) > 0 and int(result.iterations[2]) > 0
     damper = system.replace(tid_damping=1.5 * float(system.tid_damping))
     assert float(tj.peaks(damper, [15.0], band).x_peak[0]) < 0.95 * float(result.x_peak[0])
-    first = len(traces)
     alone = tj.retune(system, [800.0], omegas=band)
-    assert len(traces) == first
     assert int(result.status[2]) == int(alone.status[0]) == 0
     assert int(result.iterations[2]) == int(alone.iterations[0])
     for field in ("tid_stiffness", "tid_damping"):

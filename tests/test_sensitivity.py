@@ -11,7 +11,7 @@ import pytest
 import tid_jax as tj
 from tests.lanes import peaks_of
 from tid_jax._design import STENCIL_STEP
-from tid_jax._retune import DESIGN_SCALE, design_of_tuning
+from tid_jax._design_variables import DESIGN_SCALE, design_of_tuning
 from tid_jax._system import compiler_options
 
 SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there

@@ -15,6 +15,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._band import _band, locate_peaks, sweep
 from ._cache import compiled
 from ._checks import check_grid, check_steady_state_device, check_system
+from ._design_variables import design_of_tuning, tuning_of_design
 from ._linear import den_hartog_tuning
 from ._parallel import map_shares, serial
 from ._peaks import (
@@ -26,14 +27,7 @@ from ._peaks import (
     smooth_log_peak,
 )
 from ._response import batched, lane_response, scaled_states
-from ._retune import (
-    RETUNE_OUTCOMES,
-    RetuneSettings,
-    check_retune_options,
-    design_of_tuning,
-    optimal_tunings,
-    tuning_of_design,
-)
+from ._retune import RETUNE_OUTCOMES, RetuneSettings, check_retune_options, optimal_tunings
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem, compiler_options
 

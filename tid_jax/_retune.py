@@ -1,16 +1,17 @@
+"""Retuning the TID per forcing amplitude: `retune`, its settings and result, and the
+optimiser on lanes that every per-scenario optimum shares (`optimal_tunings`): the initial
+orbits, the continuation stages (`_retune_stage`) and the check on a finer grid."""
+
 import dataclasses
-import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import Peaks, _band, response_peaks
-from ._cache import compiled
 from ._checks import (
     check_grid,
     check_optimiser_options,
@@ -18,33 +19,21 @@ from ._checks import (
     check_system,
     is_positive,
 )
-from ._dynamics import PARAMETERS, parameters
+from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._parallel import map_shares, serial
-from ._peaks import (
-    REFINED_PEAKS,
-    bracket,
-    interpolated,
-    located_peak,
-    newton_iterates,
-    smooth_log_peak,
-    stencil,
-    top_peaks,
-)
 from ._response import (
     FrequencyResponse,
     _on_host,
     batched,
     lane_response,
-    point_response,
     scaled_states,
     with_tuning,
 )
+from ._retune_stage import stage_lanes
 from ._settings import SolverSettings
-from ._stall import cut_within_tolerance
 from ._status import Outcomes
-from ._steady_state import refined_peak, settled_state
-from ._system import TIDSystem, compiler_options
+from ._system import TIDSystem
 
 
 class RetuneSettings(eqx.Module):
@@ -150,298 +139,12 @@ class RetuneResult(eqx.Module):
 DAMPING_BOUND_RATIO = 1e-3
 
 
-# Scales of retune's design variables: they make the curvature of the log peak about one
-# in each, so that BFGS's first steps (from an identity Hessian) are about the right
-# length. (The robust design's trust-region steps are measured in unscaled ones.)
-DESIGN_SCALE = (10.0, 3.0)
-
-
-def tuning_of_design(u, k_ref, c_ref, scale=DESIGN_SCALE, xp=jnp):
-    """The tuning (k, c) of the design variables u = (scale[0] ln(k / k_ref), scale[1]
-    sqrt(c / c_ref)): k > 0 through an exponential, c >= 0 through a square, so that the
-    bound c = 0 is a stationary point of the unconstrained problem and can be reached
-    exactly. `xp`: the array module (`jax.numpy`, or `numpy` on the host)."""
-    return k_ref * xp.exp(u[0] / scale[0]), c_ref * (u[1] / scale[1]) ** 2
-
-
-def design_of_tuning(k, c, k_ref, c_ref, scale=DESIGN_SCALE, xp=jnp):
-    """The design variables of the tuning (k, c), the inverse of `tuning_of_design`."""
-    return xp.stack([scale[0] * xp.log(k / k_ref), scale[1] * xp.sqrt(c / c_ref)], axis=-1)
-
-
-# The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
-# shooting iterations carry tangents along them for the implicit derivatives.
-DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))
-
-
-
-class _CappedNewtonDescent(optx.NewtonDescent):
-    """Newton direction with its two-norm capped at `max_step` before the line search
-    scales it, and the scaled step capped again: where the objective is nearly linear
-    along some direction, BFGS's curvature estimate there is near zero and the plain
-    Newton step would throw the design far off, where the steady states are expensive
-    and the objective meaningless."""
-
-    max_step: float = 1.0
-
-    def query(self, y, f_info, state):
-        state = super().query(y, f_info, state)
-        return eqx.tree_at(lambda s: s.newton, state, _capped(state.newton, self.max_step))
-
-    def step(self, step_size, state):
-        step, result = super().step(step_size, state)
-        return _capped(step, self.max_step), result
-
-
-def _capped(step, max_step):
-    """`step` scaled down to two-norm `max_step` if longer."""
-    length = optx.two_norm(step)
-    factor = jnp.minimum(1.0, max_step / jnp.maximum(length, jnp.finfo(length.dtype).tiny))
-    return jax.tree.map(lambda leaf: factor * leaf, step)
-
-
-class _SearchState(eqx.Module):
-    step_size: Float[Array, ""]
-
-
-class _InterpolatingArmijo(optx.AbstractSearch):
-    """Backtracking Armijo line search (as `optx.BacktrackingArmijo`) that shortens a
-    rejected step to the minimum of the parabola through the objective's values and slope
-    along it, and lengthens steps where the objective shows no curvature.
-
-    A step is accepted when the objective falls by at least `slope` times the decrease its
-    gradient predicts. A rejected step t is cut to the parabola's minimum, kept within
-    [`shortest`, 1/2] times t (halved where the objective is not finite). The first step
-    from the starting point is `first_step` times the (quasi-)Newton step: a continuation
-    stage that sharpens the smooth maximum starts from the last stage's curvature, too
-    weak across the ridge of equal peaks by about the ratio of the sharpnesses. After an
-    accepted step the next one starts at the full step; where the accepted step fell at
-    least as far as its gradient predicted (the objective is linear or concave along it,
-    and BFGS learnt no curvature from it), at twice its size, its length at most
-    `max_step`: where the objective curves down towards a distant optimum, the design
-    reaches it in a few steps instead of many equal ones."""
-
-    max_step: float
-    first_step: Float[ArrayLike, ""] = 1.0
-    slope: float = 0.1
-    shortest: float = 0.05
-
-    def init(self, y, f_info_struct):
-        return _SearchState(step_size=jnp.asarray(1.0, f_info_struct.f.dtype))
-
-    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
-        t = state.step_size
-        y_diff = jax.tree.map(lambda new, old: new - old, y_eval, y)
-        predicted = f_info.compute_grad_dot(y_diff)
-        actual = f_eval_info.as_min() - f_info.as_min()
-        accept = first_step | ((actual <= self.slope * predicted) & (predicted <= 0))
-        # Rejected: the minimum of the parabola through f(0), its slope and f(t), in units
-        # of the step tried.
-        excess = actual - predicted  # the parabola's curvature term, > 0 where rejected
-        fraction = -predicted / (2 * jnp.where(excess > 0, excess, 1.0))
-        fraction = jnp.where(jnp.isfinite(actual) & (excess > 0),
-                             jnp.clip(fraction, self.shortest, 0.5), 0.5)
-        # Accepted with no curvature seen: twice the step, no longer than `max_step`.
-        length = optx.two_norm(y_diff)
-        room = self.max_step / jnp.maximum(length, jnp.finfo(length.dtype).tiny)
-        linear = ~first_step & (predicted < 0) & (actual <= predicted)
-        longer = jnp.maximum(1.0, t * jnp.minimum(2.0, room))
-        step_size = jnp.where(first_step, self.first_step,
-                              jnp.where(accept, jnp.where(linear, longer, 1.0), fraction * t))
-        return step_size.astype(t.dtype), accept, optx.RESULTS.successful, _SearchState(step_size)
-
-
-class _BFGS(optx.AbstractBFGS):
-    """`optx.BFGS` (inverse-Hessian updates) with the Newton step capped
-    (`_CappedNewtonDescent`) and a line search that interpolates and extrapolates
-    (`_InterpolatingArmijo`)."""
-
-    rtol: float
-    atol: float
-    descent: optx.AbstractDescent
-    search: optx.AbstractSearch
-    norm: Callable = optx.max_norm
-    use_inverse: bool = True
-    verbose: Callable[..., None] = optx.BFGS(rtol=1.0, atol=1.0).verbose
-
-
-@compiled(options=compiler_options)
-def _optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
-                    max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
-                    small_cuts_end):
-    """BFGS on one lane (every array with a leading axis of one lane: the system
-    `systems[0]`, its fields batched, at `amplitudes[0]` over the frequencies `omegas[0]`)
-    from the design `u0[0]` and inverse Hessian `h0[0]` on the smooth log peak, shooting
-    from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
-    scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
-    the design, iterations, success, the orbits of the last accepted design and BFGS's
-    inverse Hessian there, each with the lane axis."""
-    settings = eqx.tree_at(
-        lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
-    )
-    solver = _BFGS(rtol=tol, atol=tol, descent=_CappedNewtonDescent(max_step=max_design_step),
-                   search=_InterpolatingArmijo(max_step=max_design_step, first_step=first_step))
-    lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
-                      max_steps=max_steps, max_rejected_steps=max_rejected_steps,
-                      small_cuts_end=small_cuts_end)
-
-    # One lane per call: its optimiser stops when it converges, and its integrations wait
-    # only for its own stiffest steady state. Batching the loops of the optimiser, with
-    # the batched loops of the steady states inside, would cost most of the program's
-    # tracing; spread over several devices as one batch (one lane each), every device
-    # would also wait for the others at each iteration of those loops (a retune with
-    # smoothed friction took five times as long on 4 simulated CPU devices as on one),
-    # and optimistix's BFGS cannot yet run on each device on its own (in a `shard_map`:
-    # lineax issue 185).
-    args = (systems, amplitudes, omegas, u0, z0, h0)
-    return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
-
-
-def _stage_lanes(lanes, options: dict):
-    """One stage (`_optimise_stage`) of the lane `(systems, amplitudes, bands, designs,
-    orbits, inverse Hessians)` (NumPy arrays, with a leading axis of one lane), its
-    results as NumPy arrays: a task of `map_lanes`."""
-    return jax.tree.map(np.asarray, _optimise_stage(*_stage_arguments(lanes, options)))
-
-
-def _stage_arguments(lanes, options: dict):
-    """The arguments of `_optimise_stage` for `_stage_lanes`."""
-    systems, amplitudes, bands, u, z, h = lanes
-    return (systems, amplitudes, u, z, h, bands, jnp.asarray(options["sharpness"]),
-            jnp.asarray(options["first_step"]), options["settings"], options["max_steps"],
-            jnp.asarray(options["tol"]), options["design_newton_steps"],
-            jnp.asarray(options["max_rejected_steps"]), options["max_design_step"],
-            jnp.asarray(options["small_cuts_end"]))
-
-
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
     """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
     its `response_peaks`, as NumPy arrays: a task of `map_shares`."""
     response = lane_response(systems, amplitudes, omegas, settings, warm)
     return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
 
-
-def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
-    """Host peaks (m) at every frequency, the true maxima over frequency of the highest
-    of them, and the orbits of the design `u`, from the orbits `warm` of a nearby
-    design (its tuning, then per frequency the scaled state, monodromy matrix and state
-    derivatives with respect to the tuning): every steady state is predicted to first
-    order at `u` and settled by chord iterations without tangents; each of the
-    `REFINED_PEAKS` highest local maxima is then located in continuous frequency by
-    Newton steps on the slope of the response (`_peaks.true_peaks`), the stencils
-    shot from the grid's orbits (interpolated) with the monodromy matrix of the
-    peak's grid point and settled by chord iterations; the peak, the response at the
-    last iterate, is solved with tangents from the last stencil's orbits
-    (interpolated), which give its derivatives and renew the monodromy matrices at
-    those grid points.
-    Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
-    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
-                                     system.inertance)
-    k, c = tuning_of_design(u, k_ref, c_ref)
-    tuned = with_tuning(system, k, c)
-    warm_tuning, states, monodromies, derivatives = warm
-    change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
-    scale = amplitude / system.host_stiffness
-
-    def settle(omega, z0, monodromy):
-        p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
-        z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
-        return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
-
-    states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)
-    index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
-    lower, upper, interior = bracket(index, omegas)
-
-    def on_stencil(at):
-        nearby = jnp.broadcast_to(monodromies[index][:, None], at.shape + monodromies.shape[-2:])
-        # One vmap over every stencil point (a nested one would batch the solves' loops
-        # twice over when traced).
-        args = (at, interpolated(states, omegas, at), nearby)
-        z, x = jax.vmap(settle)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
-        return x.reshape(at.shape), z.reshape(at.shape + z.shape[1:])
-
-    no_states = jnp.zeros(stencil(centre, interior).shape + states.shape[1:], states.dtype)
-    estimate, centre, at, stencil_states = newton_iterates(on_stencil, centre, interior,
-                                                           lower, upper, no_states)
-    # Each peak is shot with tangents from its last stencil's orbits, interpolated to its
-    # frequency (the last Newton step's move from that stencil's centre): closer than
-    # the grid's, so that no chord iterations (another copy of the solver in the
-    # compiled program) precede the Newton iterations with tangents.
-    start = jax.vmap(interpolated)(stencil_states, at, centre[:, None])[:, 0]
-
-    def full(omega, z0):
-        orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
-                                          directions=DESIGN_PARAMETERS)
-        return x_max, (orbit.monodromy, orbit.state_derivatives)
-
-    values, (m_new, d_new) = jax.vmap(full)(centre, start)
-    peak = located_peak(estimate, values)
-    orbits = (states, monodromies.at[index].set(m_new), derivatives.at[index].set(d_new))
-    return (jax.lax.stop_gradient(xs), (index, peak)), (
-        jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
-
-
-def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solver,
-                   sharpness, settings: SolverSettings, max_steps, max_rejected_steps,
-                   small_cuts_end):
-    """BFGS on one lane of `_optimise_stage`: `(u, steps, converged, orbits, inverse
-    Hessian)`."""
-    options = dict(autodiff_mode="fwd")
-    tags = frozenset()
-
-    def traced_objective(u, warm):
-        (xs, (index, peak)), orbits = _design_sweep(system, omegas, u, amplitude, warm, settings)
-        static = amplitude / system.host_stiffness
-        objective = smooth_log_peak(xs / static, omegas, sharpness, (index, peak / static))
-        return objective, jax.lax.stop_gradient(orbits)
-
-    # Traced once: the optimiser's steps replay this trace rather than tracing the
-    # steady-state solves again.
-    objective = eqx.filter_closure_convert(traced_objective, u_start, z_start)
-    # Every shooting solve starts from the orbits of the last accepted design, so that
-    # the Newton iterations of the steady states follow the optimiser.
-    f_struct, aux_struct = objective.out_struct
-    state = solver.init(objective, u_start, z_start, options, f_struct, aux_struct, tags)
-    # A stage starts from the curvature that the last one learnt, not from the identity:
-    # from a gradient step (about 0.1 long on the paper's system), the line search
-    # would cut its way down to the small moves that a sharper maximum asks for
-    # (1e-3 to 1e-4), one evaluation of the objective per cut.
-    state = eqx.tree_at(lambda s: s.f_info.hessian_inv.pytree, state, h_start)
-
-    def cond(carry):
-        u, state, z, steps, rejected, settled = carry
-        done, _ = solver.terminate(objective, u, z, options, state, tags)
-        return ~done & (steps < max_steps) & (rejected < max_rejected_steps) & ~settled
-
-    def body(carry):
-        u, state, z, steps, rejected, _ = carry
-        accepted = state.num_accepted_steps
-        u, state, _ = solver.step(objective, u, z, options, state, tags)
-        # A first step shortened on purpose (`_InterpolatingArmijo.first_step`) says
-        # nothing of the distance to the optimum: the stage does not end on it.
-        shortened = (accepted == 1) & (solver.search.first_step < 1)
-        state = eqx.tree_at(lambda s: s.terminate, state, state.terminate & ~shortened)
-        z = jax.tree.map(lambda new, old: jnp.where(state.num_accepted_steps > 0, new, old),
-                         state.aux, z)
-        rejected = jnp.where(state.num_accepted_steps > accepted, 0, rejected + 1)
-        # A rejected step cut to a move within the tolerance (as BFGS measures an
-        # accepted step's): the line search is down to moves that would count as
-        # converged, and no decrease is found above the noise of the objective. (Where
-        # `small_cuts_end` is off, in the last stage, the design goes on creeping by
-        # such moves where they are accepted: the optimum that `sensitivities` polishes.)
-        settled = small_cuts_end & (rejected > 0) & cut_within_tolerance(solver, u, state)
-        return u, state, z, steps + 1, rejected, settled
-
-    u, state, z, steps, rejected, settled = jax.lax.while_loop(
-        cond, body, (u_start, state, z_start, 0, 0, False)
-    )
-    done, result = solver.terminate(objective, u, z, options, state, tags)
-    # A line search that finds no decrease in `max_rejected_steps` cuts, or none before
-    # its cuts are within the tolerance, has reached the noise of the objective (steady
-    # states converged to the periodicity tolerance).
-    stalled = (rejected >= max_rejected_steps) | settled
-    return (u, steps, (done & (result == optx.RESULTS.successful)) | stalled, z,
-            state.f_info.hessian_inv.pytree)
 
 
 def _on_check_grid(values, refinement: int):
@@ -587,7 +290,7 @@ def optimal_tunings(
         if moving.size:
             lanes = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
             # One lane per call: one compiled program serves any number of lanes.
-            parts = map_lanes(_stage_lanes, [
+            parts = map_lanes(stage_lanes, [
                 (jax.tree.map(lambda a, i=i: a[i : i + 1], lanes), options)
                 for i in range(moving.size)
             ])
@@ -612,7 +315,7 @@ def optimal_tunings(
 
 def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
                    retune_settings: RetuneSettings) -> dict:
-    """The options of `_stage_lanes` at the continuation stage `stage` (from 1)."""
+    """The options of `stage_lanes` at the continuation stage `stage` (from 1)."""
     sharpness = sharpnesses[stage - 1]
     # Stages before the last only bring the design near the optimum.
     stage_tol = (tol if stage == len(sharpnesses)
