@@ -29,6 +29,7 @@ def main() -> None:
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
+    from tid_jax._design import PARAMETER_UNITS
     from tid_jax._io import write_csv
     from tid_jax._sensitivity import elasticity_series
 
@@ -82,7 +83,7 @@ def main() -> None:
                 amplitude,
                 name,
                 float(result.values[i]),
-                tj._design.PARAMETER_UNITS[name],
+                PARAMETER_UNITS[name],
                 float(result.host_peak),
                 float(result.host_elasticity[i]),
                 float(result.stroke_peak),

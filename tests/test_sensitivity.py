@@ -10,7 +10,7 @@ import pytest
 
 import tid_jax as tj
 from tests.lanes import peaks_of
-from tid_jax._design import STENCIL_STEP
+from tid_jax._design_evaluation import STENCIL_STEP
 from tid_jax._design_variables import DESIGN_SCALE, design_of_tuning
 from tid_jax._system import compiler_options
 
@@ -80,7 +80,8 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     # only; against the derivatives of every sample (jacfwd through the whole sweep), at
     # 200 N (the stroke sticks over part of the band) and 700 N.
     from tid_jax._band import sweep
-    from tid_jax._design import _TANGENT_CANDIDATES, Context, _changed_system, _log_candidates
+    from tid_jax._design import _TANGENT_CANDIDATES, _log_candidates, changed_system
+    from tid_jax._design_evaluation import Context
 
     # (the default settings, as `sensitivities` passes them)
     settings = tj.SolverSettings()
@@ -97,7 +98,7 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
         one compiled program (with the XLA options of the package's own)."""
 
         def logs(theta):
-            xs, ys, _, _ = sweep(_changed_system(system, theta, 1.0), theta[-1], omegas,
+            xs, ys, _, _ = sweep(changed_system(system, theta, 1.0), theta[-1], omegas,
                                  settings, z)
             (log_x, mask_x), (log_y, mask_y) = (_log_candidates(xs, omegas, none),
                                                 _log_candidates(ys, omegas, none))
@@ -252,17 +253,17 @@ def test_a_failed_steady_state_is_flagged_not_differentiated(system, band, monke
     # derivatives NaN, as a solve that failed leaves them): the sensitivities at the given
     # tuning and at the optimum come back flagged, with NaN values, not as an exception
     # or as finite numbers.
-    from tid_jax import _design
+    from tid_jax import _design_evaluation
 
     best = tj.best_tunings(system, [SENSITIVITY_AMPLITUDE], omegas=band)
-    evaluate = _design.Context.evaluate
+    evaluate = _design_evaluation.Context.evaluate
 
     def failing(self, points):
         return [curves._replace(log_x=np.full_like(curves.log_x, np.nan),
                                 jac_x=np.full_like(curves.jac_x, np.nan), converged=False)
                 for curves in evaluate(self, points)]
 
-    monkeypatch.setattr(_design.Context, "evaluate", failing)
+    monkeypatch.setattr(_design_evaluation.Context, "evaluate", failing)
     result = tj.sensitivities(system, SENSITIVITY_AMPLITUDE, omegas=band, best=best)
     assert not bool(result.converged)
     assert not np.any(np.isfinite(np.asarray(result.host_elasticity)))

@@ -11,8 +11,8 @@ __version__ = "0.1.0"
 
 _API = {
     "_band": ("Peaks", "default_omegas", "peak_response", "peaks"),
+    "_best_tunings": ("BestTunings", "best_tunings"),
     "_cache": ("default_cache_dir", "enable_compilation_cache"),
-    "_design": ("BestTunings", "best_tunings"),
     "_device": ("ForceSettings", "InerterDevice"),
     "_identify": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
                   "identify_inerter"),

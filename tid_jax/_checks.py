@@ -112,3 +112,20 @@ def integer(name: str, value, low: int, high: int | None = None) -> int:
 def choice(name: str, value, allowed: tuple) -> None:
     if not isinstance(value, str) or value not in allowed:
         raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
+
+
+def check_amplitude(amplitude) -> float:
+    if isinstance(amplitude, jax.core.Tracer):
+        raise ValueError("amplitude must be concrete (not traced)")
+    array = check_grid("amplitude", amplitude)
+    if array.ndim != 0:
+        raise ValueError(f"amplitude must be a scalar, got shape {array.shape}")
+    return float(array)
+
+
+def check_distinct(name: str, values) -> np.ndarray:
+    """A 1-d grid of distinct, finite, positive values, else `ValueError` naming `name`."""
+    array = np.atleast_1d(check_grid(name, values))
+    if np.unique(array).size != array.size:
+        raise ValueError(f"{name} must be distinct, got {array.tolist()}")
+    return array

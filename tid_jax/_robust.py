@@ -10,23 +10,17 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_steady_state_device, check_system, is_positive
-from ._design import (
+from ._best_tunings import BestTunings, best_tunings, check_best
+from ._checks import check_distinct, check_steady_state_device, check_system, is_positive
+from ._design_evaluation import (
     MAX_STEP,
     NOISE_FACTOR,
-    BestTunings,
     Context,
     Evaluation,
     Scenario,
-    Terms,
-    best_tunings,
-    check_best,
-    check_distinct,
     cold_start,
     evaluate_design,
     evaluation_of,
-    smooth_max,
-    term_weights,
 )
 from ._parallel import map_shares, serial
 from ._peaks import (
@@ -35,6 +29,7 @@ from ._peaks import (
 from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
+from ._smooth_max import Terms, smooth_max, term_weights
 from ._sqp import Model, finite, minimise_stage, stationary
 from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem

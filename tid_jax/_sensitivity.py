@@ -9,33 +9,29 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_steady_state_device, check_system
-from ._design import (
+from ._best_tunings import BestTunings, best_tunings, check_best
+from ._checks import check_amplitude, check_distinct, check_steady_state_device, check_system
+from ._design_evaluation import (
     MAX_STEP,
     NOISE_FACTOR,
     STENCIL_STEP,
-    BestTunings,
     Context,
     Scenario,
-    best_tunings,
-    check_amplitude,
-    check_best,
-    check_distinct,
     coordinates,
     evaluate_designs,
-    smooth_max,
     without_jumped_peaks,
 )
 from ._parallel import serial
 from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
+from ._smooth_max import smooth_max
 from ._sqp import Model, decrement, finite, trust_step
 from ._system import TIDSystem
 
 _POLISH = 3  # Newton steps with central differences before differentiating an optimum
 POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the polishing
 # The polishing's steps keep the curvatures of the central stencil at their start while
-# they move less than this fraction of its step (`_design.STENCIL_STEP`).
+# they move less than this fraction of its step (`STENCIL_STEP`).
 _SAME_CURVATURES = 0.1
 # The polishing's orbits are this many times tighter (integration and periodicity) than
 # the settings': the curvatures, differences of gradients over the stencil's step,

@@ -645,4 +645,4 @@ def lane_map(args):
 def import_library() -> None:
     """A worker process's first step: the library's modules imported before its first
     task, while the command sets its inputs up."""
-    from .. import _design, _identify, _robust  # noqa: F401
+    from .. import _identify, _robust, _sensitivity  # noqa: F401
