@@ -21,6 +21,7 @@ from ._checks import (
 )
 from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._linear import breakaway_amplitude, den_hartog_tuning
+from ._outcomes import outcome_code, outcome_message
 from ._parallel import map_shares, serial
 from ._response import (
     FrequencyResponse,
@@ -32,7 +33,6 @@ from ._response import (
 )
 from ._retune_stage import stage_lanes
 from ._settings import SolverSettings
-from ._status import Outcomes
 from ._system import TIDSystem
 
 
@@ -88,17 +88,16 @@ class RetuneSettings(eqx.Module):
         return len(self.sharpness) + 2
 
 
-RETUNE_OUTCOMES = Outcomes(
-    ok="ok",
-    not_stationary="optimiser did not converge",
-    steady_states_failed="some steady states did not converge",
-    peak_at_band_edge="peak at the edge of the frequency band",
-    initial_kept="the retuned peak was above the initial tuning's on the check grid: "
-    "initial tuning kept",
-    stuck="below the breakaway amplitude: the inerter never slips and the TID is a spring "
-    "and damper to ground, which retuning would only stiffen; initial tuning kept",
-)
-
+# The outcomes of `retune` (codes in `RetuneResult.status`).
+class RetuneOutcome(eqx.Enumeration):
+    ok = "ok"
+    not_stationary = "optimiser did not converge"
+    steady_states_failed = "some steady states did not converge"
+    peak_at_band_edge = "peak at the edge of the frequency band"
+    initial_kept = ("the retuned peak was above the initial tuning's on the check grid: "
+                    "initial tuning kept")
+    stuck = ("below the breakaway amplitude: the inerter never slips and the TID is a spring "
+             "and damper to ground, which retuning would only stiffen; initial tuning kept")
 
 
 class RetuneResult(eqx.Module):
@@ -107,7 +106,7 @@ class RetuneResult(eqx.Module):
     before retuning, confirmed on a frequency grid `RetuneSettings.check_refinement` times
     finer than the design grid, `check_omegas`, on which `x_response`/`x_response_initial`
     hold the peak host displacement over a period at every frequency. `status` holds codes
-    of `RETUNE_OUTCOMES`, explained by `status_messages()`."""
+    of `RetuneOutcome`, explained by `status_messages()`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -130,7 +129,7 @@ class RetuneResult(eqx.Module):
     def status_messages(self) -> list[str]:
         messages = []
         for code, at_bound in zip(np.asarray(self.status), np.asarray(self.damping_at_bound)):
-            text = RETUNE_OUTCOMES.message(code)
+            text = outcome_message(RetuneOutcome, code)
             messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
         return messages
 
@@ -412,17 +411,19 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
     before = jax.tree.map(lambda a: a[:n], found)
     after = jax.tree.map(lambda a: a[n:], found)
-    outcome = RETUNE_OUTCOMES
-    status = jnp.where(after.at_edge, outcome.peak_at_band_edge, outcome.ok)
-    status = jnp.where(after.converged & before.converged, status, outcome.steady_states_failed)
-    status = jnp.where(ok, status, outcome.not_stationary)
+    code = {name: outcome_code(getattr(RetuneOutcome, name)) for name in (
+        "ok", "not_stationary", "steady_states_failed", "peak_at_band_edge", "initial_kept",
+        "stuck")}
+    status = jnp.where(after.at_edge, code["peak_at_band_edge"], code["ok"])
+    status = jnp.where(after.converged & before.converged, status, code["steady_states_failed"])
+    status = jnp.where(ok, status, code["not_stationary"])
     # A design that the check finds worse than the tuning it started from (the design grid
     # misled the optimiser) is not returned: the initial tuning is kept and flagged.
     worse = after.x_peak > before.x_peak
-    status = jnp.where(worse, outcome.initial_kept, status)
+    status = jnp.where(worse, code["initial_kept"], status)
     # Below the breakaway amplitude the smoothed model's optimum is a stiffer and stiffer
     # spring-damper to ground (the inerter stays stuck): not a TID design, so not returned.
-    status = jnp.where(stuck, outcome.stuck, status)
+    status = jnp.where(stuck, code["stuck"], status)
     kept = worse | stuck
     k, c = jnp.where(kept, k0, k), jnp.where(kept, c0, c)
     after = jax.tree.map(lambda b, a: jnp.where(kept, b, a), before, after)
@@ -442,7 +443,7 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
         x_response=x_response,
         x_response_initial=initial.x_max,
         iterations=iterations,
-        converged=status == outcome.ok,
+        converged=status == code["ok"],
         damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,
         status=status,
     )

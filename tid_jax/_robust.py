@@ -22,6 +22,7 @@ from ._design_evaluation import (
     evaluate_design,
     evaluation_of,
 )
+from ._outcomes import outcome_code, outcome_message
 from ._parallel import map_shares, serial
 from ._peaks import (
     lane_grid_peaks,
@@ -31,7 +32,6 @@ from ._retune import RetuneSettings, check_retune_options
 from ._settings import SolverSettings
 from ._smooth_max import Terms, smooth_max, term_weights
 from ._sqp import Model, finite, minimise_stage, stationary
-from ._status import Outcomes
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
 _FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
@@ -88,13 +88,12 @@ class RobustSettings(eqx.Module):
                                  f"got {value!r}")
 
 
-ROBUST_OUTCOMES = Outcomes(
-    ok="ok",
-    not_stationary="optimiser did not converge",
-    steady_states_failed="some steady states did not converge",
-    stroke_over_limit="stroke over the limit on the check grid",
-)
-
+# The outcomes of `robust_tune` (the code in `RobustDesign.status`).
+class RobustOutcome(eqx.Enumeration):
+    ok = "ok"
+    not_stationary = "optimiser did not converge"
+    steady_states_failed = "some steady states did not converge"
+    stroke_over_limit = "stroke over the limit on the check grid"
 
 
 class _Minimum(NamedTuple):
@@ -334,7 +333,7 @@ class RobustDesign(eqx.Module):
       `ratio` per scenario); `check_stroke_peak`: inerter peaks `[scales, amps]` on the
       fine grid, `check_converged`: whether every steady state there converged; `best`:
       the `BestTunings` it was measured against.
-    - `iterations`: Newton steps; `converged`; `status`: a code of `ROBUST_OUTCOMES`,
+    - `iterations`: Newton steps; `converged`; `status`: a code of `RobustOutcome`,
       see `status_messages()`.
     """
 
@@ -357,7 +356,7 @@ class RobustDesign(eqx.Module):
     def status_messages(self) -> list[str]:
         """The meaning of `status`, one message per entry (one here), as
         `RetuneResult.status_messages`."""
-        return [ROBUST_OUTCOMES.message(code) for code in np.atleast_1d(self.status)]
+        return [outcome_message(RobustOutcome, code) for code in np.atleast_1d(self.status)]
 
 
 def _check_stroke_limit(stroke_limit) -> float:
@@ -499,14 +498,14 @@ def robust_tune(
         system.replace(tid_stiffness=k, tid_damping=c), best, settings=settings,
         map_lanes=map_lanes)
     steady = bool(np.all(performance.converged) and np.all(check_ok))
-    outcome = ROBUST_OUTCOMES
-    status = (outcome.not_stationary if not minimum.converged
-              else outcome.steady_states_failed if not steady
-              else outcome.stroke_over_limit if max_stroke > limit else outcome.ok)
+    outcome = (RobustOutcome.not_stationary if not minimum.converged
+               else RobustOutcome.steady_states_failed if not steady
+               else RobustOutcome.stroke_over_limit if max_stroke > limit else RobustOutcome.ok)
+    status = outcome_code(outcome)
     say(
         f"robust tuning: k = {k:.6g} N/m, c = {c:.5g} N s/m, worst ratio "
         f"{float(performance.worst_ratio):.4f} at {float(performance.worst_amplitude):g} N; "
-        f"{outcome.message(status)}"
+        f"{outcome_message(RobustOutcome, status)}"
     )
     return RobustDesign(
         tid_stiffness=jnp.asarray(k),
@@ -522,7 +521,7 @@ def robust_tune(
         check_converged=jnp.asarray(check_ok),
         best=best,
         iterations=jnp.asarray(steps),
-        converged=jnp.asarray(status == outcome.ok),
+        converged=jnp.asarray(status == outcome_code(RobustOutcome.ok)),
         status=jnp.asarray(status),
     )
 
