@@ -2,6 +2,7 @@
 optimum that `retune` finds there, which the sensitivities and the robust design are
 measured against."""
 
+import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
@@ -11,7 +12,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._checks import check_distinct, check_steady_state_device, check_system
+from ._checks import check_distinct, check_steady_state_device, check_system, is_positive
 from ._outcomes import outcome_code
 from ._parallel import serial
 from ._peaks import lane_grid_peaks, smooth_log_peak
@@ -19,11 +20,6 @@ from ._response import batched
 from ._retune import RetuneOutcome, RetuneSettings, check_retune_options, optimal_tunings
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
-
-# Sharpness of the smooth log peak over a scenario's band (`BestTunings.objective`), the
-# reference of the robust design's ratios: that of its last stage by default
-# (`RobustSettings.sharpness`).
-OBJECTIVE_SHARPNESS = 1000.0
 
 
 class BestTunings(eqx.Module):
@@ -37,8 +33,8 @@ class BestTunings(eqx.Module):
     - `host_peak`: peak |x| over the band's grid with it (refined by a parabola, as the
       robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
       `retune` (`RetuneSettings.check_refinement` times finer than the band).
-    - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, sharpness
-      `OBJECTIVE_SHARPNESS`, ln m), the reference of the worst-case ratio of
+    - `objective`: the smooth log peak over the band's grid (`smooth_log_peak`, of the
+      sharpness `best_tunings` was given, ln m), the reference of the worst-case ratio of
       `robust_tune`.
     - `iterations`: optimiser iterations; `stationary`: the optimiser converged;
       `converged`: `retune`'s status is ok (stationary, every steady state converged, the
@@ -75,10 +71,11 @@ def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
     )
 
 
-@jax.jit
-def _smooth_objective(values, omegas):
-    """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies)."""
-    return jax.vmap(lambda v, w: smooth_log_peak(v, w, OBJECTIVE_SHARPNESS))(values, omegas)
+@ft.partial(jax.jit, static_argnames="sharpness")
+def _smooth_objective(values, omegas, sharpness: float):
+    """`BestTunings.objective` from the host peaks `values` (m, lanes x frequencies), of
+    the given `sharpness`."""
+    return jax.vmap(lambda v, w: smooth_log_peak(v, w, sharpness))(values, omegas)
 
 
 def best_tunings(
@@ -91,6 +88,7 @@ def best_tunings(
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
+    objective_sharpness: float = 1000.0,
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
 ) -> BestTunings:
@@ -107,6 +105,9 @@ def best_tunings(
     - `omegas`: the band for the nominal system, rad/s (default `default_omegas(system)`).
     - `settings`: `SolverSettings` of every steady state.
     - `max_steps`, `tol`, `retune_settings`: the optimiser's, as in `retune`.
+    - `objective_sharpness`: sharpness of the smooth log peak `BestTunings.objective`, the
+      reference of the robust design's ratios (by default that of the robust design's
+      last stage, `RobustSettings.sharpness`).
     - `progress`: if given, called with a line as each step of the retune ends.
     - `map_lanes`: how the independent scenarios are mapped (see `retune`).
 
@@ -118,6 +119,9 @@ def best_tunings(
     scales = check_distinct("host_frequency_scales", host_frequency_scales)
     band = _band(system, omegas)
     check_retune_options(max_steps, tol, retune_settings)
+    if not is_positive(objective_sharpness):
+        raise ValueError("objective_sharpness must be a positive number, got "
+                         f"{objective_sharpness!r}")
     lane_scales, lane_amps = (g.reshape(-1) for g in np.meshgrid(scales, amps, indexing="ij"))
     bands = jnp.asarray(lane_scales[:, None] * np.asarray(band)[None])
     result = optimal_tunings(
@@ -140,7 +144,7 @@ def best_tunings(
         tid_damping=grid(result.tid_damping),
         host_peak=grid(band_peaks),
         stroke_peak=grid(result.y_peak),
-        objective=grid(_smooth_objective(on_band, bands)),
+        objective=grid(_smooth_objective(on_band, bands, objective_sharpness)),
         iterations=grid(result.iterations),
         stationary=grid(np.asarray(result.status)
                         != outcome_code(RetuneOutcome.not_stationary)),

@@ -28,19 +28,7 @@ from ._settings import SolverSettings
 from ._smooth_max import Terms
 from ._system import TIDSystem
 
-# Design-variable step of the differences of exact gradients that give the curvature of
-# each refined peak (forward while optimising, central for the final derivatives; the
-# curvature of the smooth maximum across peaks is exact). Smaller steps amplify the noise
-# of the orbit solver in the gradients, larger ones the truncation error.
-STENCIL_STEP = 1e-3
 UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
-MAX_STEP = 0.25  # largest optimiser step in u (about 28% in k)
-
-# The optimiser aims at a Newton decrement below `tol`; the noise of the orbit solver in the
-# gradients, and jumps of ~1e-8 in the log peak where a sample's concavity flips, can hold
-# it above that (most where peaks of different amplitudes balance). Within
-# NOISE_FACTOR * tol (1e-6 of the log peak by default) the optimum counts as converged.
-NOISE_FACTOR = 1000.0
 
 
 class _Curves(NamedTuple):
@@ -81,12 +69,15 @@ class Context:
     frequency, the solver settings, whether the host's peaks are located in continuous
     frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
     the grid's, refined by parabolas) and the reference tuning of the design variables
-    u = (ln(k / k_ref), sqrt(c / c_ref)) (`design_of_tuning`, unscaled), and how
-    independent lanes are mapped (`map_lanes`, see `_parallel`)."""
+    u = (ln(k / k_ref), sqrt(c / c_ref)) (`design_of_tuning`, unscaled), the step in u of
+    the stencils (`stencil_step`: the curvature of each refined peak from differences of
+    its exact gradients over that step), and how independent lanes are mapped
+    (`map_lanes`, see `_parallel`)."""
 
     def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool,
-                 map_lanes: Callable = serial):
+                 stencil_step: float, map_lanes: Callable = serial):
         self.system = system
+        self.stencil_step = stencil_step
         self.map_lanes = map_lanes
         self.locate = locate
         self.settings = settings
@@ -255,16 +246,17 @@ STENCILS = {
 }
 
 
-def _stencil(u, kind: str) -> list[np.ndarray]:
+def _stencil(u, kind: str, step: float) -> list[np.ndarray]:
+    """The designs of the stencil `kind` (of `STENCILS`) at u, `step` apart."""
     u = np.asarray(u, dtype=float)
-    return [u] + [u + STENCIL_STEP * np.asarray(step) for step in STENCILS[kind]]
+    return [u] + [u + step * np.asarray(offset) for offset in STENCILS[kind]]
 
 
 def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms:
     """Log peaks, their gradients in the coordinates (u0, u1, parameters `Context.other`) and
     the derivatives of those gradients along u0 and u1, for every frequency of one
-    scenario, from the curves at the designs `_stencil(u, kind)` (central when there
-    are five). Only the second derivatives of each refined peak come from differences;
+    scenario, from the curves at the designs of a stencil at u (`_stencil`; central when
+    there are five). Only the second derivatives of each refined peak come from differences;
     from u alone (one design) they are unknown: NaN."""
     k, _ = ctx.tuning(u)
     jac = [getattr(curves, f"jac_{response}") for curves in stencil]
@@ -274,9 +266,9 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
     dgrad = np.full(grad.shape[:1] + (2,) + grad.shape[1:], np.nan)
     for i in range(2 if len(stencil) > 1 else 0):
         if len(stencil) == 5:
-            d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * STENCIL_STEP)
+            d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * ctx.stencil_step)
         else:
-            d_jac = (jac[1 + i] - centre) / STENCIL_STEP
+            d_jac = (jac[1 + i] - centre) / ctx.stencil_step
         dgrad[:, i, 0] = k * d_jac[:, K_INDEX] + (k * centre[:, K_INDEX] if i == 0 else 0.0)
         dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, C_INDEX]
                                           + (centre[:, C_INDEX] if i == 1 else 0.0))
@@ -332,7 +324,7 @@ def evaluate_designs(ctx, designs, *, stencil="forward") -> list[Evaluation]:
     points, stencils = [], []
     for u, scenarios, z_inits in designs:
         kinds = [stencil] * len(scenarios) if isinstance(stencil, str) else stencil
-        us = [_stencil(u, kind) for kind in kinds]
+        us = [_stencil(u, kind, ctx.stencil_step) for kind in kinds]
         stencils.append(us)
         for scenario, z, vs in zip(scenarios, z_inits, us, strict=True):
             points += [(ctx.theta(*ctx.tuning(v), scenario.amplitude), scenario.scale, z)

@@ -56,6 +56,8 @@ class RetuneSettings(eqx.Module):
       found above the noise of the objective.
     - `max_design_step`: longest optimiser step in the scaled design variables (1.0 is
       about 10% in k; see `DESIGN_SCALE`).
+    - `damping_bound_ratio`: the damping's ratio to Den Hartog's below which the bound
+      c >= 0 is reported as active (`RetuneResult.damping_at_bound`).
     """
 
     sharpness: tuple[float, ...] = (50.0, 1000.0, 30000.0)
@@ -64,6 +66,7 @@ class RetuneSettings(eqx.Module):
     design_newton_steps: int = 4
     max_rejected_steps: int = 12
     max_design_step: float = 1.0
+    damping_bound_ratio: float = 1e-3
 
     def __check_init__(self):
         sharpness = self.sharpness
@@ -71,7 +74,7 @@ class RetuneSettings(eqx.Module):
                 and all(is_positive(v) for v in sharpness)):
             raise ValueError("RetuneSettings.sharpness must be a non-empty tuple of positive "
                              f"numbers, got {sharpness!r}")
-        for name in ("continuation_tol", "max_design_step"):
+        for name in ("continuation_tol", "max_design_step", "damping_bound_ratio"):
             value = getattr(self, name)
             if not is_positive(value):
                 raise ValueError(f"RetuneSettings.{name} must be a positive number, "
@@ -132,10 +135,6 @@ class RetuneResult(eqx.Module):
             text = outcome_message(RetuneOutcome, code)
             messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
         return messages
-
-
-# Damping ratio to Den Hartog's below which the bound c >= 0 is reported as active.
-DAMPING_BOUND_RATIO = 1e-3
 
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
@@ -306,7 +305,8 @@ def optimal_tunings(
     # The initial and retuned designs checked together, one share of both per process.
     both_lanes = jax.tree.map(lambda *a: np.concatenate(a), initial, lanes)
     both, found = map_shares(map_lanes, _check_lanes, both_lanes, settings)
-    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck)
+    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck,
+                             retune_settings.damping_bound_ratio)
     say(f"checked the initial and retuned designs on {lanes[2].shape[-1]} frequencies x "
         f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
     return result
@@ -402,11 +402,12 @@ def _below_breakaway(systems: TIDSystem, amplitudes, bands):
 
 @eqx.filter_jit
 def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, iterations,
-                    c_ref, stuck):
+                    c_ref, stuck, damping_bound_ratio: float):
     """The `RetuneResult` from the check `both` of the initial designs (`k0`, `c0`, its first
     half of amplitudes) and the retuned ones (`k`, `c`, the second half), and their true
     peaks `found`; `stuck` marks the amplitudes below the initial tuning's breakaway
-    amplitude."""
+    amplitude, `damping_bound_ratio` (`RetuneSettings`) where the damping is at its
+    bound."""
     n = k0.shape[0]
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
     before = jax.tree.map(lambda a: a[:n], found)
@@ -444,6 +445,6 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
         x_response_initial=initial.x_max,
         iterations=iterations,
         converged=status == code["ok"],
-        damping_at_bound=c < DAMPING_BOUND_RATIO * c_ref,
+        damping_at_bound=c < damping_bound_ratio * c_ref,
         status=status,
     )

@@ -13,8 +13,6 @@ from ._band import _band
 from ._best_tunings import BestTunings, best_tunings, check_best
 from ._checks import check_distinct, check_steady_state_device, check_system, is_positive
 from ._design_evaluation import (
-    MAX_STEP,
-    NOISE_FACTOR,
     Context,
     Evaluation,
     Scenario,
@@ -34,14 +32,6 @@ from ._smooth_max import Terms, smooth_max, term_weights
 from ._sqp import Model, finite, minimise_stage, stationary
 from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
-_FEASIBILITY = 1e-6  # |ln(stroke / target)| within which the stroke constraint is met
-_MIN_DAMPING_START = 0.05  # of c_ref, as in `retune`: c = 0 is stationary in u
-# A scenario whose weight in the smooth worst case (and in the stroke's smooth maximum)
-# is below this is evaluated at the design alone, without the neighbours that give the
-# curvatures of its peaks: its share of the curvature, below this fraction of theirs, is
-# left out; the value and gradient stay exact (the optimum is the same).
-_NEGLIGIBLE = 1e-3
-
 
 class RobustSettings(eqx.Module):
     """Settings of the robust design's optimiser (`robust_tune`). Defaults live here only.
@@ -60,24 +50,49 @@ class RobustSettings(eqx.Module):
     - `max_step`: longest trust-region step in the design variables (0.25 is about 28%
       in k).
     - `min_step`: trust radius at which a stage gives up.
+    - `noise_factor`: the optimiser aims at a Newton decrement below `tol`; the noise of
+      the orbit solver in the gradients, and jumps of ~1e-8 in the log peak where a
+      sample's concavity flips, can hold it above that: within `noise_factor * tol` the
+      design counts as converged.
+    - `feasibility`: |ln(stroke / target)| within which the stroke constraint is met.
+    - `stencil_step`: step in the design variables of the forward differences of exact
+      gradients that give the curvature of each refined peak (that of the smooth maximum
+      across peaks is exact). Smaller steps amplify the noise of the orbit solver in the
+      gradients, larger ones the truncation error.
+    - `negligible_weight`: a scenario whose weight in the smooth worst case (and in the
+      stroke's smooth maximum) is below this is evaluated at the design alone, without
+      the neighbours that give the curvatures of its peaks: its share of the curvature,
+      below this fraction of theirs, is left out; the value and gradient stay exact (the
+      optimum is the same). 0 keeps every scenario's curvature.
+    - `min_damping_start`: the search starts with the damping at least this fraction of
+      Den Hartog's (as `retune` does): c = 0 is stationary in the design variables.
     """
 
     sharpness: tuple[float, ...] = (50.0, 1000.0)
     stroke_margin: float = 0.005
     check_refinement: int = 4
     stroke_rounds: int = 3
-    max_step: float = MAX_STEP
+    max_step: float = 0.25
     min_step: float = 1e-8
+    noise_factor: float = 1000.0
+    feasibility: float = 1e-6
+    stencil_step: float = 1e-3
+    negligible_weight: float = 1e-3
+    min_damping_start: float = 0.05
 
     def __check_init__(self):
         if not (isinstance(self.sharpness, tuple) and self.sharpness
                 and all(is_positive(v) for v in self.sharpness)):
             raise ValueError("RobustSettings.sharpness must be a non-empty tuple of positive "
                              f"numbers, got {self.sharpness!r}")
-        for name in ("max_step", "min_step"):
+        for name in ("max_step", "min_step", "noise_factor", "feasibility", "stencil_step"):
             if not is_positive(getattr(self, name)):
                 raise ValueError(f"RobustSettings.{name} must be a positive number, "
                                  f"got {getattr(self, name)!r}")
+        for name in ("negligible_weight", "min_damping_start"):
+            value = getattr(self, name)
+            if not (is_positive(value) or value == 0):
+                raise ValueError(f"RobustSettings.{name} must be a number >= 0, got {value!r}")
         if not (is_positive(self.stroke_margin) and self.stroke_margin < 1):
             raise ValueError("RobustSettings.stroke_margin must be in (0, 1), "
                              f"got {self.stroke_margin!r}")
@@ -133,15 +148,15 @@ def _weights(evaluation: Evaluation, sharpness, stroke_log_limit) -> np.ndarray:
     return weights
 
 
-def _completed(ctx, evaluation: Evaluation, scenarios, sharpness,
-               stroke_log_limit) -> Evaluation:
+def _completed(ctx, evaluation: Evaluation, scenarios, sharpness, stroke_log_limit,
+               negligible: float) -> Evaluation:
     """`evaluation` with the forward stencil of every scenario solved at the design alone
-    whose weight (`_weights`) is not negligible, solved now; the others' curvature (NaN,
-    unknown) left out (0)."""
+    whose weight (`_weights`) is not below `negligible`, solved now; the others' curvature
+    (NaN, unknown) left out (0)."""
     weights = _weights(evaluation, sharpness, stroke_log_limit)
     missing = [i for i, (weight, stencil) in enumerate(zip(weights, evaluation.stencils,
                                                            strict=True))
-               if weight >= _NEGLIGIBLE and len(stencil) == 1]
+               if weight >= negligible and len(stencil) == 1]
     if missing:
         states = evaluation.states()
         again = evaluate_design(ctx, evaluation.u, [scenarios[i] for i in missing],
@@ -173,7 +188,8 @@ def _minimise(
     smooth-max sharpness of `stages` in turn, by a trust-region Newton method; with a
     stroke limit, by sequential quadratic programming on the constraint c <= 0 with the
     exact penalty f + weight max(c, 0) as merit function. A design is evaluated with the
-    curvatures of only the scenarios that weigh in the smooth maxima (`_NEGLIGIBLE`): a
+    curvatures of only the scenarios that weigh in the smooth maxima
+    (`robust_settings.negligible_weight`): a
     trial with those that weighed in the last accepted design, then those of any other
     that weighs at the trial (`_completed`); the first, solved at the design alone, with
     those that weigh there."""
@@ -182,26 +198,27 @@ def _minimise(
     current = evaluate_design(ctx, np.asarray(u, dtype=float), scenarios, z_inits,
                               stencil="centre")
     steps, converged = 0, False
+    negligible, feasibility = robust_settings.negligible_weight, robust_settings.feasibility
     for stage, sharpness in enumerate(stages, start=1):
-        current = _completed(ctx, current, scenarios, sharpness, stroke_log_limit)
+        current = _completed(ctx, current, scenarios, sharpness, stroke_log_limit, negligible)
         f, c = _models(current, sharpness, stroke_log_limit)
         if not (finite(f) and (c is None or finite(c))):
             return _Minimum(current, f, c, steps, False)
 
         def evaluate(u, accepted, sharpness=sharpness):
-            curved = _weights(accepted, sharpness, stroke_log_limit) >= _NEGLIGIBLE
+            curved = _weights(accepted, sharpness, stroke_log_limit) >= negligible
             trial = evaluate_design(ctx, u, scenarios, accepted.states(),
                                     stencil=["forward" if c else "centre" for c in curved])
-            trial = _completed(ctx, trial, scenarios, sharpness, stroke_log_limit)
+            trial = _completed(ctx, trial, scenarios, sharpness, stroke_log_limit, negligible)
             t_f, t_c = _models(trial, sharpness, stroke_log_limit)
             return trial, t_f, t_c, trial.converged()
 
         current, f, c, stage_steps = minimise_stage(
             evaluate, current, f, c, max_step=robust_settings.max_step,
             min_step=robust_settings.min_step,
-            feasibility=_FEASIBILITY, max_steps=max_steps, tol=tol)
+            feasibility=feasibility, max_steps=max_steps, tol=tol)
         steps += stage_steps
-        converged = stationary(f, c, NOISE_FACTOR * tol, _FEASIBILITY)
+        converged = stationary(f, c, robust_settings.noise_factor * tol, feasibility)
         if say is not None:
             k, c_tuned = ctx.tuning(current.u)
             say(
@@ -419,9 +436,9 @@ def robust_tune(
     of the scenarios' log peak ratios. It is minimised by sequential quadratic programming
     with the smooth maximum of the log inerter peaks held below the limit (aimed
     `robust_settings.stroke_margin` below it): trust-region Newton steps (the curvature
-    from the scenarios that weigh at least 1e-3 in either smooth maximum; the value and
-    gradient from all), aiming at a
-    decrement along the constraint below `tol` (converged within `NOISE_FACTOR * tol`),
+    from the scenarios that weigh at least `robust_settings.negligible_weight` in either
+    smooth maximum; the value and gradient from all), aiming at a decrement along the
+    constraint below `tol` (converged within `robust_settings.noise_factor * tol`),
     from the system's tuning or the best tuning of a nominal scenario, whichever has the
     smaller worst case within the limit. The stroke is then checked on a grid
     `robust_settings.check_refinement` times finer; if it is over the limit there, the
@@ -465,7 +482,8 @@ def robust_tune(
     # The worst case over scenarios is of the peaks on the band's grid (refined by
     # parabolas), as its reference `best.objective` is; the stroke limit is then checked
     # on a finer grid.
-    ctx = Context(system, band, settings, locate=False, map_lanes=map_lanes)
+    ctx = Context(system, band, settings, locate=False,
+                  stencil_step=robust_settings.stencil_step, map_lanes=map_lanes)
     scenarios = [
         Scenario(float(amplitude), float(scale), float(best.objective[i, j]))
         for i, scale in enumerate(scales)
@@ -477,7 +495,7 @@ def robust_tune(
     k, c = _robust_start(system, best, target, settings, map_lanes)
     say(f"starting from k = {k:.6g} N/m, c = {c:.5g} N s/m")
     options = dict(max_steps=max_steps, tol=tol, say=say, robust_settings=robust_settings)
-    minimum = _minimise(ctx, scenarios, ctx.design(k, c, floor=_MIN_DAMPING_START),
+    minimum = _minimise(ctx, scenarios, ctx.design(k, c, floor=robust_settings.min_damping_start),
                         stroke_log_limit=target, stages=robust_settings.sharpness, **options)
     steps = minimum.steps
     fine = np.linspace(band[0], band[-1], robust_settings.check_refinement * (band.size - 1) + 1)

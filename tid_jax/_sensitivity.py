@@ -10,11 +10,14 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
 from ._best_tunings import BestTunings, best_tunings, check_best
-from ._checks import check_amplitude, check_distinct, check_steady_state_device, check_system
+from ._checks import (
+    check_amplitude,
+    check_distinct,
+    check_steady_state_device,
+    check_system,
+    is_positive,
+)
 from ._design_evaluation import (
-    MAX_STEP,
-    NOISE_FACTOR,
-    STENCIL_STEP,
     Context,
     Scenario,
     coordinates,
@@ -28,16 +31,58 @@ from ._smooth_max import smooth_max
 from ._sqp import Model, decrement, finite, trust_step
 from ._system import TIDSystem
 
-_POLISH = 3  # Newton steps with central differences before differentiating an optimum
-POLISH_TOL = 1e-9  # Newton decrement of the smooth log peak aimed at by the polishing
-# The polishing's steps keep the curvatures of the central stencil at their start while
-# they move less than this fraction of its step (`STENCIL_STEP`).
-_SAME_CURVATURES = 0.1
-# The polishing's orbits are this many times tighter (integration and periodicity) than
-# the settings': the curvatures, differences of gradients over the stencil's step,
-# multiply the orbits' errors by 1 / STENCIL_STEP. At the default settings, c*'s
-# elasticities would break its exact scaling law 2 e_K + e_C = 1 by up to 0.05.
-_POLISH_ACCURACY = 10.0
+
+class SensitivitySettings(eqx.Module):
+    """Settings of the derivatives at the retuned optimum (`sensitivities`). Defaults live
+    here only.
+
+    - `polish_steps`: Newton steps at most, on central differences, that polish the
+      optimiser's optimum before it is differentiated.
+    - `polish_tol`: the Newton decrement of the smooth log peak that the polishing aims
+      at.
+    - `noise_factor`: the noise of the orbit solver in the gradients, and jumps of ~1e-8
+      in the log peak where a sample's concavity flips, can hold the decrement above
+      `polish_tol` (most where peaks of different amplitudes balance): within
+      `noise_factor * polish_tol` (1e-6 of the log peak by default) the optimum counts as
+      converged.
+    - `polish_accuracy`: the polishing's orbits are this many times tighter (integration
+      and periodicity) than the solver settings': the curvatures, differences of
+      gradients over the stencil's step, multiply the orbits' errors by
+      1 / `stencil_step`. At the default settings, c*'s elasticities would break its
+      exact scaling law 2 e_K + e_C = 1 by up to 0.05.
+    - `stencil_step`: step in the design variables of the differences of exact gradients
+      that give the curvature of each refined peak (central; the curvature of the smooth
+      maximum across peaks is exact). Smaller steps amplify the noise of the orbit solver
+      in the gradients, larger ones the truncation error.
+    - `same_curvatures`: the polishing's steps keep the curvatures of the central stencil
+      at their start while they move less than this fraction of `stencil_step`.
+    - `max_step`: longest polishing step in the design variables (0.25 is about 28% in
+      k).
+    """
+
+    polish_steps: int = 3
+    polish_tol: float = 1e-9
+    noise_factor: float = 1000.0
+    polish_accuracy: float = 10.0
+    stencil_step: float = 1e-3
+    same_curvatures: float = 0.1
+    max_step: float = 0.25
+
+    def __check_init__(self):
+        for name in ("polish_tol", "noise_factor", "polish_accuracy", "stencil_step",
+                     "max_step"):
+            value = getattr(self, name)
+            if not is_positive(value):
+                raise ValueError(f"SensitivitySettings.{name} must be a positive number, "
+                                 f"got {value!r}")
+        if not (is_positive(self.same_curvatures) or self.same_curvatures == 0):
+            raise ValueError("SensitivitySettings.same_curvatures must be a number >= 0, "
+                             f"got {self.same_curvatures!r}")
+        value = self.polish_steps
+        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 0):
+            raise ValueError(f"SensitivitySettings.polish_steps must be an integer >= 0, "
+                             f"got {value!r}")
+
 
 # --- sensitivities -------------------------------------------------------------------------
 
@@ -143,30 +188,33 @@ class Sensitivities(eqx.Module):
         }
 
 
-def _polished(ctx, starts, tol, sharpness):
+def _polished(ctx, starts, sharpness, sensitivity_settings: SensitivitySettings):
     """For each `(scenario, u, z_init, at_bound)` of `starts`, the evaluation at the
     optimum of the smooth log peak of `retune` (of its last stage's `sharpness`) near u,
-    with its smooth maximum, gradient and derivatives (a `Model`): at most `_POLISH` Newton
-    steps from u (along u0 alone, with u1 = 0, where the damping is at its bound), each
-    round's evaluations of every start in one batch. Only the start is evaluated with its
-    central stencil: the steps are far shorter than the stencil's (`STENCIL_STEP`), so
-    that the curvatures of the refined peaks from its differences hold at every step,
-    which is then evaluated alone (values and exact gradients); an optimum found further
-    away than `_SAME_CURVATURES` times the stencil's step is evaluated with its own."""
+    with its smooth maximum, gradient and derivatives (a `Model`): at most
+    `sensitivity_settings.polish_steps` Newton steps from u, aiming at a decrement below
+    its `polish_tol` (along u0 alone, with u1 = 0, where the damping is at its bound),
+    each round's evaluations of every start in one batch. Only the start is evaluated
+    with its central stencil: the steps are far shorter than the stencil's
+    (`ctx.stencil_step`), so that the curvatures of the refined peaks from its
+    differences hold at every step, which is then evaluated alone (values and exact
+    gradients); an optimum found further away than `same_curvatures` times the stencil's
+    step is evaluated with its own."""
+    tol = sensitivity_settings.polish_tol
     finals = evaluate_designs(ctx, [(u, [scenario], [z]) for scenario, u, z, _ in starts],
                               stencil="central")
     first = list(finals)
     models = [Model(*smooth_max(final.host_terms, sharpness)) for final in finals]
     # A start whose smooth maximum is not finite (a steady state failed) is not polished.
     moving = [i for i, model in enumerate(models) if finite(model)]
-    for _ in range(_POLISH):
+    for _ in range(sensitivity_settings.polish_steps):
         steps = {}
         for i in moving:
             free = slice(0, 1) if starts[i][3] else slice(0, 2)
             g, h = models[i].grad[free], models[i].curvature()[free, free]
             if decrement(g, h) >= tol:
                 steps[i] = np.zeros(2)
-                steps[i][free] = trust_step(g, h, MAX_STEP)
+                steps[i][free] = trust_step(g, h, sensitivity_settings.max_step)
         if not steps:
             break
         trials = evaluate_designs(ctx, [
@@ -183,7 +231,8 @@ def _polished(ctx, starts, tol, sharpness):
                 moving.append(i)
     # Where the steps went further, the curvatures are evaluated again there.
     far = [i for i, ((_, u, _, _), final) in enumerate(zip(starts, finals, strict=True))
-           if np.max(np.abs(final.u - u)) > _SAME_CURVATURES * STENCIL_STEP]
+           if np.max(np.abs(final.u - u))
+           > sensitivity_settings.same_curvatures * ctx.stencil_step]
     if far:
         again = evaluate_designs(ctx, [(finals[i].u, [starts[i][0]], finals[i].states())
                                        for i in far], stencil="central")
@@ -207,7 +256,7 @@ def _optimum_starts(ctx, amplitudes, best: "BestTunings", indices):
 
 
 def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, final, model,
-                           tol):
+                           sensitivity_settings: SensitivitySettings):
     """`OptimumSensitivities` at the best tuning `best[index]`, polished (`final` and its
     `model`, from `_polished`) and differentiated through its stationarity condition: in
     (u0, u1), or where the damping is at its bound, in u0 alone with dc*/dp = 0 (the bound
@@ -234,7 +283,8 @@ def _optimum_sensitivities(ctx, theta, best: "BestTunings", index, at_bound, fin
     dk[ctx.other] = k * du_dp[0]
     dc[ctx.other] = 2 * ctx.c_ref * u[1] * du_dp[1]
     host_peak, stroke_peak = centre.host_peak(), centre.stroke_peak()
-    at_optimum = decrement(g[free], h_uu[np.ix_(free, free)]) < NOISE_FACTOR * tol
+    within = sensitivity_settings.noise_factor * sensitivity_settings.polish_tol
+    at_optimum = decrement(g[free], h_uu[np.ix_(free, free)]) < within
     # At the bound the peak must rise with the damping (a positive curvature in u1).
     at_optimum &= not at_bound or h_uu[1, 1] > 0
     return OptimumSensitivities(
@@ -300,6 +350,7 @@ def sensitivities(
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
+    sensitivity_settings: SensitivitySettings = SensitivitySettings(),
 ) -> Sensitivities:
     """Sensitivities of the peak steady-state host displacement and inerter stroke over the
     band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
@@ -309,11 +360,12 @@ def sensitivities(
     With `optimum=True` also at the retuned optimum (see `OptimumSensitivities`): the
     tuning that `retune` finds (from `best`, a `BestTunings` of this system and band
     holding `amplitude`, or else from `best_tunings` with `max_steps`, `tol` and
-    `retune_settings`), polished by at most `_POLISH` Newton steps on the same objective
-    (the smooth maximum of `retune_settings.sharpness[-1]`, aiming at a Newton decrement
-    below `POLISH_TOL`, converged within `NOISE_FACTOR * POLISH_TOL`; its orbits solved
-    `_POLISH_ACCURACY` times tighter than `settings`), then differentiated
-    through its stationarity condition rather than re-optimised. Where the optimal damping
+    `retune_settings`), polished by at most `sensitivity_settings.polish_steps` Newton
+    steps on the same objective (the smooth maximum of `retune_settings.sharpness[-1]`,
+    aiming at a Newton decrement below `sensitivity_settings.polish_tol`, converged within
+    `noise_factor` times that; its orbits solved `polish_accuracy` times tighter than
+    `settings`), then differentiated through its stationarity condition rather than
+    re-optimised. Where the optimal damping
     is at its bound 0, only k* moves: dc*/dp = 0 and the elasticities of c* are NaN.
     The parameters are `parameters_of(system)`: the physical fields of the steady-state
     model and the amplitude, with a compliant device's series stiffness and backlash (a
@@ -331,13 +383,16 @@ def sensitivities(
     - `settings`: `SolverSettings` of every steady state.
     - `max_steps`, `tol`, `retune_settings`: of the optimiser that finds the optimum (as
       in `retune`).
+    - `sensitivity_settings`: `SensitivitySettings` of the polishing and the derivatives
+      at the optimum.
 
     **Returns:** a `Sensitivities` (parameters in the order `parameters_of(system)`).
     """
     amplitude = check_amplitude(amplitude)
     return amplitude_sensitivities(
         system, [amplitude], omegas=omegas, optimum=optimum, best=best, settings=settings,
-        max_steps=max_steps, tol=tol, retune_settings=retune_settings)[0]
+        max_steps=max_steps, tol=tol, retune_settings=retune_settings,
+        sensitivity_settings=sensitivity_settings)[0]
 
 
 def amplitude_sensitivities(
@@ -351,6 +406,7 @@ def amplitude_sensitivities(
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
+    sensitivity_settings: SensitivitySettings = SensitivitySettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
 ) -> list[Sensitivities]:
@@ -370,7 +426,11 @@ def amplitude_sensitivities(
     if not isinstance(optimum, bool):
         raise ValueError(f"optimum must be True or False, got {optimum!r}")
     check_retune_options(max_steps, tol, retune_settings)
-    ctx = Context(system, band, settings, locate=True, map_lanes=map_lanes)
+    if not isinstance(sensitivity_settings, SensitivitySettings):
+        raise ValueError("sensitivity_settings must be a SensitivitySettings, got "
+                         f"{type(sensitivity_settings).__name__}")
+    step = sensitivity_settings.stencil_step
+    ctx = Context(system, band, settings, locate=True, stencil_step=step, map_lanes=map_lanes)
     if optimum and best is None:
         best = best_tunings(system, amplitudes, omegas=band, settings=settings,
                             max_steps=max_steps, tol=tol, retune_settings=retune_settings,
@@ -386,15 +446,16 @@ def amplitude_sensitivities(
         indices = [_best_index(best, system, band, amplitude) for amplitude in amplitudes]
         starts = _optimum_starts(ctx, amplitudes, best, indices)
         given_settings = settings.for_system(system)
-        tight = given_settings.tighter(_POLISH_ACCURACY)
+        tight = given_settings.tighter(sensitivity_settings.polish_accuracy)
         # Exact friction has no integration error to tighten: the context of the given
         # tuning serves (one compiled program, not two that compute the same).
-        accurate = ctx if tight == given_settings else Context(system, band, tight, locate=True,
-                                                               map_lanes=map_lanes)
-        finals, models = _polished(accurate, starts, POLISH_TOL,
-                                   retune_settings.sharpness[-1])
+        accurate = ctx if tight == given_settings else Context(
+            system, band, tight, locate=True, stencil_step=step, map_lanes=map_lanes)
+        finals, models = _polished(accurate, starts, retune_settings.sharpness[-1],
+                                   sensitivity_settings)
         optimal = [
-            _optimum_sensitivities(ctx, theta, best, index, start[3], final, model, POLISH_TOL)
+            _optimum_sensitivities(ctx, theta, best, index, start[3], final, model,
+                                   sensitivity_settings)
             for theta, index, start, final, model in zip(thetas, indices, starts, finals, models,
                                                          strict=True)
         ]
