@@ -158,17 +158,17 @@ def test_the_start_scan_over_processes_is_the_scan_here():
         np.testing.assert_array_equal(theirs, mine)
 
 
-def test_the_scan_starts_from_the_first_of_the_lowest_finite_costs(monkeypatch):
+def test_the_scan_starts_from_the_first_of_the_lowest_finite_costs():
     """A candidate whose sum of squares is NaN or infinite (a failed integration) is never
     the start; of equal costs, the first in the scan's order is."""
     costs = [np.array([np.nan, 3.0, np.inf, 2.0]), np.array([2.0, np.nan])]
-    monkeypatch.setattr(_identify, "_SCAN", {"series_stiffness": np.arange(1.0, 6.0)})
+    settings = tj.IdentifySettings(stiffness_starts=(1.0, 2.0, 3.0, 4.0, 5.0))
     parameters = _identify.MODEL_PARAMETERS["compliant"]
     typical = dict.fromkeys(parameters, 1.0)
     values = np.array([75.0, 20.0, 300.0, 10.0])  # the fitted value, a sixth candidate
     motion = Motion.from_samples(np.arange(4.0), np.arange(4.0) ** 2)
     start = _identify._scanned_start(parameters, values, [motion], [np.zeros(4)], 1.0,
-                                     _identify.IdentifySettings(), typical, 1e9, 0.0,
+                                     settings, typical, 1e9, 0.0,
                                      lambda function, tasks: costs)
     np.testing.assert_array_equal(start, [75.0, 20.0, 300.0, 4.0])
 

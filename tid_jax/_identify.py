@@ -20,6 +20,7 @@ comparison says which terms the data support by the Bayesian information criteri
 import itertools
 import math
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -30,7 +31,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._cache import compiled
-from ._checks import check_precision, choice, integer, real_scalar
+from ._checks import check_precision, choice, integer, is_positive, real_scalar
 from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
 from ._parallel import serial
 from ._stall import cut_within_tolerance
@@ -40,7 +41,6 @@ MODELS = ("ideal", "damped", "compliant", "backlash")
 _TERMS = ("inertance", "friction_force", "parasitic_damping", "series_stiffness", "backlash")
 MODEL_PARAMETERS = {model: _TERMS[: i + 2] for i, model in enumerate(MODELS)}
 MIN_SAMPLES = 32
-SUPPORT_BIC = 10.0  # a term is supported where it lowers the BIC by more than this
 _NEGLIGIBLE = 1e-3  # a start below this fraction of its term's typical size is scaled by the latter
 
 
@@ -85,7 +85,8 @@ class ModelComparison(eqx.Module):
     """The nested models fitted, in order: their parameter counts, the residual RMS over
     all records (N), the Bayesian information criterion `n ln(RSS / n) + p ln n` and its
     change from the model before, and whether that change supports the model's added term
-    (a fall of more than `SUPPORT_BIC`; the first model is supported by definition)."""
+    (a fall of more than `IdentifySettings.support_bic`; the first model is supported by
+    definition)."""
 
     models: tuple[str, ...] = eqx.field(static=True)
     parameter_counts: tuple[int, ...] = eqx.field(static=True)
@@ -119,13 +120,47 @@ class InerterFit(eqx.Module):
 
 
 class IdentifySettings(eqx.Module):
-    """Least-squares tolerances (optimistix, on the scaled parameters and the force
-    relative to the records' peak) and steps, and the device's `ForceSettings`."""
+    """Settings of `identify_inerter`. Defaults live here only.
+
+    - `rtol`, `atol`, `max_steps`: the least squares' tolerances (optimistix, on the
+      scaled parameters and the force relative to the records' peak) and steps.
+    - `force`: the device's `ForceSettings`.
+    - `stiffness_starts`: starting values tried for the series stiffness, times its
+      typical size (a resonance ten times the fastest test's frequency): the force of a
+      compliant device rings after each reversal at a frequency set by the series
+      stiffness, so that the least squares in it have many local minima. Empty: no scan.
+    - `backlash_starts`: the same for the backlash, times 1% of the smallest stroke: the
+      force rattles through the free play.
+    - `starts_per_task`: starting values per task of the processes that share the scan.
+    - `support_bic`: a model's added term is supported where it lowers the Bayesian
+      information criterion by more than this.
+    """
 
     rtol: float = 1e-9
     atol: float = 1e-9
     max_steps: int = 200
     force: ForceSettings = ForceSettings()
+    stiffness_starts: tuple[float, ...] = tuple(float(v) for v in np.geomspace(2e-2, 1e2, 25))
+    backlash_starts: tuple[float, ...] = tuple(float(v) for v in np.geomspace(0.1, 30, 7))
+    starts_per_task: int = 8
+    support_bic: float = 10.0
+
+    def __check_init__(self):
+        for name in ("stiffness_starts", "backlash_starts"):
+            value = getattr(self, name)
+            if not (isinstance(value, tuple) and all(is_positive(v) for v in value)):
+                raise ValueError(f"IdentifySettings.{name} must be a tuple of positive "
+                                 f"numbers, got {value!r}")
+        integer("IdentifySettings.starts_per_task", self.starts_per_task, 1)
+        if not (is_positive(self.support_bic) or self.support_bic == 0):
+            raise ValueError("IdentifySettings.support_bic must be a number >= 0, got "
+                             f"{self.support_bic!r}")
+
+    def scanned_starts(self) -> dict[str, np.ndarray]:
+        """The starting values scanned per term, times its typical size (the terms with
+        any)."""
+        starts = {"series_stiffness": self.stiffness_starts, "backlash": self.backlash_starts}
+        return {name: np.asarray(values) for name, values in starts.items() if values}
 
 
 _SQUARED = ("friction_force", "parasitic_damping")  # terms that are squares of unknowns
@@ -235,14 +270,16 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 
 
 @compiled
-def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings):
-    fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings.force)
+def _solve(x0, scales, motions, forces, force_scale, settings: ForceSettings, *, rtol, atol,
+           max_steps):
+    """Levenberg-Marquardt from the unknowns `x0` to the tolerances `rtol`, `atol` in at
+    most `max_steps` steps, with `settings` the device's: the unknowns, the residual (N)
+    and its Jacobian in the parameters themselves, success and the steps."""
+    fn = lambda x, _: _residuals(x, scales, motions, forces, force_scale, settings)
     # the damped steps by Cholesky on the normal equations (few, well-scaled unknowns),
     # whose LAPACK call, unlike QR's, can be kept in the program cache
-    solver = _LevenbergMarquardt(rtol=settings.rtol, atol=settings.atol,
-                                 linear_solver=lx.Normal(lx.Cholesky()))
-    sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=settings.max_steps,
-                             throw=False)
+    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    sol = optx.least_squares(fn, solver, x0, has_aux=True, max_steps=max_steps, throw=False)
     x = sol.value
 
     # the Jacobian in the parameters themselves, for their covariance: defined where a
@@ -250,7 +287,7 @@ def _solve(x0, scales, motions, forces, force_scale, settings: IdentifySettings)
     # the residuals from the same integrations
     def residuals(values):
         residual, ok = _device_residuals(scales.device_of(values), motions, forces,
-                                         force_scale, settings.force)
+                                         force_scale, settings)
         return residual, (residual, ok)
 
     jacobian, (residual, ok) = jax.jacfwd(residuals, has_aux=True)(scales.values(x))
@@ -279,26 +316,20 @@ def _sum_of_squares(x, scales, motions, forces, force_scale, settings: ForceSett
     return jnp.where(ok, jnp.sum(residual**2), jnp.inf)
 
 
-# Starting values tried for the nonlinear terms, times their typical sizes: the force of
-# a compliant device rings after each reversal at a frequency set by the series
-# stiffness, and rattles through a backlash, so that the least squares in them have many
-# local minima.
-_SCAN = {"series_stiffness": np.geomspace(2e-2, 1e2, 25), "backlash": np.geomspace(0.1, 30, 7)}
-_SCAN_TASK = 8  # starting values per task of the processes that share the scan
-
-
 def _scanned_start(parameters, values, motions, forces, force_scale,
                    settings: IdentifySettings, typical, stiffness_limit, terminal_mass,
                    map_lanes):
-    """`values` with the scanned terms (`_SCAN`) of the model at the best of their
-    scanned starting values, tried together (a term fitted before also keeps its value
-    as a candidate; no series stiffness above `stiffness_limit`), the others held; the
-    candidates mapped a few to a task by `map_lanes`."""
-    scanned = [name for name in parameters if name in _SCAN]
+    """`values` with the scanned terms (`IdentifySettings.scanned_starts`) of the model at
+    the best of their scanned starting values, tried together (a term fitted before also
+    keeps its value as a candidate; no series stiffness above `stiffness_limit`), the
+    others held; the candidates mapped `settings.starts_per_task` to a task by
+    `map_lanes`."""
+    starts = settings.scanned_starts()
+    scanned = [name for name in parameters if name in starts]
     if not scanned:
         return values
     index = [parameters.index(name) for name in scanned]
-    candidates = [np.unique(np.append(_SCAN[name] * typical[name], values[i]))
+    candidates = [np.unique(np.append(starts[name] * typical[name], values[i]))
                   for name, i in zip(scanned, index, strict=True)]
     # a series stiffness whose resonance the records cannot resolve is not tried
     candidates = [c[c <= stiffness_limit] if name == "series_stiffness" else c
@@ -308,11 +339,12 @@ def _scanned_start(parameters, values, motions, forces, force_scale,
     trials = np.repeat(values[None], math.prod(c.size for c in candidates), axis=0)
     trials[:, index] = list(itertools.product(*candidates))
     # the candidates mapped a few to a task
+    task = settings.starts_per_task
     shared = jax.tree.map(np.asarray, (np.array([typical[name] for name in parameters]),
                                        terminal_mass, motions, forces, force_scale))
     costs = np.concatenate(map_lanes(_scan_costs, [
-        (trials[start : start + _SCAN_TASK], parameters, *shared, settings.force)
-        for start in range(0, len(trials), _SCAN_TASK)]))
+        (trials[start : start + task], parameters, *shared, settings.force)
+        for start in range(0, len(trials), task)]))
     # the first of the lowest finite costs, in the product's order
     costs[~np.isfinite(costs)] = np.inf
     return trials[int(np.argmin(costs))] if np.isfinite(costs).any() else values
@@ -345,8 +377,9 @@ def _fit(model, start, motions, forces, force_scale, settings: IdentifySettings,
                        for name, v in zip(parameters, values, strict=True)])
     scales = _Scales(parameters, jnp.asarray(scales), terminal_mass)
     x0 = scales.unknowns(jnp.asarray(values))
-    x, residual, jacobian, ok, steps = _solve(x0, scales, motions, forces, force_scale,
-                                              settings)
+    x, residual, jacobian, ok, steps = _solve(
+        x0, scales, motions, forces, force_scale, settings.force, rtol=settings.rtol,
+        atol=settings.atol, max_steps=settings.max_steps)
     return scales, x, np.asarray(residual), np.asarray(jacobian), bool(ok), int(steps)
 
 
@@ -404,8 +437,26 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
     mechanism_forces = [f - held_mass * m.acceleration
                         for f, m in zip(forces, motions, strict=True)]
     width = lambda m: float(friction_width(m, settings.force))
-    # typical sizes: the starting values of terms fitted afresh, and the scales of terms
-    # whose start is zero
+    typical, stiffness_limit = _typical_sizes(motions, mechanism_forces, peak_force, width)
+    fits = []
+    for name in MODELS[: MODELS.index(model) + 1]:
+        parameters = MODEL_PARAMETERS[name]
+        if name in ("ideal", "damped"):  # from their linear least squares
+            start = dict(zip(parameters, _linear_start(parameters, motions, mechanism_forces,
+                                                       width), strict=True))
+        else:  # from the model before, its added term missing
+            start = fits[-1].estimates()
+        fits.append(_model_fit(name, start, motions, forces, force_scale, settings, typical,
+                               stiffness_limit, held_mass, map_lanes))
+        if progress is not None:
+            progress(fits[-1].summary())
+    return _inerter_fit(model, float(terminal_mass), forces, fits, settings.support_bic)
+
+
+def _typical_sizes(motions, mechanism_forces, peak_force: float, width):
+    """Typical sizes of the terms: the starting values of terms fitted afresh, and the
+    scales of terms whose start is zero; and the largest series stiffness that the
+    records resolve (a resonance at an eighth of the sampling rate)."""
     omega_max = max(math.sqrt(float(np.max(np.abs(m.acceleration)))
                               / float(np.max(np.abs(m.displacement)))) for m in motions)
     b0, ff0 = _linear_start(MODEL_PARAMETERS["ideal"], motions, mechanism_forces, width)
@@ -418,63 +469,92 @@ def identify_inerter(records, *, model: str = "ideal", terminal_mass: float = 0.
         "series_stiffness": 100 * b0 * omega_max**2,  # a resonance 10x the fastest test's
         "backlash": 1e-2 * min(float(np.max(np.abs(m.displacement))) for m in motions),
     }
-    # the series stiffness of a resonance at an eighth of the sampling rate
     stiffness_limit = b0 * (2 * math.pi / (8 * max(float(np.median(np.diff(m.time)))
                                                    for m in motions))) ** 2
-    n = sum(f.shape[0] for f in forces)
+    return typical, stiffness_limit
+
+
+class _ModelFit(NamedTuple):
+    """One nested model fitted: its parameters' values, standard errors and correlations
+    (SI), the residual of each record (N), the residual sum of squares (N^2) over all the
+    records' samples, whether the least squares converged and its steps."""
+
+    name: str
+    values: np.ndarray
+    errors: np.ndarray
+    correlations: np.ndarray
+    pieces: list
+    rss: float
+    samples: int
+    ok: bool
+    steps: int
+
+    def estimates(self) -> dict:
+        """The fitted values by parameter name."""
+        return dict(zip(MODEL_PARAMETERS[self.name], self.values, strict=True))
+
+    def summary(self) -> str:
+        return (f"model {self.name!r} fitted: residual RMS "
+                f"{math.sqrt(self.rss / self.samples):.4g} N"
+                f"{'' if self.ok else ' (not converged)'}")
+
+
+def _model_fit(name, start, motions, forces, force_scale, settings: IdentifySettings,
+               typical, stiffness_limit, held_mass, map_lanes) -> _ModelFit:
+    """The model `name` fitted from `start` (`_fit`), with the standard errors of its
+    estimates."""
     sizes = [f.shape[0] for f in forces]
-    start, summary = {}, []
-    for name in MODELS[: MODELS.index(model) + 1]:
-        parameters = MODEL_PARAMETERS[name]
-        if name in ("ideal", "damped"):
-            start = dict(zip(parameters, _linear_start(parameters, motions, mechanism_forces,
-                                                       width), strict=True))
-        scales, x, residual, jacobian, ok, steps = _fit(
-            name, start, motions, forces, force_scale, settings, typical, stiffness_limit,
-            held_mass, map_lanes)
-        values = np.asarray(scales.values(x))
-        start = dict(zip(parameters, values, strict=True))
-        rss = float(np.sum(residual**2))
-        p = len(parameters)
-        pieces = np.split(residual, np.cumsum(sizes)[:-1])
-        # in units of each term's scale, where the Jacobian is well conditioned
-        size = np.asarray(scales.scales)
-        covariance = size[:, None] * _covariance(jacobian * size, pieces, p) * size[None, :]
-        errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            correlations = covariance / np.outer(errors, errors)
-        last = dict(values=values, errors=errors, correlations=correlations, pieces=pieces,
-                    ok=ok, steps=steps)
-        if progress is not None:
-            progress(f"model {name!r} fitted: residual RMS {math.sqrt(rss / n):.4g} N"
-                     f"{'' if ok else ' (not converged)'}")
-        summary.append((name, p, math.sqrt(rss / n),
-                        n * math.log(max(rss, 1e-300) / n) + p * math.log(n), ok))
-    bic = np.array([row[3] for row in summary])
+    scales, x, residual, jacobian, ok, steps = _fit(
+        name, start, motions, forces, force_scale, settings, typical, stiffness_limit,
+        held_mass, map_lanes)
+    values = np.asarray(scales.values(x))
+    pieces = np.split(residual, np.cumsum(sizes)[:-1])
+    # in units of each term's scale, where the Jacobian is well conditioned
+    size = np.asarray(scales.scales)
+    covariance = size[:, None] * _covariance(jacobian * size, pieces, len(values)) * size[None, :]
+    errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlations = covariance / np.outer(errors, errors)
+    return _ModelFit(name, values, errors, correlations, pieces,
+                     float(np.sum(residual**2)), sum(sizes), ok, steps)
+
+
+def _comparison(fits: list[_ModelFit], support_bic: float) -> ModelComparison:
+    """The `ModelComparison` of the nested models `fits`, in order."""
+    n = fits[0].samples
+    counts = [len(fit.values) for fit in fits]
+    bic = np.array([n * math.log(max(fit.rss, 1e-300) / n) + p * math.log(n)
+                    for fit, p in zip(fits, counts, strict=True)])
     delta = np.concatenate([[0.0], np.diff(bic)])
-    comparison = ModelComparison(
-        models=tuple(row[0] for row in summary),
-        parameter_counts=tuple(row[1] for row in summary),
-        rms=jnp.asarray([row[2] for row in summary]),
+    return ModelComparison(
+        models=tuple(fit.name for fit in fits),
+        parameter_counts=tuple(counts),
+        rms=jnp.asarray([math.sqrt(fit.rss / n) for fit in fits]),
         bic=jnp.asarray(bic),
         delta_bic=jnp.asarray(delta),
-        supported=jnp.asarray([True] + [bool(d < -SUPPORT_BIC) for d in delta[1:]]),
-        converged=jnp.asarray([row[4] for row in summary]),
+        supported=jnp.asarray([True] + [bool(d < -support_bic) for d in delta[1:]]),
+        converged=jnp.asarray([fit.ok for fit in fits]),
     )
+
+
+def _inerter_fit(model, terminal_mass: float, forces, fits: list[_ModelFit],
+                 support_bic: float) -> InerterFit:
+    """The `InerterFit` of `model`, the last of the nested models `fits`."""
+    last = fits[-1]
     fitted = tuple(jnp.asarray(f) + jnp.asarray(piece)
-                   for f, piece in zip(forces, last["pieces"], strict=True))
+                   for f, piece in zip(forces, last.pieces, strict=True))
     return InerterFit(
         model=model,
         parameters=MODEL_PARAMETERS[model],
         device=InerterDevice(**dict(zip(MODEL_PARAMETERS[model],
-                                        (float(v) for v in last["values"]), strict=True)),
-                             terminal_mass=float(terminal_mass)),
-        estimates=jnp.asarray(last["values"]),
-        standard_errors=jnp.asarray(last["errors"]),
-        correlations=jnp.asarray(last["correlations"]),
-        rms=jnp.asarray([math.sqrt(float(np.mean(piece**2))) for piece in last["pieces"]]),
+                                        (float(v) for v in last.values), strict=True)),
+                             terminal_mass=terminal_mass),
+        estimates=jnp.asarray(last.values),
+        standard_errors=jnp.asarray(last.errors),
+        correlations=jnp.asarray(last.correlations),
+        rms=jnp.asarray([math.sqrt(float(np.mean(piece**2))) for piece in last.pieces]),
         fitted_force=fitted,
-        converged=jnp.asarray(last["ok"]),
-        steps=jnp.asarray(last["steps"]),
-        comparison=comparison,
+        converged=jnp.asarray(last.ok),
+        steps=jnp.asarray(last.steps),
+        comparison=_comparison(fits, support_bic),
     )
