@@ -1,5 +1,6 @@
-"""What the commands share: their constants, arguments, inputs (flags and TOML to library
-objects), output folder, progress and tables."""
+"""What the commands share: their constants, inputs (flags and TOML to library objects),
+what a run starts from, its output folder and progress, and the worker processes. (Their
+shared arguments are in `_arguments`, their records and tables in `_tables`.)"""
 
 import argparse
 import contextlib
@@ -9,7 +10,6 @@ import shutil
 import sys
 import time
 import tomllib
-from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -18,9 +18,8 @@ from tqdm import tqdm
 
 from .. import __version__
 from .._band import DEFAULT_FREQUENCIES, default_omegas
-from .._cache import CACHE_ENVIRONMENT_VARIABLE
 from .._checks import check_steady_state_device
-from .._io import check_writable_dir, json_text, write_csv
+from .._io import check_writable_dir, json_text
 from .._linear import (
     den_hartog_tuning,
     linear_receptance,
@@ -110,115 +109,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise CLIError(f"{message} (see '{self.prog} --help')")
-
-
-# --- shared arguments -------------------------------------------------------------------
-
-
-def _add_structure_arguments(parser: argparse.ArgumentParser, config_help: str) -> None:
-    """The "structure and device" group: --config and a flag per physical input."""
-    group = parser.add_argument_group(
-        "structure and device",
-        "SI units, frequencies in Hz. Defaults: the paper's system (1500 kg, 4 Hz, 2% "
-        "damping, b = 75 kg, ff = 20 N, Den Hartog k and c). Flags override --config.",
-    )
-    group.add_argument("--config", metavar="FILE.toml", help=config_help)
-    for key, unit, description, _ in PHYSICAL_INPUTS:
-        group.add_argument(
-            f"--{key.replace('_', '-')}",
-            dest=key,
-            type=_width_flag if key == "friction_width" else float,
-            metavar="RATIO" if unit == "-" else unit,
-            help=f"{description} [{unit}]"
-            + (f", default {DEFAULTS[key]:g}" if key in DEFAULTS else ""),
-        )
-
-
-def _width_flag(text: str) -> float | str:
-    if text == RELATIVE_WIDTH:
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a number (m/s) or {RELATIVE_WIDTH!r}, got {text!r}") from None
-
-
-def _add_system_arguments(parser: argparse.ArgumentParser) -> None:
-    _add_structure_arguments(
-        parser,
-        "TOML file with any of the keys below (flag names with '_' for "
-        "'-') and an optional [solver] table; see the README",
-    )
-    grid = parser.add_argument_group("forcing and frequency band")
-    grid.add_argument(
-        "--amplitudes",
-        nargs="+",
-        type=float,
-        metavar="N",
-        help="forcing amplitudes A of A sin(wt) [N] (default: the paper's twelve, 100-3000 N)",
-    )
-    _add_band_arguments(grid)
-
-
-def _add_band_arguments(group) -> None:
-    """--band-hz and --n-frequencies."""
-    group.add_argument(
-        "--band-hz",
-        dest="band_hz",
-        nargs=2,
-        type=float,
-        metavar=("LOW", "HIGH"),
-        help="forcing frequency band [Hz] (default: 0.65-1.4 times the host "
-        "frequency, both resonance peaks)",
-    )
-    group.add_argument(
-        "--n-frequencies",
-        dest="n_frequencies",
-        type=int,
-        metavar="N",
-        help=f"frequencies in the band (default {DEFAULT_FREQUENCIES})",
-    )
-
-
-def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("output")
-    group.add_argument(
-        "--out",
-        default="tid-results",
-        metavar="DIR",
-        help="folder for the CSV, JSON, TOML and PNG files (default: ./tid-results/)",
-    )
-    group.add_argument(
-        "--json",
-        action="store_true",
-        help="print the machine-readable result (the saved JSON) on stdout instead of the table",
-    )
-    group.add_argument("--quiet", action="store_true", help="no progress messages")
-    cache = parser.add_argument_group("compilation cache")
-    cache.add_argument(
-        "--cache-dir",
-        dest="cache_dir",
-        metavar="DIR",
-        help=f"folder of the compiled-program cache that makes later runs start fast "
-        f"(default: ${CACHE_ENVIRONMENT_VARIABLE}, else ~/.cache/tid_jax)",
-    )
-    cache.add_argument(
-        "--no-cache",
-        dest="no_cache",
-        action="store_true",
-        help=f"compile afresh and save nothing (also: {CACHE_ENVIRONMENT_VARIABLE}=off)",
-    )
-    processes = parser.add_argument_group("processes")
-    processes.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help="worker processes that share the independent lanes on a CPU (the optimised "
-        "amplitudes, shares of the batches of steady states, identify's scan of starting "
-        f"values) (default: ${WORKERS_ENVIRONMENT_VARIABLE}, else one per CPU core; 1: "
-        "none, this process computes alone)",
-    )
 
 
 # --- from flags and TOML to library objects ---------------------------------------------
@@ -515,64 +405,6 @@ class _Output:
             f"done in {time.perf_counter() - self.start:.0f} s; results in {self.folder}/: {names}"
         )
         return 0
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-class Shown(NamedTuple):
-    """A column of a printed table: its header (a format string, filled in by `table`)
-    and the text of its cell for a record (a dict keyed by the command's CSV columns)."""
-
-    header: str
-    cell: Callable[[dict], str]
-
-
-def shown(header: str, key: str, spec: str, unit: float = 1.0) -> Shown:
-    """The column that prints `record[key] / unit` with the format `spec` ("-" for
-    None)."""
-
-    def cell(record: dict) -> str:
-        value = record[key]
-        return "-" if value is None else format(value / unit if unit != 1.0 else value, spec)
-
-    return Shown(header, cell)
-
-
-def table(columns: Sequence[Shown], records: Sequence[dict], **header_values) -> str:
-    """The printed table of `records`, one row each, in the `columns` declared."""
-    return _format_table([column.header.format(**header_values) for column in columns],
-                         [[column.cell(record) for column in columns] for record in records])
-
-
-def save_records(output: "_Output", name: str, columns: Sequence[str],
-                 records: Sequence[dict]) -> None:
-    """`name` (a CSV file in the output folder) with a row per record: its values in the
-    order `columns`, None as an empty cell."""
-    write_csv(output.path(name), columns,
-              [["" if record[key] is None else record[key] for key in columns]
-               for record in records])
-
-
-def _format_table(header: list[str], rows: list[list[str]]) -> str:
-    """Columns of numbers right-aligned, columns of text left-aligned."""
-    columns = list(zip(header, *rows, strict=True))
-    widths = [max(len(cell) for cell in column) for column in columns]
-    numeric = [all(_is_number(cell) for cell in column[1:]) for column in columns]
-    lines = [
-        "  ".join(
-            cell.rjust(width) if right else cell.ljust(width)
-            for cell, width, right in zip(row, widths, numeric, strict=True)
-        ).rstrip()
-        for row in [header, *rows]
-    ]
-    lines.insert(1, "  ".join("-" * width for width in widths))
-    return "\n".join(lines)
 
 
 def _config_comment(command: str) -> str:

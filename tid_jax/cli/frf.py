@@ -9,10 +9,8 @@ from .. import plot
 from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._response import frequency_response
+from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (
-    Shown,
-    _add_output_arguments,
-    _add_system_arguments,
     _breakaway_line,
     _config_comment,
     _config_data,
@@ -22,10 +20,8 @@ from ._common import (
     _linear_normalised,
     _start,
     _stuck_curve,
-    save_records,
-    shown,
-    table,
 )
+from ._tables import Shown, save_records, shown, table
 
 FRF_COLUMNS = (
     "amplitude_N",

@@ -10,17 +10,9 @@ from .._design import PARAMETER_UNITS
 from .._device import Motion
 from .._identify import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
 from .._io import write_csv, write_json, write_toml
-from ._common import (
-    INERTER_TABLE,
-    PROG,
-    CLIError,
-    Shown,
-    _add_output_arguments,
-    _number,
-    _Output,
-    shown,
-    table,
-)
+from ._arguments import _add_output_arguments
+from ._common import INERTER_TABLE, PROG, CLIError, _number, _Output
+from ._tables import Shown, shown, table
 
 RECORD_COLUMNS = ("time", "displacement", "force")
 OPTIONAL_COLUMN = "record"

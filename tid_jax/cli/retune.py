@@ -9,9 +9,8 @@ from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
+from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (
-    _add_output_arguments,
-    _add_system_arguments,
     _breakaway_line,
     _config_comment,
     _config_data,
@@ -20,10 +19,8 @@ from ._common import (
     _host_frequency_hz,
     _linear_curves,
     _start,
-    save_records,
-    shown,
-    table,
 )
+from ._tables import save_records, shown, table
 
 RETUNE_COLUMNS = (
     "amplitude_N",

@@ -9,19 +9,9 @@ from .._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance
-from ._common import (
-    CLIError,
-    _add_output_arguments,
-    _add_system_arguments,
-    _config_comment,
-    _config_data,
-    _den_hartog,
-    _describe,
-    _start,
-    save_records,
-    shown,
-    table,
-)
+from ._arguments import _add_output_arguments, _add_system_arguments
+from ._common import CLIError, _config_comment, _config_data, _den_hartog, _describe, _start
+from ._tables import save_records, shown, table
 
 ROBUST_COLUMNS = (
     "host_frequency_scale",

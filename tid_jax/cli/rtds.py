@@ -7,12 +7,9 @@ import numpy as np
 from .. import plot
 from .._io import write_json
 from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
+from ._arguments import _add_band_arguments, _add_output_arguments, _add_structure_arguments
 from ._common import (
     CLIError,
-    Shown,
-    _add_band_arguments,
-    _add_output_arguments,
-    _add_structure_arguments,
     _describe,
     _frequencies,
     _inputs,
@@ -21,10 +18,8 @@ from ._common import (
     _read_config,
     _settings,
     _system,
-    save_records,
-    shown,
-    table,
 )
+from ._tables import Shown, save_records, shown, table
 
 RTDS_COLUMNS = (
     "frequency_Hz",

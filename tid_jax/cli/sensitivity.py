@@ -8,18 +8,9 @@ from .._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._sensitivity import amplitude_sensitivities, elasticity_series
-from ._common import (
-    Shown,
-    _add_output_arguments,
-    _add_system_arguments,
-    _config_comment,
-    _config_data,
-    _describe,
-    _start,
-    save_records,
-    shown,
-    table,
-)
+from ._arguments import _add_output_arguments, _add_system_arguments
+from ._common import _config_comment, _config_data, _describe, _start
+from ._tables import Shown, save_records, shown, table
 
 SENSITIVITY_COLUMNS = (
     "amplitude_N",
