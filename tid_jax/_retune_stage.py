@@ -35,8 +35,8 @@ from ._system import compiler_options
 
 @compiled(options=compiler_options)
 def optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
-                    max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
-                    small_cuts_end):
+                   max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
+                   small_cuts_end):
     """BFGS on one lane (every array with a leading axis of one lane: the system
     `systems[0]`, its fields batched, at `amplitudes[0]` over the frequencies `omegas[0]`)
     from the design `u0[0]` and inverse Hessian `h0[0]` on the smooth log peak, shooting
@@ -48,7 +48,8 @@ def optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_ste
         lambda s: s.max_newton_steps, settings, min(settings.max_newton_steps, design_newton_steps)
     )
     solver = CappedBFGS(rtol=tol, atol=tol, descent=CappedNewtonDescent(max_step=max_design_step),
-                   search=InterpolatingArmijo(max_step=max_design_step, first_step=first_step))
+                        search=InterpolatingArmijo(max_step=max_design_step,
+                                                   first_step=first_step))
     lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
                       max_steps=max_steps, max_rejected_steps=max_rejected_steps,
                       small_cuts_end=small_cuts_end)
