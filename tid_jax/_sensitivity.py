@@ -80,7 +80,7 @@ class SensitivitySettings(eqx.Module):
                              f"got {self.same_curvatures!r}")
         value = self.polish_steps
         if not (isinstance(value, int) and not isinstance(value, bool) and value >= 0):
-            raise ValueError(f"SensitivitySettings.polish_steps must be an integer >= 0, "
+            raise ValueError("SensitivitySettings.polish_steps must be an integer >= 0, "
                              f"got {value!r}")
 
 
