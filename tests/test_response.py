@@ -368,29 +368,6 @@ def test_an_orbit_whose_integration_ran_out_of_steps_is_not_converged(system):
     assert np.isposinf(float(x_max)) and np.isposinf(float(y_max))
 
 
-def test_the_peaks_programs_serve_any_number_of_lanes():
-    # The peaks of seventeen amplitudes in one call (two chunks of lanes, the second
-    # padded) are those of each amplitude alone, and one program of each kind of the
-    # peaks' location serves both numbers of lanes (the stencils: of five points and of
-    # one).
-    paper = tj.paper_system()
-    band = np.linspace(0.8, 1.25, 13) * float(paper.host_frequency)
-    amplitudes = np.linspace(150.0, 3000.0, 17)
-    from tid_jax import _band
-
-    programs = (_band._selection, _band._stencils, _band._newton_steps, _band._peaks_found)
-    before = [set(program.loaded) for program in programs]
-    together = tj.peaks(paper, amplitudes, band)
-    assert bool(np.all(together.converged))
-    for i in (0, 9, 16):
-        alone = tj.peaks(paper, amplitudes[i : i + 1], band)
-        for field in ("x_peak", "y_peak", "omega_x", "omega_y", "at_edge"):
-            np.testing.assert_allclose(np.asarray(getattr(together, field))[i],
-                                       np.asarray(getattr(alone, field))[0], rtol=1e-12)
-    new = [len(set(program.loaded) - keys) for program, keys in zip(programs, before, strict=True)]
-    assert new[0] <= 1 and new[1] <= 2 and new[2] <= 1 and new[3] <= 1
-
-
 def _compiling(call):
     """`call()` and the compilation events of JAX (`jax.monitoring`: tracing for jit,
     lowering, compiling) that it caused."""
@@ -405,6 +382,25 @@ def _compiling(call):
         return call(), events
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def test_the_peaks_programs_serve_any_number_of_lanes():
+    # The peaks of eighteen amplitudes in one call (two chunks of lanes, the second
+    # padded) are those of each amplitude alone, and the programs of that call serve one
+    # lane: the calls for one amplitude trace and compile nothing.
+    paper = tj.paper_system()
+    band = np.linspace(0.8, 1.25, 13) * float(paper.host_frequency)
+    amplitudes = np.linspace(150.0, 3000.0, 18)
+    together = tj.peaks(paper, amplitudes, band)
+    assert bool(np.all(together.converged))
+    lanes = (0, 9, 17)
+    alone, events = _compiling(
+        lambda: [tj.peaks(paper, amplitudes[i : i + 1], band) for i in lanes])
+    assert events == []
+    for i, one in zip(lanes, alone, strict=True):
+        for field in ("x_peak", "y_peak", "omega_x", "omega_y", "at_edge"):
+            np.testing.assert_allclose(np.asarray(getattr(together, field))[i],
+                                       np.asarray(getattr(one, field))[0], rtol=1e-12)
 
 
 def test_peak_response_is_compiled_once_for_every_amplitude_and_tolerance():
@@ -441,16 +437,15 @@ def test_coarse_newton_iterations_reach_the_orbits_of_a_tight_solve(system, omeg
     # residual is within `coarse_residual`: the orbits are those of a solve at rtol 1e-10
     # to a periodicity residual of 1e-10 (x within 1e-5; y, which a stuck inerter makes
     # small and weakly determined, within 1e-4 of the static displacement).
-    from tid_jax import _response
-
     tight = tj.SolverSettings(rtol=1e-10, atol=1e-10, periodicity_tol=1e-10,
                               max_newton_steps=30)
-    programs = set(_response._points.loaded)  # (this session's cache is on)
-    reference = tj.frequency_response(system, omegas, AMPLITUDES, settings=tight)
+    reference, events = _compiling(
+        lambda: tj.frequency_response(system, omegas, AMPLITUDES, settings=tight))
     assert bool(jnp.all(reference.converged))
     # Tolerances and Newton iterations are arguments of the compiled program, not part of
-    # it: the tight solve ran the program of the default settings, to its own tolerances.
-    assert set(_response._points.loaded) == programs
+    # it: the tight solve ran the program of the default settings (`nonlinear`), to its
+    # own tolerances, and compiled nothing.
+    assert events == []
     assert np.max(np.asarray(reference.residual)) <= 1e-10
     assert np.sum(np.asarray(reference.newton_steps)) > np.sum(np.asarray(nonlinear.newton_steps))
     scale = np.asarray(AMPLITUDES)[:, None] / float(system.host_stiffness)
