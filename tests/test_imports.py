@@ -1,12 +1,14 @@
-"""The package's imports: they run one way (a DAG, function-level imports included), and
-reach other libraries through their public APIs only."""
+"""The package's imports: they run one way (a DAG, function-level imports included), as
+docs/architecture.md draws them, and reach other libraries through their public APIs
+only."""
 
 import ast
 import pathlib
 
 import pytest
 
-PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "tid_jax"
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "tid_jax"
 # Libraries whose private modules (a `_`-prefixed part, `_src`) must never be imported.
 LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax", "jaxtyping")
 
@@ -34,10 +36,13 @@ def _imports(name: str, path: pathlib.Path) -> list[tuple[str, int]]:
                 module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module
-            found.append((module, node.lineno))
-            # `from . import name` names a module where there is one
-            found += [(f"{module}.{alias.name}", node.lineno) for alias in node.names
-                      if f"{module}.{alias.name}" in MODULES]
+            # `from . import name` names a module where there is one, else a name of
+            # the module `module`
+            submodules = [f"{module}.{alias.name}" for alias in node.names
+                          if f"{module}.{alias.name}" in MODULES]
+            found += [(name, node.lineno) for name in submodules]
+            if len(submodules) < len(node.names):
+                found.append((module, node.lineno))
     return found
 
 
@@ -118,3 +123,20 @@ def _root(node):
     while isinstance(node, ast.Attribute):
         node = node.value
     return node
+
+
+def test_the_architecture_page_draws_the_graph():
+    # Its table lists every module with the package's modules it imports, each row
+    # below the rows of those it imports.
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    section = text.split("\n## Modules and their imports\n", 1)[1].split("\n## ", 1)[0]
+    rows = [line.split("|")[1:-1] for line in section.splitlines()
+            if line.startswith("| `")]
+    full = lambda cell: "tid_jax" if cell == "tid_jax" else f"tid_jax.{cell}"
+    drawn = {full(name.strip().strip("`")): {full(part.strip().strip("`"))
+                                             for part in imports.split(",") if part.strip()}
+             for name, _, imports in rows}
+    assert drawn == _graph()
+    order = [full(name.strip().strip("`")) for name, _, _ in rows]
+    for i, name in enumerate(order):
+        assert drawn[name] <= set(order[:i]), f"{name} is drawn above a module it imports"

@@ -2,12 +2,11 @@
 or `OSError` into one line `tid-jax: error: <problem>` on stderr and exit status 2.
 
 Each subcommand is a module of this package with a pair `_add_<name>_parser(subparsers)`
-/ `_run_<name>(args) -> int`, registered in `_COMMANDS`. What they share is in
-`_common`: `_add_system_arguments` (the physical parameters, amplitudes, band and
-`--config`), `_add_output_arguments` (`--out`, `--json`, `--quiet`, the cache and the
-processes), `_inputs`/`_system`/`_settings`/`_frequencies` (from flags and TOML to library
-objects), `lane_map` (the processes a command's lanes are mapped over: `args.map_lanes`)
-and `_Output` (output folder, progress, files written).
+/ `_run_<name>(args) -> int`, registered in `_COMMANDS`. Their shared arguments are in
+`_arguments` (`_add_system_arguments`, `_add_output_arguments`); `_common` has
+`_inputs`/`_system`/`_settings`/`_frequencies` (from flags and TOML to library objects),
+`lane_map` (the processes a command's lanes are mapped over: `args.map_lanes`) and
+`_Output` (output folder, progress, files written); `_tables` the records and tables.
 """
 
 import argparse
