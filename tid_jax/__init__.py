@@ -12,7 +12,8 @@ __version__ = "0.1.0"
 _API = {
     "_band": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_best_tunings": ("BestTunings", "best_tunings"),
-    "_cache": ("default_cache_dir", "enable_compilation_cache"),
+    "_cache": ("enable_compilation_cache",),
+    "_cache_folder": ("default_cache_dir",),
     "_device": ("ForceSettings", "InerterDevice"),
     "_identify": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
                   "identify_inerter"),

@@ -28,8 +28,8 @@ from pathlib import Path
 import equinox as eqx
 import jax
 
-CACHE_ENVIRONMENT_VARIABLE = "TID_JAX_CACHE_DIR"
-_OFF = ("", "0", "off", "false", "no", "none")
+from ._cache_folder import default_cache_dir
+
 _LIBRARIES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 PROGRAMS = "programs"
 # Kept programs unused for this long are deleted (those of older sources or library
@@ -37,22 +37,6 @@ PROGRAMS = "programs"
 STALE_DAYS = 30
 
 _programs_folder: Path | None = None
-
-
-def default_cache_dir() -> Path | None:
-    """The folder of the compilation cache.
-
-    **Arguments:** none; `$TID_JAX_CACHE_DIR` and `$XDG_CACHE_HOME` are read.
-
-    **Returns:** `$TID_JAX_CACHE_DIR` if set (`off`, `0` or empty turn the cache off:
-    `None`), else `tid_jax/` in the user's cache folder (`$XDG_CACHE_HOME`, default
-    `~/.cache`).
-    """
-    value = os.environ.get(CACHE_ENVIRONMENT_VARIABLE)
-    if value is not None:
-        return None if value.strip().lower() in _OFF else Path(value).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "tid_jax"
 
 
 def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path | None:
@@ -155,6 +139,26 @@ class _Program:
         folder = _programs_folder
         if _is_traced((args, kwargs)) or (folder is None and self.options is None):
             return self.jitted(*args, **kwargs)
+        key, leaves = self._prepared(folder, args, kwargs)
+        run, skeletons = self.programs[key]
+        out = run(*leaves)
+        return jax.tree.unflatten(jax.tree.structure(skeletons[-1]), out)
+
+    def compile_only(self, *args, **kwargs) -> None:
+        """Compile the program for these arguments (only their shapes, dtypes and static
+        values matter) without running it, into JAX's cache, where other processes find
+        it, and for later calls here. Nothing happens while the cache is off."""
+        folder = _programs_folder
+        if folder is None or _is_traced((args, kwargs)):
+            return
+        key, leaves = self._prepared(folder, args, kwargs)
+        run, skeletons = self.programs[key]
+        if not isinstance(run, jax.stages.Compiled):
+            self.programs[key] = run.lower(*leaves).compile(), skeletons
+
+    def _prepared(self, folder: Path | None, args, kwargs):
+        """The key of the program for these arguments, made ready in `programs` (loaded
+        or exported while the cache is on), and the arrays it takes."""
         dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
         leaves, structure = jax.tree.flatten(dynamic)
         options = None if self.options is None else self.options(*args, **kwargs) or None
@@ -169,13 +173,11 @@ class _Program:
             else:
                 exported, skeleton = kept
                 self.programs[key] = jax.jit(exported.call, compiler_options=options), [skeleton]
-        run, skeletons = self.programs[key]
         if not several:
             # Placed on the device (committed) at every call, as the outputs of an earlier
             # program are: one compilation serves both.
             leaves = jax.device_put(leaves, jax.devices()[0])
-        out = run(*leaves)
-        return jax.tree.unflatten(jax.tree.structure(skeletons[-1]), out)
+        return key, leaves
 
     def _key(self, static, structure, leaves, options) -> str:
         """The key of the program for these arguments and XLA options."""

@@ -35,24 +35,32 @@ class ProcessMap:
     with tj.ProcessMap(2) as pool:
         result = tj.retune(system, amplitudes, map_lanes=pool)
     ```
+
+    An entry point that makes the pool before it imports JAX (so that the workers start
+    meanwhile) gives their precision `x64` and compilation cache folder `cache_dir`
+    (None: no cache) instead.
     """
 
     def __init__(self, processes: int, *, initializer: Callable | None = None,
-                 initargs: tuple = ()):
+                 initargs: tuple = (), x64: bool | None = None,
+                 cache_dir: str | None | type[Ellipsis] = ...):
         if not (isinstance(processes, int) and not isinstance(processes, bool)
                 and processes >= 1):
             raise ValueError(f"processes must be a whole number >= 1, got {processes!r}")
-        import jax
+        if x64 is None:
+            import jax
 
-        from ._cache import cache_folder
+            x64 = bool(jax.config.jax_enable_x64)
+        if cache_dir is ...:
+            from ._cache import cache_folder
 
-        folder = cache_folder()
-        setup = (bool(jax.config.jax_enable_x64), None if folder is None else str(folder),
-                 initializer, initargs)
+            folder = cache_folder()
+            cache_dir = None if folder is None else str(folder)
         self.processes = processes
+        self.cache_dir = cache_dir
         self._executor = concurrent.futures.ProcessPoolExecutor(
             processes, mp_context=multiprocessing.get_context("spawn"),
-            initializer=_set_up, initargs=setup)
+            initializer=_set_up, initargs=(x64, cache_dir, initializer, initargs))
 
     def start(self) -> None:
         """Start the worker processes now (they are set up while this process goes on),
@@ -70,8 +78,10 @@ class ProcessMap:
                 future.cancel()
             raise
 
-    def close(self) -> None:
-        self._executor.shutdown(wait=True, cancel_futures=True)
+    def close(self, *, wait: bool = True) -> None:
+        """Shut the pool down: its processes end once their tasks are done (without
+        `wait`, this process does not wait for them to end)."""
+        self._executor.shutdown(wait=wait, cancel_futures=True)
 
     def __enter__(self) -> "ProcessMap":
         return self

@@ -2,7 +2,9 @@
 optimiser on lanes that every per-scenario optimum shares (`optimal_tunings`): the initial
 orbits, the continuation stages (`_retune_stage`) and the check on a finer grid."""
 
+import concurrent.futures
 import dataclasses
+import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
@@ -20,9 +22,11 @@ from ._checks import (
     is_positive,
 )
 from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
+from ._dynamics import PARAMETERS
 from ._linear import breakaway_amplitude, den_hartog_tuning
 from ._outcomes import outcome_code, outcome_message
-from ._parallel import map_shares, serial
+from ._parallel import process_count, serial
+from ._period import initial_state
 from ._response import (
     FrequencyResponse,
     _on_host,
@@ -31,7 +35,7 @@ from ._response import (
     scaled_states,
     with_tuning,
 )
-from ._retune_stage import stage_lanes
+from ._retune_stage import compile_stage, stage_lanes
 from ._settings import SolverSettings
 from ._system import TIDSystem
 
@@ -139,7 +143,7 @@ class RetuneResult(eqx.Module):
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):
     """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
-    its `response_peaks`, as NumPy arrays: a task of `map_shares`."""
+    its `response_peaks`, as NumPy arrays."""
     response = lane_response(systems, amplitudes, omegas, settings, warm)
     return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
 
@@ -265,31 +269,75 @@ def optimal_tunings(
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
     fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
     frequencies `bands[i]`: the lanes are optimised one per task of `map_lanes`, their
-    initial orbits solved in one batch and their check in one share per process.
+    initial orbits and their check solved in one batch each, in this process.
     `check_omegas` of the result is one check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
     amps = jax.device_put(np.asarray(amplitudes))
-    sharpnesses, refinement = retune_settings.sharpness, retune_settings.check_refinement
+    refinement = retune_settings.check_refinement
     k_ref, c_ref, k0, c0, u, hessian_inv = _initial_design(systems, amps)
-    iterations = np.zeros(amps.shape, dtype=int)
     # Below the breakaway amplitude the inerter never slips: those lanes keep the initial
     # tuning (status `stuck`), and only the others are optimised.
     stuck = _below_breakaway(systems, amps, bands)
     moving = np.flatnonzero(~stuck)
+    stages = [_stage_options(stage, retune_settings.sharpness, tol, settings, max_steps,
+                             retune_settings)
+              for stage in range(1, len(retune_settings.sharpness) + 1)]
+    # With worker processes, this process's threads only wait for them: a worker compiles
+    # the stages' program while this process solves the initial tuning, and the stages
+    # run on the workers while this process checks the initial tuning. (In one process
+    # everything runs in turn: two threads running XLA's programs at once can deadlock.)
+    workers, compiling = process_count(map_lanes) > 1, None
+    with concurrent.futures.ThreadPoolExecutor(2) as waiting:
+        if workers and moving.size:
+            placeholder = _lanes_of(moving[:1], (systems, amps, bands, u, _placeholder_orbits(
+                k0, c0, bands, settings), hessian_inv))
+            compiling = waiting.submit(map_lanes, compile_stage, [(placeholder, stages[0])])
+        start = lane_response(systems, amps, bands, settings)
+        say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
+        orbits = _initial_orbits(start, systems, k0, c0)
+        initial = _check_inputs(systems, amps, bands, orbits[1], refinement)
+        lanes = (systems, amps, bands, u, orbits, hessian_inv)
+        run = ft.partial(_stages, lanes, moving, stages, retune_settings.sharpness, say,
+                         map_lanes)
+        if workers:
+            # (the stages wait for the program: the other workers then load it)
+            staged = waiting.submit(_after, compiling, run)
+            initial_check = _check_lanes(*initial, settings)
+            u, orbits, ok, iterations = staged.result()
+        else:
+            u, orbits, ok, iterations = run()
+            initial_check = _check_lanes(*initial, settings)
+    k, c, retuned = _retuned(systems, u, k_ref, c_ref)
+    checked = _check_lanes(*_check_inputs(retuned, amps, bands, orbits[1], refinement), settings)
+    both, found = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
+    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck,
+                             retune_settings.damping_bound_ratio)
+    say(f"checked the initial and retuned designs on {initial[2].shape[-1]} frequencies x "
+        f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
+    return result
+
+
+def _after(future: concurrent.futures.Future | None, function: Callable):
+    """`function()` once `future` (if any) is done, whatever its outcome."""
+    if future is not None:
+        future.exception()
+    return function()
+
+
+def _stages(lanes, moving, stages, sharpnesses, say, map_lanes):
+    """The continuation stages of the lanes `moving` of `lanes` (systems, amplitudes,
+    bands, designs, orbits, inverse Hessians), one lane per task of `map_lanes`: the
+    designs, orbits, convergence and iterations of every lane (the others' unchanged)."""
+    systems, amps, bands, u, orbits, hessian_inv = lanes
     ok = np.zeros(amps.shape, bool)
-    stages = [_stage_options(stage, sharpnesses, tol, settings, max_steps, retune_settings)
-              for stage in range(1, len(sharpnesses) + 1)]
-    start = lane_response(systems, amps, bands, settings)
-    say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
-    orbits = _initial_orbits(start, systems, k0, c0)
-    initial = _check_inputs(systems, amps, bands, orbits[1], refinement)
+    iterations = np.zeros(amps.shape, dtype=int)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
-            lanes = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
+            these = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
             # One lane per call: one compiled program serves any number of lanes.
             parts = map_lanes(stage_lanes, [
-                (jax.tree.map(lambda a, i=i: a[i : i + 1], lanes), options)
+                (jax.tree.map(lambda a, i=i: a[i : i + 1], these), options)
                 for i in range(moving.size)
             ])
             new_u, steps, new_ok, new_orbits, new_hessian_inv = jax.tree.map(
@@ -300,16 +348,18 @@ def optimal_tunings(
         say(f"retune stage {stage}/{len(sharpnesses)} (smooth-max sharpness {sharpness:g}): "
             f"{int(np.sum(ok))}/{amps.size} lanes converged, "
             f"{int(np.max(steps, initial=0))} iterations at most")
-    k, c, retuned = _retuned(systems, u, k_ref, c_ref)
-    lanes = _check_inputs(retuned, amps, bands, orbits[1], refinement)
-    # The initial and retuned designs checked together, one share of both per process.
-    both_lanes = jax.tree.map(lambda *a: np.concatenate(a), initial, lanes)
-    both, found = map_shares(map_lanes, _check_lanes, both_lanes, settings)
-    result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck,
-                             retune_settings.damping_bound_ratio)
-    say(f"checked the initial and retuned designs on {lanes[2].shape[-1]} frequencies x "
-        f"{amps.size} lanes: {int(np.sum(result.converged))}/{amps.size} ok")
-    return result
+    return u, orbits, ok, iterations
+
+
+def _placeholder_orbits(k0, c0, bands, settings: SolverSettings):
+    """Orbits of the shapes and types `_initial_orbits` gives, all states zero: the stages'
+    program compiled for them is the program of the stages on the real orbits."""
+    size = jax.eval_shape(lambda q: initial_state(q, settings.compliant),
+                          jax.ShapeDtypeStruct((len(PARAMETERS),), bands.dtype)).shape[0]
+    states = np.zeros(bands.shape + (size,), bands.dtype)
+    return (np.stack([np.asarray(k0), np.asarray(c0)], axis=-1), states,
+            np.zeros(states.shape + (size,), bands.dtype),
+            np.zeros(states.shape + (len(DESIGN_PARAMETERS),), bands.dtype))
 
 
 def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,

@@ -73,6 +73,13 @@ def stage_lanes(lanes, options: dict):
     return jax.tree.map(np.asarray, optimise_stage(*_stage_arguments(lanes, options)))
 
 
+def compile_stage(lanes, options: dict) -> None:
+    """`optimise_stage` for `stage_lanes(lanes, options)` compiled, not run (only the
+    shapes of `lanes` matter): a task of `map_lanes` that a worker process runs while
+    the initial tuning is solved, so that the stages find the program in the cache."""
+    optimise_stage.compile_only(*_stage_arguments(lanes, options))
+
+
 def _stage_arguments(lanes, options: dict):
     """The arguments of `optimise_stage` for `stage_lanes`."""
     systems, amplitudes, bands, u, z, h = lanes

@@ -4,8 +4,9 @@ frequency band, the output, the compilation cache and the processes."""
 import argparse
 
 from .._band import DEFAULT_FREQUENCIES
-from .._cache import CACHE_ENVIRONMENT_VARIABLE
-from ._common import DEFAULTS, PHYSICAL_INPUTS, RELATIVE_WIDTH, WORKERS_ENVIRONMENT_VARIABLE
+from .._cache_folder import CACHE_ENVIRONMENT_VARIABLE
+from ._common import DEFAULTS, PHYSICAL_INPUTS, RELATIVE_WIDTH
+from ._pool import WORKERS_ENVIRONMENT_VARIABLE
 
 
 def _add_structure_arguments(parser: argparse.ArgumentParser, config_help: str) -> None:

@@ -5,7 +5,6 @@ shared arguments are in `_arguments`, their records and tables in `_tables`.)"""
 import argparse
 import contextlib
 import math
-import os
 import shutil
 import sys
 import time
@@ -18,6 +17,7 @@ from tqdm import tqdm
 
 from .. import __version__
 from .._band import DEFAULT_FREQUENCIES, default_omegas
+from .._cache import cache_folder
 from .._checks import check_steady_state_device
 from .._io import check_writable_dir, json_text
 from .._linear import (
@@ -39,9 +39,9 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
+from ._pool import import_library, requested_workers
 
 PROG = "tid-jax"
-WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
 
@@ -432,49 +432,39 @@ def _breakaway_line(breakaway) -> str:
 # --- processes ------------------------------------------------------------------------
 
 
-def _cpu_cores() -> int:
-    """The CPU cores this process may use."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 def worker_count(args) -> int:
     """The processes a command spreads its lanes over: `--workers`, else
     `$TID_JAX_WORKERS`, else one per CPU core; 1 off the CPU or with several JAX devices
     (whose lanes are sharded over the devices instead)."""
-    given = args.workers
-    if given is None:
-        value = os.environ.get(WORKERS_ENVIRONMENT_VARIABLE)
-        try:
-            given = _cpu_cores() if value is None else int(value)
-        except ValueError:
-            raise CLIError(f"${WORKERS_ENVIRONMENT_VARIABLE} must be a whole number of "
-                           f"processes >= 1, got {value!r}") from None
-    if given < 1:
-        raise CLIError(f"--workers must be at least 1, got {given}")
+    try:
+        count = requested_workers(args.workers)
+    except ValueError as error:
+        raise CLIError(str(error)) from None
     import jax
 
     if jax.default_backend() != "cpu" or len(jax.devices()) > 1:
         return 1
-    return given
+    return count
 
 
 @contextlib.contextmanager
-def lane_map(args):
+def lane_map(args, started: ProcessMap | None = None):
     """The `map_lanes` of a command: `serial` for one process, else a `ProcessMap` of
-    `worker_count(args)` processes (computing as this one does), started now and set up
-    as this process computes, shut down when the command ends."""
+    `worker_count(args)` processes (computing as this one does), the pool `started`
+    before JAX was imported where it has as many, else one started now; shut down when
+    the command ends."""
     count = worker_count(args)
+    cache = None if args.no_cache else cache_folder()
+    if started is not None and (count != started.processes
+                                or started.cache_dir != (None if cache is None else str(cache))):
+        started.close(wait=False)
+        started = None
     if count == 1:
         yield serial
         return
-    with ProcessMap(count, initializer=import_library) as pool:
-        pool.start()
+    pool = started if started is not None else ProcessMap(count, initializer=import_library)
+    pool.start()
+    try:
         yield pool
-
-
-def import_library() -> None:
-    """A worker process's first step: the library's modules imported before its first
-    task, while the command sets its inputs up."""
-    from .. import _identify, _robust, _sensitivity  # noqa: F401
+    finally:
+        pool.close()

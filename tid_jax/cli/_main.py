@@ -17,17 +17,15 @@ import jax
 
 from .. import __version__
 from .._cache import enable_compilation_cache
-from .._parallel import serial
+from .._parallel import ProcessMap, serial
 from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser, lane_map
+from ._pool import COMMANDS_WITH_LANES
 from .frf import _add_frf_parser, _run_frf
 from .identify import _add_identify_parser, _run_identify
 from .retune import _add_retune_parser, _run_retune
 from .robust import _add_robust_parser, _run_robust
 from .rtds import _add_rtds_parser, _run_rtds
 from .sensitivity import _add_sensitivity_parser, _run_sensitivity
-
-# The commands whose independent lanes are mapped over processes (`lane_map`).
-COMMANDS_WITH_LANES = ("retune", "sensitivity", "robust", "identify")
 
 _COMMANDS = {
     "retune": (_add_retune_parser, _run_retune),
@@ -56,9 +54,19 @@ def _one_line(error: BaseException) -> str:
     return " ".join(str(error).split()) or type(error).__name__
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, started: ProcessMap | None = None) -> int:
     """Run `tid-jax` with the arguments `argv` (default `sys.argv[1:]`); returns the exit
-    status: 0 on success, 2 on bad input (one line on stderr), 130 if interrupted."""
+    status: 0 on success, 2 on bad input (one line on stderr), 130 if interrupted.
+    `started`: the command's worker processes, started before JAX was imported
+    (`_pool.early_pool`), if any."""
+    try:
+        return _main(argv, started)
+    finally:
+        if started is not None:
+            started.close(wait=False)
+
+
+def _main(argv: list[str] | None, started: ProcessMap | None) -> int:
     jax.config.update("jax_enable_x64", True)
     parser = build_parser()
     try:
@@ -71,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if not args.no_cache:
             enable_compilation_cache(args.cache_dir)
-        lanes = (lane_map(args) if args.command in COMMANDS_WITH_LANES
+        lanes = (lane_map(args, started) if args.command in COMMANDS_WITH_LANES
                  else contextlib.nullcontext(serial))
         with lanes as args.map_lanes:
             return _COMMANDS[args.command][1](args)
