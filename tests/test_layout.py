@@ -3,6 +3,9 @@ or method whose body (without its docstring) is over `MAX_BODY_LINES` lines."""
 
 import ast
 import pathlib
+import re
+
+import pytest
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "tid_jax"
 MODULES = sorted(PACKAGE.rglob("*.py"))
@@ -55,3 +58,12 @@ def test_a_body_is_counted_without_its_docstring():
     (only_docstring,) = _functions('def g():\n    """Only a docstring."""\n')
     assert _body_lines(only_docstring) == 1
 
+
+
+@pytest.mark.parametrize("name", ["README.md", "benchmarks/README.md"])
+def test_the_readmes_are_at_most_250_lines_and_hold_no_dates(name):
+    # Documents for users: the latest measurements only, no run-by-run history.
+    text = (PACKAGE.parent / name).read_text()
+    assert len(text.splitlines()) <= 250
+    dated = re.findall(r"\b20[0-9]{2}-[01][0-9]-[0-3][0-9]\b", text)
+    assert not dated, f"{name} names dates: {dated}"
