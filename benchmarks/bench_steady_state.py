@@ -177,7 +177,7 @@ def run_cli(command, cache_dir, limit_s, extra=()):
         start = time.perf_counter()
         try:
             done = subprocess.run(
-                [sys.executable, "-c", "from tid_jax._launch import run; run()", command,
+                [sys.executable, "-c", "from tid_jax.cli import run; run()", command,
                  "--out", folder, "--quiet", "--cache-dir", cache_dir, *extra],
                 capture_output=True, text=True, timeout=limit_s,
             )
