@@ -547,6 +547,17 @@ def test_console_script_runs_and_fails_cleanly(tmp_path):
     assert "Traceback" not in bad.stderr
 
 
+
+def test_a_refused_command_leaves_no_worker_processes():
+    # A command that maps lanes starts its worker processes before its arguments are
+    # judged: refused, it waits for them to end, so that none outlives it (holding its
+    # output open, this run would not end).
+    done = subprocess.run([console_script(), "retune", "--workers", "2", "--bogus"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.startswith("tid-jax: error: unrecognized arguments: --bogus")
+
+
 # --- the README's quick start and example ---------------------------------------------------
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

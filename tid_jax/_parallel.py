@@ -78,10 +78,11 @@ class ProcessMap:
                 future.cancel()
             raise
 
-    def close(self, *, wait: bool = True) -> None:
-        """Shut the pool down: its processes end once their tasks are done (without
-        `wait`, this process does not wait for them to end)."""
-        self._executor.shutdown(wait=wait, cancel_futures=True)
+    def close(self) -> None:
+        """Shut the pool down: tasks not yet started are cancelled, and this process waits
+        for the worker processes to end (a process that ends before them would leave
+        them running)."""
+        self._executor.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> "ProcessMap":
         return self

@@ -296,7 +296,8 @@ def optimal_tunings(
         say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
         orbits = _initial_orbits(start, systems, k0, c0)
         initial = _check_inputs(systems, amps, bands, orbits[1], refinement)
-        lanes = (systems, amps, bands, u, orbits, hessian_inv)
+        # On the host here: the stages' thread then only slices NumPy arrays and waits.
+        lanes = jax.tree.map(np.asarray, (systems, amps, bands, u, orbits, hessian_inv))
         run = ft.partial(_stages, lanes, moving, stages, retune_settings.sharpness, say,
                          map_lanes)
         if workers:

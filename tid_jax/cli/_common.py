@@ -457,13 +457,15 @@ def lane_map(args, started: ProcessMap | None = None):
     cache = None if args.no_cache else cache_folder()
     if started is not None and (count != started.processes
                                 or started.cache_dir != (None if cache is None else str(cache))):
-        started.close(wait=False)
+        started.close()
         started = None
     if count == 1:
         yield serial
         return
-    pool = started if started is not None else ProcessMap(count, initializer=import_library)
-    pool.start()
+    pool = started
+    if pool is None:
+        pool = ProcessMap(count, initializer=import_library)
+        pool.start()
     try:
         yield pool
     finally:

@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None, *, started: ProcessMap | None = None) ->
         return _main(argv, started)
     finally:
         if started is not None:
-            started.close(wait=False)
+            started.close()
 
 
 def _main(argv: list[str] | None, started: ProcessMap | None) -> int:

@@ -6,6 +6,7 @@ Nothing here imports JAX at import.
 
 import argparse
 import os
+from pathlib import Path
 
 from .._cache_folder import default_cache_dir
 from .._parallel import ProcessMap
@@ -67,8 +68,9 @@ def early_pool(argv: list[str]) -> ProcessMap | None:
         return None
     if workers == 1:
         return None
+    # as `enable_compilation_cache` reads the folder, so that `lane_map` recognises it
     folder = (None if known.no_cache else
-              os.path.expanduser(known.cache_dir) if known.cache_dir is not None else
+              Path(known.cache_dir).expanduser() if known.cache_dir is not None else
               default_cache_dir())
     pool = ProcessMap(workers, initializer=import_library, x64=True,
                       cache_dir=None if folder is None else str(folder))
