@@ -1,0 +1,309 @@
+"""`BuildingTID`: a TID anywhere in a `Structure`, under a force pattern or a ground
+acceleration; `Quantity`, the response that is measured; their generalised matrices and
+linear (frictionless and stuck) steady states in closed form.
+
+Coordinates `u = (x_1..x_n, r)`: the floors' displacements relative to the ground and
+the inerter's stroke `r = y - x_i`, its terminal `y` relative to floor i (the ground for
+i = 0). The spring k and damper c join floor j to the terminal; with `d = e_j - e_i`
+(`e_0 = 0`) the spring's stretch is `d.x - r` and
+
+    Mg u'' + Cg u' + Kg u = G a(t) - phi e_r,
+    Mg = [[M + mt e_i e_i^T, mt e_i], [mt e_i^T, b + mt]],
+    Kg = [[K + k d d^T, -k d], [-k d^T, k]],  Cg = [[C + c d d^T, -c d], [-c d^T, c + cp]],
+
+with `phi = ff sgn(r')` the inerter's friction, `a(t) = A sin(w t)` and `G` the load
+per unit amplitude: `(pattern, 0)` for a force, `-(M 1 + mt e_i, mt)` for a ground
+acceleration (responses relative to the ground).
+"""
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Complex, Float
+
+from ._linear import den_hartog_tuning
+from ._structure import Structure
+from ._system import FRICTION_WIDTH_RATIO, check_values
+
+LOADS = ("force", "ground")
+QUANTITIES = ("displacement", "drift", "acceleration")
+# what each quantity is measured in
+QUANTITY_UNITS = {"displacement": "m", "drift": "m", "acceleration": "m/s2"}
+G = 9.80665  # m/s2, the standard acceleration of gravity
+
+
+class Quantity(eqx.Module):
+    """The response a design is judged by: `kind` "displacement" (a floor's, relative to
+    the ground), "drift" (floor minus the floor below) or "acceleration" (a floor's
+    absolute acceleration) of `floor` (1..n; None: the top floor)."""
+
+    kind: str = eqx.field(static=True, default="displacement")
+    floor: int | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if self.kind not in QUANTITIES:
+            raise ValueError(f"response kind must be one of {list(QUANTITIES)}, "
+                             f"got {self.kind!r}")
+
+    def floor_of(self, floors: int) -> int:
+        floor = floors if self.floor is None else self.floor
+        if not (isinstance(floor, (int, np.integer)) and 1 <= floor <= floors):
+            raise ValueError(f"response floor must be a floor 1..{floors}, got {floor!r}")
+        return int(floor)
+
+    def describe(self, floors: int) -> str:
+        floor = self.floor_of(floors)
+        return {"displacement": f"floor {floor} displacement",
+                "drift": f"storey {floor} drift",
+                "acceleration": f"floor {floor} absolute acceleration"}[self.kind]
+
+    @property
+    def unit(self) -> str:
+        return QUANTITY_UNITS[self.kind]
+
+
+def _floor(name: str, value, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
+            low <= value <= high):
+        raise ValueError(f"{name} must be a floor {low}..{high}, got {value!r}")
+    return int(value)
+
+
+def _pattern(value, floors: int) -> Array:
+    pattern = np.zeros(floors) if value is None else np.asarray(value, dtype=float)
+    if value is None:
+        pattern[-1] = 1.0
+    if pattern.shape != (floors,):
+        raise ValueError(f"force_pattern must have one weight per floor ({floors}), "
+                         f"got shape {pattern.shape}")
+    if not np.all(np.isfinite(pattern)) or not np.any(pattern != 0):
+        raise ValueError("force_pattern must be finite and not all zero")
+    return jnp.asarray(pattern)
+
+
+class BuildingTID(eqx.Module):
+    """A tuned inerter damper in a `Structure` (see the module's equations).
+
+    **Fields** (SI units): `structure`; `inertance` b (kg); `friction_force` ff (N);
+    `tid_stiffness` k (N/m); `tid_damping` c (N s/m); `friction_width`: 0 (default) for
+    exact Coulomb friction, a velocity scale (m/s) of `tanh` smoothing, or None for
+    `FRICTION_WIDTH_RATIO` times omega times the static displacement scale;
+    `parasitic_damping` cp (N s/m, on the stroke's velocity); `terminal_mass` mt (kg).
+
+    **Placement and load** (static): `spring_floor` j (1..n) where the spring and damper
+    attach; `inerter_floor` i (0..n, not j; 0: the ground) where the inerter attaches;
+    `load` "force" (amplitude A in N on `force_pattern`, one weight per floor, default
+    the top floor) or "ground" (ground acceleration amplitude A in m/s2).
+    """
+
+    structure: Structure
+    inertance: Float[Array, ""]
+    friction_force: Float[Array, ""]
+    tid_stiffness: Float[Array, ""]
+    tid_damping: Float[Array, ""]
+    friction_width: Float[Array, ""] | None
+    parasitic_damping: Float[Array, ""]
+    terminal_mass: Float[Array, ""]
+    force_pattern: Float[Array, " n"]
+    spring_floor: int = eqx.field(static=True)
+    inerter_floor: int = eqx.field(static=True)
+    load: str = eqx.field(static=True)
+    exact_friction: bool = eqx.field(static=True)
+
+    def __init__(self, structure: Structure, inertance: ArrayLike, friction_force: ArrayLike,
+                 tid_stiffness: ArrayLike, tid_damping: ArrayLike,
+                 friction_width: ArrayLike | None = 0.0, *, spring_floor: int = 1,
+                 inerter_floor: int = 0, load: str = "force",
+                 force_pattern: ArrayLike | None = None, parasitic_damping: ArrayLike = 0.0,
+                 terminal_mass: ArrayLike = 0.0):
+        if not isinstance(structure, Structure):
+            raise ValueError("structure must be a tid_jax.Structure")
+        floors = structure.floors
+        self.structure = structure
+        self.spring_floor = _floor("spring_floor", spring_floor, 1, floors)
+        self.inerter_floor = _floor("inerter_floor", inerter_floor, 0, floors)
+        if self.inerter_floor == self.spring_floor:
+            raise ValueError("inerter_floor must differ from spring_floor")
+        if load not in LOADS:
+            raise ValueError(f"load must be one of {list(LOADS)}, got {load!r}")
+        self.load = load
+        self.force_pattern = _pattern(force_pattern, floors)
+        for name, value, allowed in (
+                ("inertance", inertance, "positive"),
+                ("friction_force", friction_force, "non-negative"),
+                ("tid_stiffness", tid_stiffness, "positive"),
+                ("tid_damping", tid_damping, "non-negative"),
+                ("parasitic_damping", parasitic_damping, "non-negative"),
+                ("terminal_mass", terminal_mass, "non-negative")):
+            check_values(name, value, allowed)
+            setattr(self, name, jnp.asarray(value, dtype=float))
+        if friction_width is not None:
+            check_values("friction_width", friction_width, "non-negative")
+            friction_width = jnp.asarray(friction_width, dtype=float)
+        self.friction_width = friction_width
+        self.exact_friction = friction_width is not None and bool(
+            np.all(np.asarray(friction_width) == 0))
+
+    @property
+    def floors(self) -> int:
+        return self.structure.floors
+
+    def replace(self, **changes) -> "BuildingTID":
+        """A copy with some fields changed (validated like the constructor)."""
+        names = ("structure", "inertance", "friction_force", "tid_stiffness", "tid_damping",
+                 "friction_width", "spring_floor", "inerter_floor", "load", "force_pattern",
+                 "parasitic_damping", "terminal_mass")
+        unknown = sorted(set(changes) - set(names))
+        if unknown:
+            raise ValueError(f"unknown BuildingTID field(s) {unknown}; fields are {list(names)}")
+        values = {name: getattr(self, name) for name in names}
+        values.update(changes)
+        structure = values.pop("structure")
+        args = [values.pop(name) for name in names[1:6]]
+        return BuildingTID(structure, *args, **values)
+
+    def generalised_matrices(self) -> tuple[Array, Array, Array]:
+        """`(Mg, Cg, Kg)`, (n + 1) x (n + 1): floors then the stroke."""
+        s = self.structure
+        n = s.floors
+        d = self._direction()
+        e_i = self._unit(self.inerter_floor)
+        mt, b = self.terminal_mass, self.inertance
+
+        def coupled(block, corner, coupling):
+            top = jnp.concatenate([block, coupling[:, None]], axis=1)
+            bottom = jnp.concatenate([coupling, corner[None]])[None, :]
+            return jnp.concatenate([top, bottom], axis=0)
+
+        mass = coupled(s.mass_matrix + mt * jnp.outer(e_i, e_i), b + mt, mt * e_i)
+        k, c = self.tid_stiffness, self.tid_damping
+        stiffness = coupled(s.stiffness_matrix + k * jnp.outer(d, d), k, -k * d)
+        damping = coupled(s.damping_matrix + c * jnp.outer(d, d), c + self.parasitic_damping,
+                          -c * d)
+        assert mass.shape == (n + 1, n + 1)
+        return mass, damping, stiffness
+
+    def _unit(self, floor: int) -> Array:
+        return jnp.zeros(self.floors).at[floor - 1].set(1.0 if floor > 0 else 0.0)
+
+    def _direction(self) -> Array:
+        return self._unit(self.spring_floor) - self._unit(self.inerter_floor)
+
+    def load_vector(self) -> Float[Array, " n+1"]:
+        """G, the generalised load per unit amplitude (N per N, or N per m/s2)."""
+        if self.load == "force":
+            return jnp.append(self.force_pattern, 0.0)
+        s = self.structure
+        e_i = self._unit(self.inerter_floor)
+        floors = s.mass_matrix @ jnp.ones(self.floors) + self.terminal_mass * e_i
+        return -jnp.append(floors, self.terminal_mass)
+
+    def static_scale(self) -> Float[Array, ""]:
+        """d, the largest floor displacement of the bare structure under the static load
+        per unit amplitude (m per N, or m per m/s2): the unit of the scaled states."""
+        s = self.structure
+        g = self.load_vector()[:-1]
+        return jnp.max(jnp.abs(jnp.linalg.solve(s.stiffness_matrix, g)))
+
+    def width_at(self, amplitude, omega) -> Float[Array, "..."]:
+        """The friction width (m/s) at amplitude A and frequency omega."""
+        if self.friction_width is not None:
+            return self.friction_width
+        return FRICTION_WIDTH_RATIO * omega * amplitude * self.static_scale()
+
+    def first_mode(self) -> tuple[float, float, float]:
+        """The bare structure's first mode seen by the TID: its natural frequency (rad/s)
+        and its modal mass and stiffness with the mode scaled to a unit relative motion
+        of the TID's floors (`d.phi = 1`)."""
+        omegas, shapes = self.structure.modes()
+        shape = shapes[:, 0] / float(np.asarray(self._direction()) @ shapes[:, 0])
+        mass = float(shape @ np.asarray(self.structure.mass_matrix) @ shape)
+        return float(omegas[0]), mass, mass * float(omegas[0]) ** 2
+
+
+def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
+    """Single-mode tunings `(k, c)` on the first mode (`BuildingTID.first_mode`):
+    "den_hartog" (eq. (11)) and "h_infinity", the exact H-infinity optimum of an undamped
+    host (Nishihara and Asami 2002)."""
+    _, mass, stiffness = system.first_mode()
+    b = float(system.inertance)
+    k, c = den_hartog_tuning(mass, stiffness, b)
+    mu = b / mass
+    root = math.sqrt(4 + 3 * mu)
+    ratio = 2 / (1 + mu) * math.sqrt(2 * (16 + 23 * mu + 9 * mu**2 + 2 * (2 + mu) * root)
+                                     / (3 * (64 + 80 * mu + 27 * mu**2)))
+    xi = 0.25 * math.sqrt((8 + 9 * mu - 4 * root) / (1 + mu))
+    k_exact = b * ratio**2 * stiffness / mass
+    return {"den_hartog": (float(k), float(c)),
+            "h_infinity": (k_exact, 2 * xi * math.sqrt(k_exact * b))}
+
+
+def selection(system: BuildingTID, quantity: Quantity):
+    """The chosen quantity as `w . u + wd . u'' + kappa a(t)` per unit of displacement
+    (for an acceleration, per unit of acceleration): `(w, wd, kappa, acceleration)` with
+    `w`, `wd` over the n + 1 coordinates."""
+    n = system.floors
+    floor = quantity.floor_of(n)
+    unit = lambda m: np.eye(n + 1)[m - 1] if m > 0 else np.zeros(n + 1)
+    zero = np.zeros(n + 1)
+    if quantity.kind == "displacement":
+        return unit(floor), zero, 0.0, False
+    if quantity.kind == "drift":
+        return unit(floor) - unit(floor - 1), zero, 0.0, False
+    return zero, unit(floor), 1.0 if system.load == "ground" else 0.0, True
+
+
+def _solve(matrices, vector):
+    """`matrices^-1 vector` for a batch of matrices and one vector."""
+    rhs = jnp.broadcast_to(vector, matrices.shape[:-1]).astype(complex)
+    return jnp.linalg.solve(matrices, rhs[..., None])[..., 0]
+
+
+def linear_amplitudes(system: BuildingTID, omegas, friction_damping=0.0, stuck=False):
+    """Complex amplitudes U per unit load amplitude (`a(t) = Im(e^{i w t})`) of the
+    frictionless TID, or with an extra viscous damping on the stroke, or with the inerter
+    stuck (`stuck`: the stroke held, returning the friction force it needs as the last
+    entry): `[..., n + 1]`."""
+    mass, damping, stiffness = system.generalised_matrices()
+    g = system.load_vector()
+    w = jnp.asarray(omegas)[..., None, None]
+    n = system.floors
+    damping = damping + jnp.zeros_like(damping).at[n, n].set(1.0) * jnp.asarray(
+        friction_damping)[..., None, None]
+    dynamic = stiffness - w**2 * mass + 1j * w * damping
+    if stuck:
+        # the stroke's column replaced by the friction force's (-e_r): unknowns (x, phi)
+        dynamic = dynamic.at[..., :, n].set(0.0).at[..., n, n].set(1.0)
+    return _solve(dynamic, g)
+
+
+def quantity_amplitude(system: BuildingTID, quantity: Quantity, omegas,
+                       amplitudes: Complex[Array, "... m"]) -> Complex[Array, "..."]:
+    """The quantity's complex amplitude from the coordinates' `amplitudes` at `omegas`."""
+    w, wd, kappa, _ = selection(system, quantity)
+    omegas = jnp.asarray(omegas)
+    coordinates = amplitudes[..., : system.floors + 1] @ jnp.asarray(w + 0j)
+    accelerations = -omegas**2 * (amplitudes[..., : system.floors + 1] @ jnp.asarray(wd + 0j))
+    return coordinates + accelerations + kappa
+
+
+def uncontrolled_amplitude(system: BuildingTID, quantity: Quantity, omegas):
+    """|quantity| per unit load amplitude of the bare structure (no TID) at `omegas`."""
+    s = system.structure
+    g = system.load_vector()[:-1]
+    if system.load == "ground":
+        g = -(s.mass_matrix @ jnp.ones(system.floors))
+    w = jnp.asarray(omegas)[..., None, None]
+    dynamic = s.stiffness_matrix - w**2 * s.mass_matrix + 1j * w * s.damping_matrix
+    x = _solve(dynamic, g)
+    x = jnp.concatenate([x, jnp.zeros_like(x[..., :1])], axis=-1)
+    return jnp.abs(quantity_amplitude(system, quantity, omegas, x))
+
+
+def breakaway_amplitudes(system: BuildingTID, omegas) -> Float[Array, "..."]:
+    """The load amplitudes up to which the steady state with the inerter stuck exists:
+    ff / |phi| with phi the friction force the stuck inerter needs per unit amplitude."""
+    phi = linear_amplitudes(system, omegas, stuck=True)[..., -1]
+    return system.friction_force / jnp.abs(phi)

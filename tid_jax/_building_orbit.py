@@ -1,0 +1,211 @@
+"""Periodic steady states of a `BuildingTID` by shooting: the linear equivalent start,
+Newton's iterations on the period map (`_building_flow`) with its monodromy matrix by
+forward derivatives, Floquet multipliers, and batches of them over amplitudes and
+frequencies (`building_response`)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ._building import BuildingTID, Quantity, linear_amplitudes, uncontrolled_amplitude
+from ._building_flow import flow, period, plant, projection_units, smoothed_period
+from ._checks import check_grid
+from ._eigen import eigenvalues
+from ._peaks import parabola_top
+from ._settings import SolverSettings
+from ._steady_state import fixed_point_matrix, moving_part
+
+_MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
+
+
+def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
+    """The scaled state at phase 0 of the equivalent linear steady state: the friction
+    replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
+    stroke amplitude |R| it lets through (found by bisection), or the steady state with
+    the inerter stuck where the friction holds it."""
+    n = system.floors
+    scale = system.static_scale()
+
+    def stroke(log_amplitude):
+        damping = 4 * system.friction_force / (jnp.pi * omega * amplitude * jnp.exp(log_amplitude))
+        return linear_amplitudes(system, omega, damping)
+
+    def bisect(_, bounds):
+        low, high = bounds
+        middle = 0.5 * (low + high)
+        further = jnp.log(jnp.abs(stroke(middle)[n])) > middle
+        return jnp.where(further, middle, low), jnp.where(further, high, middle)
+
+    high = jnp.log(jnp.abs(linear_amplitudes(system, omega)[n]))
+    low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
+    slipping = stroke(0.5 * (low + high))
+    held = linear_amplitudes(system, omega, stuck=True)
+    stuck = jnp.abs(held[n]) * amplitude < system.friction_force
+    u = jnp.where(stuck, held.at[n].set(0.0), slipping) / scale
+    # load Im(e^{i theta}); response Im(U e^{i theta}); velocity in units of omega D
+    return jnp.concatenate([u.imag, u.real])
+
+
+def _period_end(z, pl, fl, settings: SolverSettings):
+    if settings.exact_friction:
+        return period(z, fl, keep_samples=False)[1]
+    return smoothed_period(z, pl, settings, keep_samples=False)[1]
+
+
+def _samples(z, pl, fl, settings: SolverSettings):
+    if settings.exact_friction:
+        return period(z, fl)
+    return smoothed_period(z, pl, settings)
+
+
+class _Newton(eqx.Module):
+    z: Float[Array, " s"]
+    monodromy: Float[Array, "s s"]
+    residual: Float[Array, ""]
+    steps: Int[Array, ""]
+
+
+def _newton(z0, pl, fl, settings: SolverSettings, tol) -> _Newton:
+    """Newton's iterations for z = Phi_T(z) from `z0`, each with the monodromy matrix by
+    forward derivatives of the period map; the stuck stroke's family of orbits is handled
+    by `fixed_point_matrix`."""
+    basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
+    end = lambda z: _period_end(z, pl, fl, settings)
+
+    def linearise(z):
+        z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(basis)
+        return z_end, monodromy
+
+    def cond(state):
+        return (state.residual > tol) & (state.steps < settings.max_newton_steps)
+
+    def body(state):
+        z_end, monodromy = linearise(state.z)
+        residual = z_end - state.z
+        update = jnp.linalg.solve(fixed_point_matrix(monodromy), residual)
+        size = jnp.max(jnp.abs(update))
+        limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(state.z)))
+        ok = jnp.all(jnp.isfinite(update))
+        step = jnp.where(ok, update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300)), 0.0)
+        value = jnp.where(ok, jnp.max(jnp.abs(residual)), jnp.inf)
+        done = value <= tol
+        return _Newton(jnp.where(done, state.z, state.z + step), monodromy,
+                       jnp.where(done, value, jnp.inf), state.steps + 1)
+
+    s = z0.shape[0]
+    start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype), jnp.asarray(jnp.inf, z0.dtype),
+                    jnp.zeros((), int))
+    return jax.lax.while_loop(cond, body, start)
+
+
+class BuildingOrbit(eqx.Module):
+    """The steady state at one (amplitude, frequency), SI units unless stated."""
+
+    state: Float[Array, " s"]  # scaled (u, u') at phase 0
+    response_max: Float[Array, ""]  # peak |quantity| over the period
+    stroke_max: Float[Array, ""]  # peak |r|, m
+    quantity_samples: Float[Array, " samples"]  # the quantity over the period, SI
+    stroke_samples: Float[Array, " samples"]  # the stroke, m
+    transitions: Int[Array, ""]  # stick-slip transitions per period (exact friction)
+    floquet_max: Float[Array, ""]  # largest Floquet multiplier modulus (about the family)
+    residual: Float[Array, ""]  # max |Phi_T(z) - z|, scaled
+    newton_steps: Int[Array, ""]
+    converged: Bool[Array, ""]
+
+
+def _peak(samples):
+    """The largest |sample| of a periodic sequence, refined by a parabola."""
+    values = jnp.abs(samples)
+    i = jnp.argmax(values)
+    count = samples.shape[0]
+    left, right = values[(i - 1) % count], values[(i + 1) % count]
+    return parabola_top(left, values[i], right)
+
+
+def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
+                settings: SolverSettings, z0=None) -> BuildingOrbit:
+    """The periodic steady state at one point (traceable; see `building_response`)."""
+    pl = plant(system, quantity, amplitude, omega)
+    fl = flow(pl, settings.samples) if settings.exact_friction else None
+    z = initial_state(system, amplitude, omega) if z0 is None else z0
+    tol = settings.exact_periodicity_tol if settings.exact_friction else settings.periodicity_tol
+    if settings.transient_periods:
+        z = jax.lax.fori_loop(0, settings.transient_periods,
+                              lambda _, z: _period_end(z, pl, fl, settings), z)
+    newton = _newton(z, pl, fl, settings, tol)
+    values, z_end, transitions, stroke_events = _samples(newton.z, pl, fl, settings)
+    residual = jnp.max(jnp.abs(z_end - newton.z))
+    unit_q, unit_r = projection_units(system, quantity, amplitude, omega)
+    floquet = jnp.max(jnp.abs(eigenvalues(moving_part(newton.monodromy))))
+    converged = (residual <= 10 * tol) & jnp.all(jnp.isfinite(values))
+    return BuildingOrbit(
+        state=newton.z,
+        response_max=_peak(values[:, 0]) * unit_q,
+        stroke_max=jnp.maximum(_peak(values[:, 1]), stroke_events) * unit_r,
+        quantity_samples=values[:, 0] * unit_q,
+        stroke_samples=values[:, 1] * unit_r,
+        transitions=transitions,
+        floquet_max=floquet,
+        residual=residual,
+        newton_steps=newton.steps,
+        converged=converged,
+    )
+
+
+@eqx.filter_jit
+def solve_orbits(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
+                 settings: SolverSettings) -> BuildingOrbit:
+    """`solve_orbit` at each pair of `amplitudes` and `omegas` (1-d, one length)."""
+    return jax.vmap(lambda a, w: solve_orbit(system, quantity, a, w, settings))(amplitudes,
+                                                                                 omegas)
+
+
+def building_settings(system: BuildingTID, settings: SolverSettings | None) -> SolverSettings:
+    settings = SolverSettings() if settings is None else settings
+    return eqx.tree_at(lambda s: s.exact_friction, settings, system.exact_friction)
+
+
+class BuildingResponse(eqx.Module):
+    """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
+    peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
+    within the unit circle, the stuck stroke's family aside), `floquet_max`,
+    `transitions` per period, and `uncontrolled` (amplitudes x frequencies: the bare
+    structure's quantity)."""
+
+    amplitudes: Float[Array, " amps"]
+    omegas: Float[Array, " freqs"]
+    response_max: Float[Array, "amps freqs"]
+    stroke_max: Float[Array, "amps freqs"]
+    converged: Bool[Array, "amps freqs"]
+    stable: Bool[Array, "amps freqs"]
+    floquet_max: Float[Array, "amps freqs"]
+    transitions: Int[Array, "amps freqs"]
+    uncontrolled: Float[Array, "amps freqs"]
+
+
+def building_response(system: BuildingTID, omegas, amplitudes,
+                      quantity: Quantity = Quantity(),
+                      settings: SolverSettings | None = None) -> BuildingResponse:
+    """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
+    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, each point solved by shooting from its
+    linear equivalent; a point whose orbit was not found has `converged` False (its
+    values NaN)."""
+    amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
+    omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))
+    quantity.floor_of(system.floors)
+    settings = building_settings(system, settings)
+    a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
+    orbits = solve_orbits(system, quantity, jnp.asarray(a), jnp.asarray(w), settings)
+    shape = (amplitudes.size, omegas.size)
+    ok = np.asarray(orbits.converged).reshape(shape)
+    value = lambda x: np.where(ok, np.asarray(x).reshape(shape), np.nan)
+    floquet = np.asarray(orbits.floquet_max).reshape(shape)
+    bare = np.asarray(uncontrolled_amplitude(system, quantity, jnp.asarray(omegas)))
+    return BuildingResponse(
+        amplitudes=amplitudes, omegas=omegas, response_max=value(orbits.response_max),
+        stroke_max=value(orbits.stroke_max), converged=ok,
+        stable=ok & (floquet < 1.0), floquet_max=floquet,
+        transitions=np.asarray(orbits.transitions).reshape(shape),
+        uncontrolled=amplitudes[:, None] * bare[None, :])
