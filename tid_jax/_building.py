@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from ._checks import check_grid
 from ._linear import den_hartog_tuning
 from ._structure import Structure
 from ._system import FRICTION_WIDTH_RATIO, check_values
@@ -302,8 +303,22 @@ def uncontrolled_amplitude(system: BuildingTID, quantity: Quantity, omegas):
     return jnp.abs(quantity_amplitude(system, quantity, omegas, x))
 
 
-def breakaway_amplitudes(system: BuildingTID, omegas) -> Float[Array, "..."]:
-    """The load amplitudes up to which the steady state with the inerter stuck exists:
-    ff / |phi| with phi the friction force the stuck inerter needs per unit amplitude."""
-    phi = linear_amplitudes(system, omegas, stuck=True)[..., -1]
-    return system.friction_force / jnp.abs(phi)
+def linear_building_response(system: BuildingTID, omegas,
+                             quantity: Quantity = Quantity()) -> np.ndarray:
+    """|quantity| per unit load amplitude of the frictionless TID (friction_force
+    ignored) at `omegas` (rad/s), in closed form: the quantity's unit per N (force) or
+    per m/s2 (ground acceleration)."""
+    omegas = np.asarray(check_grid("omegas", omegas), float)
+    quantity.floor_of(system.floors)
+    u = linear_amplitudes(system, jnp.asarray(omegas))
+    return np.asarray(jnp.abs(quantity_amplitude(system, quantity, omegas, u)))
+
+
+def building_breakaway(system: BuildingTID, omegas) -> np.ndarray:
+    """The load amplitudes (N, or m/s2) up to which the steady state with the inerter
+    stuck exists at `omegas` (rad/s): ff / |phi| with phi the friction force the stuck
+    inerter needs per unit amplitude. Below them the structure moves as if the spring
+    and damper joined its floors directly and the inertance does nothing."""
+    omegas = np.asarray(check_grid("omegas", omegas), float)
+    phi = linear_amplitudes(system, jnp.asarray(omegas), stuck=True)[..., -1]
+    return np.asarray(system.friction_force / jnp.abs(phi))

@@ -63,39 +63,52 @@ def _samples(z, pl, fl, settings: SolverSettings):
 class _Newton(eqx.Module):
     z: Float[Array, " s"]
     monodromy: Float[Array, "s s"]
+    lu: tuple  # LU factors of the fixed-point matrix held by the chord iterations
     residual: Float[Array, ""]
     steps: Int[Array, ""]
 
 
-def _newton(z0, pl, fl, settings: SolverSettings, tol) -> _Newton:
-    """Newton's iterations for z = Phi_T(z) from `z0`, each with the monodromy matrix by
-    forward derivatives of the period map; the stuck stroke's family of orbits is handled
-    by `fixed_point_matrix`."""
+def _limited(z, update):
+    size = jnp.max(jnp.abs(update))
+    limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
+    ok = jnp.all(jnp.isfinite(update))
+    return jnp.where(ok, z + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300)), z)
+
+
+def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int) -> _Newton:
+    """Iterations for z = Phi_T(z) from `z0`: `newton_steps` Newton steps, each with the
+    monodromy matrix by forward derivatives of the period map (the stuck stroke's family
+    of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
+    held, each one period without tangents, until the residual is within `tol` or
+    twice `settings.max_newton_steps` steps in all."""
     basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
     end = lambda z: _period_end(z, pl, fl, settings)
 
-    def linearise(z):
-        z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(basis)
-        return z_end, monodromy
-
     def cond(state):
-        return (state.residual > tol) & (state.steps < settings.max_newton_steps)
+        return (state.residual > tol) & (state.steps < 2 * settings.max_newton_steps)
+
+    def newton(state):
+        z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (state.z,), (t,)),
+                                    out_axes=(None, 1))(basis)
+        lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
+        return z_end, monodromy, lu
+
+    def chord(state):
+        return end(state.z), state.monodromy, state.lu
 
     def body(state):
-        z_end, monodromy = linearise(state.z)
+        z_end, monodromy, lu = jax.lax.cond(state.steps < newton_steps, newton, chord, state)
         residual = z_end - state.z
-        update = jnp.linalg.solve(fixed_point_matrix(monodromy), residual)
-        size = jnp.max(jnp.abs(update))
-        limit = _MAX_NEWTON_STEP * jnp.maximum(1.0, jnp.max(jnp.abs(state.z)))
-        ok = jnp.all(jnp.isfinite(update))
-        step = jnp.where(ok, update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300)), 0.0)
-        value = jnp.where(ok, jnp.max(jnp.abs(residual)), jnp.inf)
+        value = jnp.where(jnp.all(jnp.isfinite(residual)), jnp.max(jnp.abs(residual)), jnp.inf)
         done = value <= tol
-        return _Newton(jnp.where(done, state.z, state.z + step), monodromy,
+        update = jax.scipy.linalg.lu_solve(lu, jnp.where(jnp.isfinite(residual), residual, 0.0))
+        return _Newton(jnp.where(done, state.z, _limited(state.z, update)), monodromy, lu,
                        jnp.where(done, value, jnp.inf), state.steps + 1)
 
     s = z0.shape[0]
-    start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype), jnp.asarray(jnp.inf, z0.dtype),
+    eye = jnp.eye(s, dtype=z0.dtype)
+    start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype),
+                    jax.scipy.linalg.lu_factor(eye), jnp.asarray(jnp.inf, z0.dtype),
                     jnp.zeros((), int))
     return jax.lax.while_loop(cond, body, start)
 
@@ -125,16 +138,17 @@ def _peak(samples):
 
 
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
-                settings: SolverSettings, z0=None) -> BuildingOrbit:
-    """The periodic steady state at one point (traceable; see `building_response`)."""
+                settings: SolverSettings, newton_steps: int = 3) -> BuildingOrbit:
+    """The periodic steady state at one point (traceable; see `building_response`):
+    `newton_steps` Newton steps, then chord steps (`_newton`)."""
     pl = plant(system, quantity, amplitude, omega)
     fl = flow(pl, settings.samples) if settings.exact_friction else None
-    z = initial_state(system, amplitude, omega) if z0 is None else z0
+    z = initial_state(system, amplitude, omega)
     tol = settings.exact_periodicity_tol if settings.exact_friction else settings.periodicity_tol
     if settings.transient_periods:
         z = jax.lax.fori_loop(0, settings.transient_periods,
                               lambda _, z: _period_end(z, pl, fl, settings), z)
-    newton = _newton(z, pl, fl, settings, tol)
+    newton = _newton(z, pl, fl, settings, tol, newton_steps)
     values, z_end, transitions, stroke_events = _samples(newton.z, pl, fl, settings)
     residual = jnp.max(jnp.abs(z_end - newton.z))
     unit_q, unit_r = projection_units(system, quantity, amplitude, omega)
@@ -143,7 +157,11 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
     return BuildingOrbit(
         state=newton.z,
         response_max=_peak(values[:, 0]) * unit_q,
-        stroke_max=jnp.maximum(_peak(values[:, 1]), stroke_events) * unit_r,
+        # every extremum of a stroke that has events is at one (r' = 0) or on a stuck
+        # segment, where the samples hold it
+        stroke_max=jnp.where(transitions > 0,
+                             jnp.maximum(jnp.max(jnp.abs(values[:, 1])), stroke_events),
+                             _peak(values[:, 1])) * unit_r,
         quantity_samples=values[:, 0] * unit_q,
         stroke_samples=values[:, 1] * unit_r,
         transitions=transitions,

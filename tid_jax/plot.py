@@ -504,3 +504,34 @@ def plot_identification(records, *, title=None):
         fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def plot_building_response(frequencies_hz, amplitudes, response, uncontrolled, *, ylabel,
+                           title=None):
+    """A structure's peak response (SI) against frequency, one line per amplitude, with
+    the bare structure's dotted in the same colour; arrays `(n_amplitudes, n_freqs)`."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.6), layout="constrained")
+    for amplitude, colour, row, bare in zip(amplitudes, _amplitude_colours(amplitudes),
+                                            np.atleast_2d(response),
+                                            np.atleast_2d(uncontrolled), strict=True):
+        ax.plot(frequencies_hz, row, color=colour, linewidth=1.0, label=f"A = {amplitude:g}")
+        ax.plot(frequencies_hz, bare, color=colour, linewidth=0.8, linestyle=":")
+    ax.set(xlabel="frequency [Hz]", ylabel=ylabel,
+           title=title or "with the TID (solid), without (dotted)")
+    ax.set_xlim(frequencies_hz[0], frequencies_hz[-1])
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    return fig
+
+
+def plot_building_retune(amplitudes, peaks: dict, *, ylabel, title=None):
+    """Peak response against amplitude for each tuning of `peaks` (name: values)."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.6), layout="constrained")
+    for name, values in peaks.items():
+        ax.plot(amplitudes, values, marker="o", markersize=3, linewidth=1.0, label=name)
+    ax.set(xlabel="amplitude", ylabel=ylabel, title=title or "peak over the band")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig

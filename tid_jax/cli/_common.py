@@ -39,6 +39,7 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
+from ._building_config import BUILDING_TABLES, amplitude_value, check_tables
 from ._pool import import_library, requested_workers
 
 PROG = "tid-jax"
@@ -124,12 +125,13 @@ def _read_config(path: str) -> dict:
         raise CLIError(f"config {path} is not valid TOML: {error}") from None
     except OSError as error:
         raise CLIError(f"cannot read config {path}: {error.strerror}") from None
-    tables = (SOLVER_TABLE, INERTER_TABLE)
+    tables = (SOLVER_TABLE, INERTER_TABLE, *BUILDING_TABLES)
     unknown = [key for key in config if key not in INPUT_KEYS + tables]
     if unknown:
         raise CLIError(
             f"config {path}: unknown key {unknown[0]!r}; allowed keys are "
-            f"{', '.join(INPUT_KEYS)}, an [{INERTER_TABLE}] and a [{SOLVER_TABLE}] table"
+            f"{', '.join(INPUT_KEYS)}, an [{INERTER_TABLE}] and a [{SOLVER_TABLE}] table, "
+            f"and for a building [{'], ['.join(BUILDING_TABLES)}]"
         )
     # the friction model follows friction_width (0: exact), not a solver setting
     solver_keys = tuple(name for name in SolverSettings.__dataclass_fields__
@@ -144,6 +146,11 @@ def _read_config(path: str) -> dict:
                 f"config {path}: unknown key {unknown[0]!r} in [{table}]; "
                 f"allowed keys are {', '.join(allowed)}"
             )
+    if "structure" in config:
+        try:
+            check_tables(config, path)
+        except ValueError as error:
+            raise CLIError(str(error)) from None
     inerter = config.pop(INERTER_TABLE, {})
     twice = [key for key in inerter if key in config]
     if twice:
@@ -180,6 +187,17 @@ def _inputs(args) -> dict:
         if second in given:
             del inputs[first]
     inputs = {key: inputs[key] for key in INPUT_KEYS if key in inputs}
+    if "structure" in config:  # a building: its tables, and amplitudes that may be "0.2g"
+        inputs.update({name: config[name] for name in BUILDING_TABLES if name in config})
+        if "amplitudes" in given:
+            inputs["amplitudes_given"] = True
+            amplitudes = given["amplitudes"]
+            try:
+                inputs["amplitudes"] = [
+                    amplitude_value(a) for a in (amplitudes if isinstance(amplitudes, list)
+                                                 else [amplitudes])]
+            except ValueError as error:
+                raise CLIError(str(error)) from None
     for key, _, _, allowed in PHYSICAL_INPUTS:
         if key in inputs and not (key == "friction_width" and inputs[key] == RELATIVE_WIDTH):
             inputs[key] = _number(key, inputs[key], allowed)
@@ -258,9 +276,18 @@ class _Start(NamedTuple):
     output: "_Output"
 
 
+def _single_storey(inputs: dict, command: str) -> None:
+    """`CLIError` where a command that takes the single-storey host is given a
+    [structure]."""
+    if "structure" in inputs:
+        raise CLIError(f"{PROG} {command} takes a single-storey host; a [structure] is "
+                       f"taken by {PROG} frf and {PROG} retune")
+
+
 def _start(args) -> _Start:
     """The inputs of a command and what follows from them."""
     inputs = _inputs(args)
+    _single_storey(inputs, args.command)
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)

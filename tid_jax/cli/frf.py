@@ -9,6 +9,7 @@ from .. import plot
 from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._response import frequency_response
+from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (
     _breakaway_line,
@@ -16,6 +17,7 @@ from ._common import (
     _config_data,
     _describe,
     _host_frequency_hz,
+    _inputs,
     _linear_curves,
     _linear_normalised,
     _start,
@@ -75,6 +77,9 @@ class _Grid(NamedTuple):
 
 
 def _run_frf(args) -> int:
+    inputs = _inputs(args)
+    if "structure" in inputs:
+        return _building.run_frf(args, inputs)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
     output.say(
         f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "

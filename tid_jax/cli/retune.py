@@ -9,6 +9,7 @@ from .._io import write_json, write_toml
 from .._linear import breakaway_amplitude
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
+from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (
     _breakaway_line,
@@ -17,6 +18,7 @@ from ._common import (
     _den_hartog,
     _describe,
     _host_frequency_hz,
+    _inputs,
     _linear_curves,
     _start,
 )
@@ -71,6 +73,9 @@ def _add_retune_parser(subparsers) -> None:
 
 
 def _run_retune(args) -> int:
+    inputs = _inputs(args)
+    if "structure" in inputs:
+        return _building.run_retune(args, inputs)
     start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     output.say(

@@ -17,6 +17,7 @@ from ._common import (
     _Output,
     _read_config,
     _settings,
+    _single_storey,
     _system,
 )
 from ._tables import Shown, save_records, shown, table
@@ -142,6 +143,7 @@ def _run_rtds(args) -> int:
     if args.amplitudes is None and not (args.config and "amplitudes" in _read_config(args.config)):
         args.amplitudes = RTDS_AMPLITUDE
     inputs = _inputs(args)
+    _single_storey(inputs, args.command)
     if len(inputs["amplitudes"]) != 1:
         raise CLIError(f"rtds takes one amplitude, got {inputs['amplitudes']}")
     amplitude = inputs["amplitudes"][0]

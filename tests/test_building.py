@@ -1,0 +1,236 @@
+"""A TID in a multi-storey structure, against independent answers: a direct complex solve
+of the dynamic stiffness (`reference/building_linear.py`), the event-driven stick-slip
+solver (`reference/building_stick_slip.py`), a Nelder-Mead H-infinity search on the
+closed-form receptance (`reference/building_hinf.py`), the single-storey host of the
+paper (`frequency_response`), and Nishihara and Asami's closed form (`reference/hinf.py`)."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
+
+import tid_jax as tj
+from tests.reference import building_hinf, building_linear
+from tests.reference.building_stick_slip import steady_state
+from tests.reference.hinf import h_infinity_optimum
+
+MASSES = [2000.0, 2000.0, 1500.0]
+STIFFNESSES = [1.5e6, 1.25e6, 1.0e6]  # first mode near 2 Hz
+B = 275.0  # 5% of the total mass
+
+
+@pytest.fixture(scope="module")
+def building():
+    return tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)
+
+
+def _matrices(structure):
+    return tuple(np.asarray(m) for m in (structure.mass_matrix, structure.stiffness_matrix,
+                                         structure.damping_matrix))
+
+
+def test_shear_building_and_damping_match_the_reference(building):
+    M, K = building_linear.shear_building(MASSES, STIFFNESSES)
+    C = building_linear.modal_damping(M, K, 0.02)
+    for mine, reference in zip(_matrices(building), (M, K, C)):
+        np.testing.assert_allclose(mine, reference, rtol=1e-12, atol=1e-9)
+    rayleigh = tj.Structure.shear_building(MASSES, STIFFNESSES,
+                                           rayleigh=([0.02, 0.03], [2.0, 6.0]))
+    np.testing.assert_allclose(np.asarray(rayleigh.damping_matrix),
+                               building_linear.rayleigh_damping(M, K, [0.02, 0.03], [2.0, 6.0]),
+                               rtol=1e-12)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: tj.Structure.shear_building([1.0, 2.0], [1.0]), "storey_stiffnesses"),
+    (lambda: tj.Structure.shear_building([1.0, 2.0], [1.0, -2.0]), "storey_stiffnesses"),
+    (lambda: tj.Structure([[1.0, 0.1], [0.0, 1.0]], np.eye(2), np.eye(2)), "mass_matrix"),
+    (lambda: tj.Structure(np.eye(2), [[1.0, 2.0], [2.0, 1.0]], np.eye(2)),
+     "stiffness_matrix"),
+    (lambda: tj.Structure(np.eye(2), np.eye(2), -np.eye(2)), "damping_matrix"),
+    (lambda: tj.Structure(np.eye(2), np.eye(3), np.eye(2)), "stiffness_matrix"),
+    (lambda: tj.Structure.shear_building([1.0], [1.0], rayleigh=([0.02], [1.0])), "rayleigh"),
+])
+def test_bad_structures_name_the_input(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"spring_floor": 4}, "spring_floor"),
+    ({"inerter_floor": -1}, "inerter_floor"),
+    ({"inerter_floor": 1}, "inerter_floor"),
+    ({"force_pattern": [1.0, 2.0]}, "force_pattern"),
+    ({"load": "wind"}, "load"),
+    ({"tid_stiffness": -1.0}, "tid_stiffness"),
+])
+def test_bad_placements_name_the_input(building, changes, message):
+    system = tj.BuildingTID(building, B, 10.0, 4e4, 500.0)
+    with pytest.raises(ValueError, match=message):
+        system.replace(**changes)
+    with pytest.raises(ValueError, match="response floor"):
+        tj.building_response(system, [12.0], [1.0], tj.Quantity("drift", 4))
+
+
+LAYOUTS = [  # spring floor, inerter floor, load, pattern, terminal mass, parasitic damping
+    (1, 0, "ground", None, 0.0, 0.0),
+    (3, 1, "force", [0.2, 0.3, 1.0], 20.0, 50.0),
+    (2, 3, "ground", None, 10.0, 0.0),
+]
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("kind", ["displacement", "drift", "acceleration"])
+def test_linear_steady_state_matches_the_dynamic_stiffness(building, layout, kind):
+    j, i, load, pattern, mt, cp = layout
+    system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, spring_floor=j, inerter_floor=i,
+                            load=load, force_pattern=pattern, terminal_mass=mt,
+                            parasitic_damping=cp)
+    omegas = np.linspace(0.5, 2.5, 9) * 2 * np.pi * 2.0
+    floor = 2
+    mine = tj.linear_building_response(system, omegas, tj.Quantity(kind, floor))
+    M, K, C = _matrices(building)
+    reference = building_linear.response_amplitude(
+        omegas, M, K, C, b=B, k=4e4, c=500.0, spring_floor=j, inerter_floor=i, load=load,
+        pattern=pattern, kind=kind, floor=floor, cp=cp, mt=mt)
+    np.testing.assert_allclose(mine, reference, rtol=1e-10)
+    # and the shooting solver, friction free, finds the same steady state (its peak from
+    # 128 samples a period, refined by a parabola)
+    orbits = tj.building_response(system, omegas[::4], [3.0], tj.Quantity(kind, floor))
+    np.testing.assert_allclose(orbits.response_max[0], 3.0 * reference[::4], rtol=1e-6)
+
+
+def test_one_storey_building_is_the_paper_system(system):
+    omegas = np.linspace(0.85, 1.15, 7) * float(system.host_frequency)
+    amplitudes = [100.0, 500.0, 3000.0]
+    host = tj.Structure([[float(system.host_mass)]], [[float(system.host_stiffness)]],
+                        [[float(system.host_damping)]])
+    building = tj.BuildingTID(host, system.inertance, system.friction_force,
+                              system.tid_stiffness, system.tid_damping)
+    mine = tj.building_response(building, omegas, amplitudes)
+    paper = tj.frequency_response(system, omegas, amplitudes)
+    assert np.all(mine.converged) and np.all(paper.converged)
+    np.testing.assert_allclose(mine.response_max, paper.x_max, rtol=1e-10)
+    np.testing.assert_allclose(mine.stroke_max, paper.y_max, rtol=1e-9, atol=1e-12)
+    # a ground acceleration a_g moves the host relative to the ground as the force M a_g
+    ground = tj.building_response(building.replace(load="ground"), omegas,
+                                  np.asarray(amplitudes) / float(system.host_mass))
+    np.testing.assert_allclose(ground.response_max, paper.x_max, rtol=1e-10)
+
+
+def test_single_mode_h_infinity_is_nishihara_asami(system):
+    host = tj.Structure([[1500.0]], [[float(system.host_stiffness)]], [[0.0]])
+    building = tj.BuildingTID(host, 75.0, 0.0, 1.0, 1.0)
+    k, c = tj.first_mode_tunings(building)["h_infinity"]
+    k_ref, c_ref, _ = h_infinity_optimum(1500.0, float(system.host_stiffness), 0.0, 75.0)
+    assert k == pytest.approx(k_ref, rel=1e-8)
+    assert c == pytest.approx(c_ref, rel=1e-6)
+
+
+def _stick_slip_cases():
+    ground = dict(spring_floor=1, inerter_floor=0, load="ground", kind="displacement", floor=3)
+    between = dict(spring_floor=3, inerter_floor=2, load="force", kind="drift", floor=2,
+                   pattern=[0.3, 0.6, 1.0], mt=30.0, cp=40.0)
+    accel = dict(ground, kind="acceleration", floor=3)
+    cases = [(ground, r, a) for r in np.linspace(0.7, 1.3, 10) for a in (1.0,)]
+    cases += [(between, r, a) for r in np.linspace(0.8, 1.2, 6) for a in (4000.0,)]
+    cases += [(accel, r, a) for r in np.linspace(0.75, 1.25, 5) for a in (2.0,)]
+    return cases
+
+
+def test_exact_coulomb_matches_the_event_driven_reference(building):
+    M, K, C = _matrices(building)
+    first = building.modes()[0][0]
+    k, c, ff = 41668.57, 524.636, 275.0
+    transitions = []
+    for case, ratio, amplitude in _stick_slip_cases():
+        system = tj.BuildingTID(building, B, ff, k, c, spring_floor=case["spring_floor"],
+                                inerter_floor=case["inerter_floor"], load=case["load"],
+                                force_pattern=case.get("pattern"),
+                                terminal_mass=case.get("mt", 0.0),
+                                parasitic_damping=case.get("cp", 0.0))
+        quantity = tj.Quantity(case["kind"], case["floor"])
+        omega = ratio * first
+        mine = tj.building_response(system, [omega], [amplitude], quantity)
+        reference = steady_state(
+            omega, M, K, C, b=B, ff=ff, k=k, c=c, spring_floor=case["spring_floor"],
+            inerter_floor=case["inerter_floor"], amplitude=amplitude, load=case["load"],
+            pattern=case.get("pattern"), kind=case["kind"], floor=case["floor"],
+            cp=case.get("cp", 0.0), mt=case.get("mt", 0.0))
+        assert reference["converged"] and bool(mine.converged[0, 0])
+        assert mine.response_max[0, 0] == pytest.approx(reference["response_max"], rel=1e-4)
+        assert mine.stroke_max[0, 0] == pytest.approx(reference["stroke_max"], rel=1e-4,
+                                                      abs=1e-6 * reference["response_max"])
+        transitions.append(int(mine.transitions[0, 0]))
+    assert len(transitions) >= 20
+    assert 0 in transitions and max(transitions) >= 4  # stuck, slipping and stick-slip
+
+
+def test_frictionless_retune_is_the_h_infinity_optimum(building):
+    system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
+    result = tj.retune_building(system, [1.0], rtol=1e-10)
+    M, K, C = _matrices(building)
+    first = building.modes()[0][0]
+    band = tuple(np.asarray(tj.BUILDING_BAND) * first)
+    reference = building_hinf.h_infinity_search(
+        M, K, C, b=B, spring_floor=1, inerter_floor=0, load="ground", band=band,
+        start=tj.first_mode_tunings(system)["den_hartog"])
+    assert bool(result.converged[0])
+    assert result.peak[0] == pytest.approx(reference["peak"], rel=1e-5)
+    assert result.tid_stiffness[0] == pytest.approx(reference["k"], rel=1e-3)
+
+
+def test_retune_with_friction_beats_the_first_mode_tunings(building):
+    system = tj.BuildingTID(building, B, 0.05 * B * 9.81, 4e4, 500.0, load="ground")
+    result = tj.retune_building(system, [0.5, 2.0])
+    assert np.all(result.converged)
+    assert np.all(result.peak < 0.99 * result.den_hartog_peak)
+    assert np.all(result.peak < 0.99 * result.h_infinity_peak)
+    # the design's peak is that of a steady state at its own tuning
+    tuned = system.replace(tid_stiffness=result.tid_stiffness[1],
+                           tid_damping=result.tid_damping[1])
+    check = tj.building_response(tuned, [result.peak_omega[1]], [2.0])
+    assert check.response_max[0, 0] == pytest.approx(result.peak[1], rel=1e-3)
+
+
+@hypothesis_settings(max_examples=8, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_frictionless_response_is_linear_in_the_amplitude(seed):
+    rng = np.random.default_rng(seed)
+    masses = rng.uniform(1e3, 1e5, 3)
+    stiffnesses = masses * (2 * np.pi * rng.uniform(0.5, 5.0, 3)) ** 2
+    structure = tj.Structure.shear_building(masses, stiffnesses,
+                                            damping_ratio=rng.uniform(0.005, 0.05))
+    b = rng.uniform(0.01, 0.1) * masses.sum()
+    first = structure.modes()[0][0]
+    k = b * first**2 * rng.uniform(0.5, 1.5)
+    system = tj.BuildingTID(structure, b, 0.0, k, 2 * 0.1 * math.sqrt(k * b), load="ground")
+    omegas = first * rng.uniform(0.5, 2.0, 3)
+    amplitude = rng.uniform(0.1, 10.0)
+    response = tj.building_response(system, omegas, [amplitude, 3 * amplitude])
+    assert np.all(response.converged)
+    np.testing.assert_allclose(response.response_max[1], 3 * response.response_max[0],
+                               rtol=1e-7)
+    np.testing.assert_allclose(response.stroke_max[1], 3 * response.stroke_max[0], rtol=1e-7)
+
+
+def test_relative_friction_width_is_close_to_exact_friction(building):
+    system = tj.BuildingTID(building, B, 275.0, 41668.57, 524.636, load="ground")
+    omegas = building.modes()[0][0] * np.linspace(0.8, 1.2, 5)
+    exact = tj.building_response(system, omegas, [1.0])
+    smooth = tj.building_response(system.replace(friction_width=None), omegas, [1.0])
+    assert np.all(smooth.converged)
+    np.testing.assert_allclose(smooth.response_max, exact.response_max, rtol=5e-3)
+
+
+def test_breakaway_amplitude_is_where_the_stuck_inerter_slips(building):
+    system = tj.BuildingTID(building, B, 275.0, 41668.57, 524.636, load="ground")
+    omega = 0.7 * building.modes()[0][0]
+    breakaway = float(tj.building_breakaway(system, [omega])[0])
+    below = tj.building_response(system, [omega], [0.9 * breakaway])
+    above = tj.building_response(system, [omega], [1.1 * breakaway])
+    assert int(below.transitions[0, 0]) == 0 and float(below.stroke_max[0, 0]) < 1e-12
+    assert int(above.transitions[0, 0]) > 0

@@ -1,0 +1,112 @@
+"""`tid-jax frf` and `tid-jax retune` on a [structure] config: files, JSON, and one-line
+errors that name the key."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.reference import building_linear
+from tests.test_cli import run
+
+CONFIG = """
+inertance = 275.0
+friction_force = 135.0
+amplitudes = ["0.1g", 2.0]
+n_frequencies = 7
+
+[structure]
+storey_masses = [2000.0, 2000.0, 1500.0]
+storey_stiffnesses = [1.5e6, 1.25e6, 1.0e6]
+damping_ratio = 0.02
+
+[tid]
+spring_floor = 1
+inerter_floor = 0
+
+[load]
+on = "ground"
+
+[response]
+kind = "drift"
+floor = 1
+"""
+
+
+def _config(tmp_path, text=CONFIG):
+    path = tmp_path / "building.toml"
+    path.write_text(text)
+    return path
+
+
+def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
+    out = tmp_path / "out"
+    status, stdout, stderr = run(["frf", "--config", _config(tmp_path), "--out", out, "--json",
+                                  "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    for name in ("frf.csv", "frf.json", "frf.png", "frf_config.toml"):
+        assert (out / name).stat().st_size > 0
+    response = np.asarray(data["response_max"])
+    assert response.shape == (2, 7) and len(data["frequencies_hz"]) == 7
+    assert np.all(data["converged"]) and np.asarray(data["y_max_m"]).shape == (2, 7)
+    assert data["response"] == {"kind": "drift", "floor": 1, "unit": "m",
+                                "describes": "storey 1 drift"}
+    assert data["amplitudes"][0] == pytest.approx(0.980665)
+    # far below resonance the drift is nearly the frictionless one's with the inerter stuck
+    # or slipping; at every point it lies below the bare structure's
+    assert np.all(response < np.asarray(data["uncontrolled"]))
+    # the band's default is around the first mode
+    M, K = building_linear.shear_building([2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6])
+    first = building_linear.natural_frequencies(M, K)[0][0] / (2 * np.pi)
+    assert data["frequencies_hz"][0] == pytest.approx(0.5 * first)
+    # the config written reruns the same case
+    status, again, _ = run(["frf", "--config", out / "frf_config.toml", "--out",
+                            tmp_path / "again", "--json", "--quiet"])
+    assert status == 0 and json.loads(again)["response_max"] == data["response_max"]
+
+
+@pytest.mark.parametrize("change, message", [
+    (("storey_stiffnesses = [1.5e6, 1.25e6, 1.0e6]", "storey_stiffnesses = [1.5e6, 1.0e6]"),
+     "storey_stiffnesses"),
+    (("storey_stiffnesses = [1.5e6, 1.25e6, 1.0e6]", "storey_stiffnesses = [1.5e6, -1, 1.0e6]"),
+     "storey_stiffnesses"),
+    (("spring_floor = 1", "spring_floor = 5"), "spring_floor"),
+    (("floor = 1\n", "floor = 7\n"), "response floor"),
+    (("kind = \"drift\"", "kind = \"velocity\""), "response kind"),
+    (("on = \"ground\"", "on = \"wind\""), "load"),
+    (("damping_ratio = 0.02", "damping = 0.02"), "damping"),
+    (("damping_ratio = 0.02", "mass_matrix = [[1.0, 2.0], [0.0, 1.0]]\nstiffness_matrix = "
+      "[[1.0, 0.0], [0.0, 1.0]]\ndamping_matrix = [[0.0, 0.0], [0.0, 0.0]]"), "symmetric"),
+    (("amplitudes = [\"0.1g\", 2.0]", "amplitudes = [\"much\"]"), "amplitudes"),
+])
+def test_bad_building_configs_get_one_line_naming_the_key(tmp_path, change, message):
+    path = _config(tmp_path, CONFIG.replace(*change))
+    status, stdout, stderr = run(["frf", "--config", path, "--out", tmp_path / "out"])
+    assert status == 2 and stdout == ""
+    assert len(stderr.strip().splitlines()) == 1 and message in stderr
+    assert not (tmp_path / "out" / "frf.json").exists()
+
+
+def test_commands_for_the_single_storey_host_refuse_a_structure(tmp_path):
+    status, _, stderr = run(["sensitivity", "--config", _config(tmp_path), "--out",
+                             tmp_path / "out"])
+    assert status == 2 and "[structure]" in stderr and len(stderr.strip().splitlines()) == 1
+
+
+def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):
+    text = CONFIG.replace("friction_force = 135.0", "friction_force = 0.0")
+    out = tmp_path / "out"
+    status, stdout, stderr = run(["retune", "--config", _config(tmp_path, text), "--out", out,
+                                  "--json", "--quiet"])
+    assert status == 0, stderr
+    results = json.loads(stdout)["results"]
+    assert len(results) == 2 and all(r["converged"] for r in results)
+    for r in results:
+        assert r["k_N_per_m"] > 0 and r["c_N_s_per_m"] > 0
+        assert r["peak"] <= r["h_infinity_peak"] * (1 + 1e-9)
+    # frictionless: the tuning does not depend on the amplitude, the peak is proportional
+    assert results[0]["k_N_per_m"] == pytest.approx(results[1]["k_N_per_m"], rel=1e-3)
+    assert results[1]["peak"] / results[0]["peak"] == pytest.approx(2.0 / 0.980665, rel=1e-6)
+    for name in ("retune.csv", "retune.json", "retune.png", "retune_config.toml"):
+        assert (out / name).stat().st_size > 0

@@ -1,0 +1,216 @@
+"""`tid-jax frf` and `tid-jax retune` on a multi-storey structure: a config with a
+[structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
+and their tables, CSV, JSON and PNG files."""
+
+import math
+
+import numpy as np
+
+from .. import plot
+from .._building import BuildingTID, Quantity, first_mode_tunings
+from .._building_design import BUILDING_BAND, retune_building
+from .._building_orbit import building_response
+from .._io import write_json, write_toml
+from .._settings import SolverSettings
+from .._structure import Structure
+from ._building_config import BUILDING_TABLES, amplitude_value
+from ._common import (
+    PROG,
+    SOLVER_TABLE,
+    CLIError,
+    _config_comment,
+    _config_data,
+    _Output,
+)
+from ._tables import save_records, shown, table
+
+
+def _structure(table: dict) -> Structure:
+    matrices = [key for key in ("mass_matrix", "stiffness_matrix", "damping_matrix")
+                if key in table]
+    try:
+        if matrices:
+            if len(matrices) != 3:
+                raise ValueError("give mass_matrix, stiffness_matrix and damping_matrix")
+            return Structure(table["mass_matrix"], table["stiffness_matrix"],
+                             table["damping_matrix"])
+        for key in ("storey_masses", "storey_stiffnesses"):
+            if key not in table:
+                raise ValueError(f"[structure] needs {key} (or the three matrices)")
+        rayleigh = table.get("rayleigh")
+        if rayleigh is not None:
+            if not isinstance(rayleigh, dict) or set(rayleigh) != {"ratios", "frequencies_hz"}:
+                raise ValueError("rayleigh must be {ratios = [..], frequencies_hz = [..]}")
+            rayleigh = (rayleigh["ratios"], rayleigh["frequencies_hz"])
+        return Structure.shear_building(table["storey_masses"], table["storey_stiffnesses"],
+                                        damping_ratio=table.get("damping_ratio"),
+                                        rayleigh=rayleigh)
+    except (ValueError, TypeError) as error:
+        raise CLIError(f"[structure]: {error}") from None
+
+
+def building_inputs(inputs: dict) -> tuple[BuildingTID, Quantity, np.ndarray]:
+    """The system, the quantity and the amplitudes of a config with a [structure]."""
+    structure = _structure(inputs["structure"])
+    tid, load, response = (inputs.get(name, {}) for name in BUILDING_TABLES[1:])
+    for key in ("host_frequency_hz", "host_stiffness", "host_damping", "series_stiffness",
+                "backlash"):
+        if key in inputs and key not in ("host_frequency_hz",):
+            raise CLIError(f"{key} does not apply to a [structure]")
+    width = inputs.get("friction_width", 0.0)
+    try:
+        system = BuildingTID(
+            structure, inputs["inertance"], inputs["friction_force"], 1.0, 0.0,
+            None if width == "relative" else width,
+            spring_floor=tid.get("spring_floor", 1), inerter_floor=tid.get("inerter_floor", 0),
+            load=load.get("on", "force"), force_pattern=load.get("force_pattern"),
+            parasitic_damping=inputs.get("parasitic_damping", 0.0),
+            terminal_mass=inputs.get("terminal_mass", 0.0))
+        quantity = Quantity(response.get("kind", "displacement"), response.get("floor"))
+        quantity.floor_of(structure.floors)
+    except ValueError as error:
+        raise CLIError(str(error)) from None
+    k, c = first_mode_tunings(system)["den_hartog"]
+    system = system.replace(tid_stiffness=inputs.get("tid_stiffness", k),
+                            tid_damping=inputs.get("tid_damping", c))
+    if system.load == "ground" and "amplitudes_given" not in inputs:
+        raise CLIError("a ground acceleration needs amplitudes (m/s2, or texts such as '0.2g')")
+    try:
+        amplitudes = np.asarray([amplitude_value(a) for a in inputs["amplitudes"]])
+    except ValueError as error:
+        raise CLIError(str(error)) from None
+    return system, quantity, amplitudes
+
+
+def _band(inputs: dict, system: BuildingTID) -> tuple[np.ndarray, np.ndarray]:
+    first = system.structure.modes()[0][0] / (2 * math.pi)
+    low, high = inputs.get("band_hz", [BUILDING_BAND[0] * first, BUILDING_BAND[1] * first])
+    hz = np.linspace(low, high, inputs["n_frequencies"])
+    return hz, 2 * math.pi * hz
+
+
+def _describe(system: BuildingTID, quantity: Quantity) -> str:
+    floors = system.floors
+    first = system.structure.natural_frequencies_hz()[0]
+    where = "the ground" if system.inerter_floor == 0 else f"floor {system.inerter_floor}"
+    load = "ground acceleration" if system.load == "ground" else "force"
+    return (f"{floors}-storey structure (first mode {first:.3g} Hz), TID from floor "
+            f"{system.spring_floor} to {where}, b = {float(system.inertance):g} kg, "
+            f"ff = {float(system.friction_force):g} N; {load}; {quantity.describe(floors)}")
+
+
+def _document(command, inputs, system, quantity, frequencies_hz, output, **results) -> dict:
+    s = system.structure
+    return {
+        "command": f"{PROG} {command}",
+        "inputs": {key: value for key, value in inputs.items() if key != "amplitudes_given"},
+        "structure": {"mass_matrix_kg": np.asarray(s.mass_matrix).tolist(),
+                      "stiffness_matrix_N_per_m": np.asarray(s.stiffness_matrix).tolist(),
+                      "damping_matrix_N_s_per_m": np.asarray(s.damping_matrix).tolist(),
+                      "natural_frequencies_hz": s.natural_frequencies_hz().tolist()},
+        "tid": {"spring_floor": system.spring_floor, "inerter_floor": system.inerter_floor,
+                "inertance_kg": float(system.inertance),
+                "friction_force_N": float(system.friction_force)},
+        "load": system.load,
+        "amplitude_unit": "m/s2" if system.load == "ground" else "N",
+        "response": {"kind": quantity.kind, "floor": quantity.floor_of(system.floors),
+                     "unit": quantity.unit, "describes": quantity.describe(system.floors)},
+        "frequencies_hz": [float(f) for f in frequencies_hz],
+        **results,
+        "files": [str(path) for path in output.files],
+    }
+
+
+def _config(inputs, output, command):
+    data = _config_data({key: value for key, value in inputs.items()
+                         if key != "amplitudes_given"})
+    write_toml(output.path(f"{command}_config.toml"), data, comment=_config_comment(command))
+
+
+def run_frf(args, inputs: dict) -> int:
+    system, quantity, amplitudes = building_inputs(inputs)
+    frequencies_hz, omegas = _band(inputs, system)
+    output = _Output(args)
+    output.say(f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
+               f"frequencies; {_describe(system, quantity)}")
+    response = building_response(system, omegas, amplitudes, quantity,
+                                 SolverSettings(**inputs[SOLVER_TABLE]))
+    bare_peak = np.max(response.uncontrolled, axis=1)
+    records = [{"amplitude": float(a), "frequency_hz": float(f),
+                "response_max": float(response.response_max[i, j]),
+                "response_over_uncontrolled_peak": float(response.response_max[i, j]
+                                                         / bare_peak[i]),
+                "stroke_m": float(response.stroke_max[i, j]),
+                "converged": bool(response.converged[i, j]),
+                "stable": bool(response.stable[i, j]),
+                "transitions": int(response.transitions[i, j])}
+               for i, a in enumerate(amplitudes) for j, f in enumerate(frequencies_hz)]
+    save_records(output, "frf.csv", list(records[0]), records)
+    _config(inputs, output, "frf")
+    plot.save_figure(plot.plot_building_response(
+        frequencies_hz, amplitudes, response.response_max, response.uncontrolled,
+        ylabel=f"{quantity.describe(system.floors)} ({quantity.unit})"), output.path("frf.png"))
+    peaks = np.nanmax(np.where(response.converged, response.response_max, np.nan), axis=1)
+    summary = [{"amplitude": float(a), "peak": float(peaks[i]),
+                "ratio": float(peaks[i] / bare_peak[i]),
+                "stroke_cm": 100 * float(np.nanmax(response.stroke_max[i])),
+                "converged": f"{int(response.converged[i].sum())}/{omegas.size}"}
+               for i, a in enumerate(amplitudes)]
+    data = _document("frf", inputs, system, quantity, frequencies_hz, output,
+                     amplitudes=amplitudes.tolist(),
+                     response_max=np.asarray(response.response_max).tolist(),
+                     uncontrolled=np.asarray(response.uncontrolled).tolist(),
+                     y_max_m=np.asarray(response.stroke_max).tolist(),
+                     converged=np.asarray(response.converged).tolist(),
+                     stable=np.asarray(response.stable).tolist(),
+                     transitions=np.asarray(response.transitions).tolist(), summary=summary)
+    write_json(output.path("frf.json"), data)
+    unit = data["amplitude_unit"]
+    columns = [shown(f"A ({unit})", "amplitude", "g"),
+               shown(f"peak ({quantity.unit})", "peak", ".4g"),
+               shown("/ uncontrolled", "ratio", ".3f"), shown("stroke (cm)", "stroke_cm", ".2f"),
+               shown("converged", "converged", "s")]
+    title = f"Frequency response: {_describe(system, quantity)}"
+    return output.finish(data, title + "\n" + table(columns, summary))
+
+
+def run_retune(args, inputs: dict) -> int:
+    system, quantity, amplitudes = building_inputs(inputs)
+    frequencies_hz, omegas = _band(inputs, system)
+    output = _Output(args)
+    output.say(f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies; "
+               f"{_describe(system, quantity)}")
+    result = retune_building(system, amplitudes, quantity, omegas=omegas,
+                             settings=SolverSettings(**inputs[SOLVER_TABLE]))
+    records = [{"amplitude": float(a), "k_N_per_m": float(result.tid_stiffness[i]),
+                "c_N_s_per_m": float(result.tid_damping[i]),
+                "peak": float(result.peak[i]),
+                "peak_over_uncontrolled": float(result.peak[i] / result.uncontrolled[i]),
+                "peak_frequency_hz": float(result.peak_omega[i]) / (2 * math.pi),
+                "den_hartog_peak": float(result.den_hartog_peak[i]),
+                "h_infinity_peak": float(result.h_infinity_peak[i]),
+                "converged": bool(result.converged[i])}
+               for i, a in enumerate(amplitudes)]
+    save_records(output, "retune.csv", list(records[0]), records)
+    _config(inputs, output, "retune")
+    plot.save_figure(plot.plot_building_retune(
+        amplitudes, {"retuned": result.peak, "first-mode Den Hartog": result.den_hartog_peak,
+                     "first-mode H-infinity": result.h_infinity_peak},
+        ylabel=f"peak {quantity.describe(system.floors)} ({quantity.unit})"),
+        output.path("retune.png"))
+    tunings = first_mode_tunings(system)
+    data = _document("retune", inputs, system, quantity, frequencies_hz, output,
+                     first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
+                                         for name, (k, c) in tunings.items()},
+                     results=records)
+    write_json(output.path("retune.json"), data)
+    unit = data["amplitude_unit"]
+    columns = [shown(f"A ({unit})", "amplitude", "g"), shown("k (N/m)", "k_N_per_m", ".5g"),
+               shown("c (N s/m)", "c_N_s_per_m", ".5g"),
+               shown(f"peak ({quantity.unit})", "peak", ".4g"),
+               shown("/ uncontrolled", "peak_over_uncontrolled", ".3f"),
+               shown("Den Hartog", "den_hartog_peak", ".4g"),
+               shown("H-infinity", "h_infinity_peak", ".4g"),
+               shown("converged", "converged", "")]
+    title = f"Retuned per amplitude: {_describe(system, quantity)}"
+    return output.finish(data, title + "\n" + table(columns, records))
