@@ -53,9 +53,8 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     assert data["response"] == {"kind": "drift", "floor": 1, "unit": "m",
                                 "describes": "storey 1 drift"}
     assert data["amplitudes"][0] == pytest.approx(0.980665)
-    # far below resonance the drift is nearly the frictionless one's with the inerter stuck
-    # or slipping; at every point it lies below the bare structure's
-    assert np.all(response < np.asarray(data["uncontrolled"]))
+    # the TID lowers the peak over the band below the bare structure's
+    assert np.all(response.max(axis=1) < 0.9 * np.asarray(data["uncontrolled"]).max(axis=1))
     # the band's default is around the first mode
     M, K = building_linear.shear_building([2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6])
     first = building_linear.natural_frequencies(M, K)[0][0] / (2 * np.pi)
@@ -72,7 +71,7 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     (("storey_stiffnesses = [1.5e6, 1.25e6, 1.0e6]", "storey_stiffnesses = [1.5e6, -1, 1.0e6]"),
      "storey_stiffnesses"),
     (("spring_floor = 1", "spring_floor = 5"), "spring_floor"),
-    (("floor = 1\n", "floor = 7\n"), "response floor"),
+    (("kind = \"drift\"\nfloor = 1", "kind = \"drift\"\nfloor = 7"), "response floor"),
     (("kind = \"drift\"", "kind = \"velocity\""), "response kind"),
     (("on = \"ground\"", "on = \"wind\""), "load"),
     (("damping_ratio = 0.02", "damping = 0.02"), "damping"),
