@@ -84,20 +84,16 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int) -> _Ne
     basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
     end = lambda z: _period_end(z, pl, fl, settings)
 
-    def cond(state):
-        return (state.residual > tol) & (state.steps < 2 * settings.max_newton_steps)
-
     def newton(state):
         z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (state.z,), (t,)),
                                     out_axes=(None, 1))(basis)
         lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
-        return z_end, monodromy, lu
+        return _step(state, z_end, monodromy, lu)
 
     def chord(state):
-        return end(state.z), state.monodromy, state.lu
+        return _step(state, end(state.z), state.monodromy, state.lu)
 
-    def body(state):
-        z_end, monodromy, lu = jax.lax.cond(state.steps < newton_steps, newton, chord, state)
+    def _step(state, z_end, monodromy, lu):
         residual = z_end - state.z
         value = jnp.where(jnp.all(jnp.isfinite(residual)), jnp.max(jnp.abs(residual)), jnp.inf)
         done = value <= tol
@@ -105,12 +101,17 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int) -> _Ne
         return _Newton(jnp.where(done, state.z, _limited(state.z, update)), monodromy, lu,
                        jnp.where(done, value, jnp.inf), state.steps + 1)
 
+    def until(limit):
+        return lambda state: (state.residual > tol) & (state.steps < limit)
+
     s = z0.shape[0]
     eye = jnp.eye(s, dtype=z0.dtype)
     start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype),
                     jax.scipy.linalg.lu_factor(eye), jnp.asarray(jnp.inf, z0.dtype),
                     jnp.zeros((), int))
-    return jax.lax.while_loop(cond, body, start)
+    # (two loops, not a switch in one: in a batch a switch would run both branches)
+    state = jax.lax.while_loop(until(newton_steps), newton, start)
+    return jax.lax.while_loop(until(2 * settings.max_newton_steps), chord, state)
 
 
 class BuildingOrbit(eqx.Module):
