@@ -33,12 +33,12 @@ import numpy as np
 from jaxtyping import Array, Complex, Float, Int
 
 from ._building import BuildingTID, Quantity, selection
+from ._coulomb import bracketed_root
 from ._eigen import eigensystem
 from ._period import integrate
 from ._settings import SolverSettings
 
 MAX_SEGMENTS = 24  # segments per period; an orbit that needs more is reported as failed
-_ROOT_ITERATIONS = 60
 _STICK = 0
 # rows of the sampled projections: the quantity, the stroke, its velocity, the friction
 # force a stuck inerter needs
@@ -226,27 +226,8 @@ def _event(segment: _Segment, z, dz, theta, plant: Plant):
 
 
 def _root(segment, mode, plant, low, high, g_low, g_high, active):
-    g_of = lambda theta: _event(segment, *_state(segment, mode, theta), theta, plant)
-    secant = g_low / jnp.where(g_low == g_high, 1.0, g_low - g_high)
-    first = low + (high - low) * jnp.clip(secant, 0.1, 0.9)
-    tol = 1e-14 * 2 * np.pi
-
-    def cond(carry):
-        low, high, theta, step, i = carry
-        return (jnp.abs(step) > tol) & (high - low > tol) & (i < _ROOT_ITERATIONS)
-
-    def body(carry):
-        low, high, theta, _, i = carry
-        g, dg = g_of(theta)
-        low, high = jnp.where(g >= 0, theta, low), jnp.where(g >= 0, high, theta)
-        newton = theta - g / jnp.where(dg == 0, 1.0, dg)
-        inside = (newton >= low) & (newton <= high) & (dg != 0)
-        new = jnp.where(inside, newton, 0.5 * (low + high))
-        return low, high, new, new - theta, i + 1
-
-    _, _, theta, _, _ = jax.lax.while_loop(
-        cond, body, (low, high, first, jnp.where(active, jnp.inf, 0.0).astype(low.dtype), 0))
-    return theta
+    return bracketed_root(lambda theta: _event(segment, *_state(segment, mode, theta), theta,
+                                               plant), low, high, g_low, g_high, active)
 
 
 def _differentiable_root(segment, mode, plant, theta0):

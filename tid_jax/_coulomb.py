@@ -206,11 +206,11 @@ def _event(segment: _Segment, z, dz, q: _Quantities):
     return _event_value(segment, z, q, force), dg
 
 
-def _root(segment, mode, q: _Quantities, low, high, g_low, g_high, active):
-    """The phase in `[low, high]` where the event function changes sign (positive at
-    `low`, negative at `high`), by Newton steps kept inside the shrinking bracket from the
-    secant of the values `g_low`, `g_high` there; no iterations where not `active`."""
-    g_of = lambda theta: _event(segment, *_state(segment, mode, theta), q)
+def bracketed_root(g_of, low, high, g_low, g_high, active):
+    """The phase in `[low, high]` where the event function `g_of(theta) -> (g, dg/dtheta)`
+    changes sign (positive at `low`, negative at `high`), by Newton steps kept inside the
+    shrinking bracket from the secant of the values `g_low`, `g_high` there; no
+    iterations where not `active`."""
     secant = g_low / jnp.where(g_low == g_high, 1.0, g_low - g_high)
     first = low + (high - low) * jnp.clip(secant, 0.1, 0.9)
     tol = 1e-14 * 2 * np.pi
@@ -233,6 +233,12 @@ def _root(segment, mode, q: _Quantities, low, high, g_low, g_high, active):
         cond, body, (low, high, first, jnp.where(active, jnp.inf, 0.0).astype(low.dtype), 0)
     )
     return theta
+
+
+def _root(segment, mode, q: _Quantities, low, high, g_low, g_high, active):
+    """`bracketed_root` of the event function of `segment`."""
+    return bracketed_root(lambda theta: _event(segment, *_state(segment, mode, theta), q),
+                          low, high, g_low, g_high, active)
 
 
 def _differentiable_root(segment, mode, q: _Quantities, theta0):
