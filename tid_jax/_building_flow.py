@@ -33,7 +33,7 @@ import numpy as np
 from jaxtyping import Array, Complex, Float, Int
 
 from ._building import BuildingTID, Quantity, selection
-from ._coulomb import bracketed_root
+from ._coulomb import bracketed_root, differentiable_root, segment_state
 from ._eigen import eigensystem
 from ._period import integrate
 from ._settings import SolverSettings
@@ -190,15 +190,6 @@ def _start(sign, theta, z, plant: Plant, modes) -> _Segment:
     return _Segment(sign, theta, constant, mode.inverse @ (z - particular).astype(complex))
 
 
-def _state(segment: _Segment, mode: _Mode, theta):
-    tau = jnp.maximum(theta - segment.start, 0.0)
-    growth = segment.coefficients * jnp.exp(mode.eigenvalues * tau)
-    harmonic = mode.harmonic * jnp.exp(1j * theta)
-    z = jnp.real(harmonic + mode.vectors @ growth) + segment.constant
-    dz = jnp.real(1j * harmonic + mode.vectors @ (mode.eigenvalues * growth))
-    return z, dz
-
-
 def _projections(segment: _Segment, mode: _Mode, plant: Plant, grid, phasors):
     """The sampled projections (rows `_QUANTITY`..`_DEMAND`) over the grid from the
     segment's start on."""
@@ -226,16 +217,8 @@ def _event(segment: _Segment, z, dz, theta, plant: Plant):
 
 
 def _root(segment, mode, plant, low, high, g_low, g_high, active):
-    return bracketed_root(lambda theta: _event(segment, *_state(segment, mode, theta), theta,
+    return bracketed_root(lambda theta: _event(segment, *segment_state(segment, mode, theta), theta,
                                                plant), low, high, g_low, g_high, active)
-
-
-def _differentiable_root(segment, mode, plant, theta0):
-    """`theta0` with the implicit derivative of the event time (one Newton step)."""
-    theta0 = jax.lax.stop_gradient(theta0)
-    g, dg = _event(segment, *_state(segment, mode, theta0), theta0, plant)
-    dg = jax.lax.stop_gradient(jnp.where(dg == 0, 1.0, dg))
-    return theta0 - (g - jax.lax.stop_gradient(g)) / dg
 
 
 def _next_sign(sign, z, theta, plant: Plant):
@@ -294,12 +277,13 @@ def period(z0, flow: Flow, keep_samples: bool = True):
         g_low = jnp.where(grid[before] >= seg.start, g[before], 0.0)
         theta = _root(*fixed[:3], low, high, jnp.maximum(g_low, 0.0), jnp.minimum(g[j], 0.0),
                       ends)
-        theta = _differentiable_root(segment, mode, plant, theta)
+        theta = differentiable_root(
+            lambda t: _event(segment, *segment_state(segment, mode, t), t, plant), theta)
         theta = jnp.where(ends, theta, 2 * np.pi)
         own = (grid[:-1] >= segment.start) & (grid[:-1] < theta)
         kept = values[:-1, _QUANTITY:_STROKE + 1]
         samples = jnp.where(own[:, None], kept, state.samples) if keep_samples else state.samples
-        z, _ = _state(segment, mode, theta)
+        z, _ = segment_state(segment, mode, theta)
         z = jnp.where(segment.sign == _STICK, z, z.at[2 * m - 1].set(0.0))
         following = _start(_next_sign(segment.sign, z, theta, plant), theta, z, plant, modes)
         transitions = state.transitions + ends
@@ -308,7 +292,7 @@ def period(z0, flow: Flow, keep_samples: bool = True):
             segment=_select(ends, following, segment),
             samples=samples,
             z_end=jnp.where(ends, jnp.where(too_many, jnp.nan, state.z_end),
-                            _state(segment, mode, grid[-1])[0]),
+                            segment_state(segment, mode, grid[-1])[0]),
             transitions=transitions,
             stroke_events=jnp.where(ends, jnp.maximum(state.stroke_events, jnp.abs(z[m - 1])),
                                     state.stroke_events),

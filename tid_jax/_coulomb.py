@@ -168,8 +168,9 @@ def _mode_of(segment: _Segment, modes) -> _Mode:
     return jax.tree.map(lambda a, b: jnp.where(segment.sign == _STICK, b, a), slip, stuck)
 
 
-def _state(segment: _Segment, mode: _Mode, theta):
-    """The state at phase `theta` (>= the segment's start) and its phase derivative."""
+def segment_state(segment, mode, theta):
+    """The state at phase `theta` (>= the segment's start) of a closed-form segment (a
+    `_Segment` and its `_Mode`, or any with their fields) and its phase derivative."""
     tau = jnp.maximum(theta - segment.start, 0.0)
     growth = segment.coefficients * jnp.exp(mode.eigenvalues * tau)
     harmonic = mode.harmonic * jnp.exp(1j * theta)
@@ -237,16 +238,16 @@ def bracketed_root(g_of, low, high, g_low, g_high, active):
 
 def _root(segment, mode, q: _Quantities, low, high, g_low, g_high, active):
     """`bracketed_root` of the event function of `segment`."""
-    return bracketed_root(lambda theta: _event(segment, *_state(segment, mode, theta), q),
+    return bracketed_root(lambda theta: _event(segment, *segment_state(segment, mode, theta), q),
                           low, high, g_low, g_high, active)
 
 
-def _differentiable_root(segment, mode, q: _Quantities, theta0):
-    """`theta0`, a root of the event function, with the forward derivative of one Newton
-    step from it: the implicit derivative -dg / (dg/dtheta) of the event time (the value
-    stays `theta0`)."""
+def differentiable_root(g_of, theta0):
+    """`theta0`, a root of the event function `g_of(theta) -> (g, dg/dtheta)`, with the
+    forward derivative of one Newton step from it: the implicit derivative
+    -dg / (dg/dtheta) of the event time (the value stays `theta0`)."""
     theta0 = jax.lax.stop_gradient(theta0)
-    g, dg = _event(segment, *_state(segment, mode, theta0), q)
+    g, dg = g_of(theta0)
     dg = jax.lax.stop_gradient(jnp.where(dg == 0, 1.0, dg))
     return theta0 - (g - jax.lax.stop_gradient(g)) / dg
 
@@ -319,7 +320,7 @@ def period(z0: Float[Array, " 4"], flow: Flow, keep_samples: bool = True):
         on_grid = segment if keep_samples else jax.lax.stop_gradient(segment)
         zs = _on_grid(on_grid, mode, grid, phasors)
         # The event is located on the values alone (its derivative is that of one Newton
-        # step from it, `_differentiable_root`): no tangents enter the search.
+        # step from it, `differentiable_root`): no tangents enter the search.
         fixed = jax.lax.stop_gradient((segment, mode, q, zs))
         states = fixed[3].T  # rows x, x', y, y' over the grid
         g = _event_value(fixed[0], states, fixed[2], _spring_force(states, fixed[2]))
@@ -335,11 +336,12 @@ def period(z0: Float[Array, " 4"], flow: Flow, keep_samples: bool = True):
         g_low = jnp.where(grid[before] >= fixed[0].start, g[before], 0.0)
         theta = _root(*fixed[:3], low, high, jnp.maximum(g_low, 0.0), jnp.minimum(g[j], 0.0),
                       ends)
-        theta = _differentiable_root(segment, mode, q, theta)
+        theta = differentiable_root(
+            lambda t: _event(segment, *segment_state(segment, mode, t), q), theta)
         theta = jnp.where(ends, theta, 2 * np.pi)
         own = (grid[:-1] >= segment.start) & (grid[:-1] < theta)
         samples = jnp.where(own[:, None], zs[:-1], state.samples) if keep_samples else state.samples
-        z, _ = _state(segment, mode, theta)
+        z, _ = segment_state(segment, mode, theta)
         z = jnp.where(segment.sign == _STICK, z, z.at[3].set(0.0))
         following = _start(_transition(segment, z, q), theta, z, q, modes)
         transitions = state.transitions + ends
@@ -348,7 +350,7 @@ def period(z0: Float[Array, " 4"], flow: Flow, keep_samples: bool = True):
             segment=jax.tree.map(lambda a, b: jnp.where(ends, a, b), following, segment),
             samples=samples,
             z_end=jnp.where(ends, jnp.where(too_many, jnp.nan, state.z_end),
-                            _state(segment, mode, grid[-1])[0]),
+                            segment_state(segment, mode, grid[-1])[0]),
             transitions=transitions,
             y_events=jnp.where(ends, jnp.maximum(state.y_events, jnp.abs(z[2])), state.y_events),
             done=~ends | too_many,
