@@ -169,9 +169,38 @@ def test_exact_coulomb_matches_the_event_driven_reference(building):
     assert 0 in transitions and max(transitions) >= 4  # stuck, slipping and stick-slip
 
 
+@pytest.mark.parametrize("friction, ratio", [(0.0, 0.93), (0.05, 0.93), (0.05, 1.06),
+                                             (0.02, 0.8)])
+def test_peak_derivatives_are_differences_of_steady_states(building, friction, ratio):
+    import jax.numpy as jnp
+
+    from tid_jax._building_design import peak_gradient
+    from tid_jax._building_orbit import building_settings, solve_orbits
+
+    system = tj.BuildingTID(building, B, friction * B * 9.81, 4e4, 500.0, load="ground")
+    omega = ratio * building.modes()[0][0]
+    settings = building_settings(system, None)
+    quantity = tj.Quantity()
+    orbit = solve_orbits(system, quantity, jnp.asarray([1.0]), jnp.asarray([omega]), settings)
+    gradient = np.asarray(peak_gradient(system, quantity, jnp.asarray(1.0),
+                                        jnp.asarray(omega), orbit.state[0], settings,
+                                        friction == 0.0))
+    step = 1e-4
+    for i, name in enumerate(("tid_stiffness", "tid_damping")):
+        value = float(getattr(system, name))
+        peaks = [tj.building_response(system.replace(**{name: value * math.exp(h)}),
+                                      [omega], [1.0]).response_max[0, 0]
+                 for h in (-step, step)]
+        difference = (peaks[1] - peaks[0]) / (2 * step)
+        assert gradient[i] == pytest.approx(difference, rel=1e-4,
+                                            abs=1e-4 * float(orbit.response_max[0]))
+    if friction:
+        assert int(orbit.transitions[0]) > 0  # the derivatives cross stick-slip events
+
+
 def test_frictionless_retune_is_the_h_infinity_optimum(building):
     system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
-    result = tj.retune_building(system, [1.0], rtol=1e-10)
+    result = tj.retune_building(system, [1.0])
     M, K, C = _matrices(building)
     first = building.modes()[0][0]
     band = tuple(np.asarray(tj.BUILDING_BAND) * first)
@@ -234,3 +263,49 @@ def test_breakaway_amplitude_is_where_the_stuck_inerter_slips(building):
     above = tj.building_response(system, [omega], [1.1 * breakaway])
     assert int(below.transitions[0, 0]) == 0 and float(below.stroke_max[0, 0]) < 1e-12
     assert int(above.transitions[0, 0]) > 0
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.05])
+def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction):
+    system = tj.BuildingTID(building, B, friction * B * 9.81, 4e4, 500.0, load="ground",
+                            terminal_mass=20.0)
+    quantity = tj.Quantity("drift", 1)
+    result = tj.building_sensitivities(system, [1.0], quantity)
+    assert bool(result.converged[0]) and len(result.names) == 7 + 2 * 3
+    M, K, C = _matrices(building)
+    storeys = [K[0, 0] + K[0, 1], -K[1, 0], -K[2, 1]]
+    step = 1e-3
+
+    def changed(name, factor):
+        if name == "amplitude":
+            return system, factor
+        if name.startswith("floor_mass_"):
+            i = int(name[-1]) - 1
+            mass = M.copy()
+            mass[i, i] *= factor
+            return system.replace(structure=tj.Structure(mass, K, C)), 1.0
+        if name.startswith("storey_stiffness_"):
+            s = int(name[-1]) - 1
+            spring = np.zeros(3)
+            spring[s] = 1.0
+            if s:
+                spring[s - 1] = -1.0
+            stiffness = K + (factor - 1) * storeys[s] * np.outer(spring, spring)
+            return system.replace(structure=tj.Structure(M, stiffness, C)), 1.0
+        return system.replace(**{name: float(getattr(system, name)) * factor}), 1.0
+
+    for name in ("tid_stiffness", "tid_damping", "inertance", "friction_force",
+                 "terminal_mass", "amplitude", "floor_mass_2", "storey_stiffness_1",
+                 "storey_stiffness_3"):
+        peaks = []
+        for h in (-step, step):
+            changed_system, amplitude = changed(name, math.exp(h))
+            peaks.append(float(tj.building_peaks(changed_system, [amplitude],
+                                                 quantity).value[0]))
+        difference = (math.log(peaks[1]) - math.log(peaks[0])) / (2 * step)
+        mine = result.elasticities[0, result.names.index(name)]
+        assert mine == pytest.approx(difference, abs=2e-4), name
+    if friction:  # friction makes the peak's growth with the amplitude sublinear
+        assert result.elasticities[0, result.names.index("amplitude")] < 0.999
+    else:
+        assert result.elasticities[0, result.names.index("amplitude")] == pytest.approx(1.0)

@@ -4,11 +4,13 @@ maxima refined by parabolas through ever closer frequencies, and the tuning (k, 
 minimises that peak by optimistix's Nelder-Mead search (the minimax optimum, with two
 equal peaks, is not smooth)."""
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
+import scipy.optimize
 from jaxtyping import Array, Bool, Float
 
 from ._building import (
@@ -19,23 +21,56 @@ from ._building import (
     quantity_amplitude,
     uncontrolled_amplitude,
 )
-from ._building_orbit import building_settings, solve_orbit
+from ._building_flow import flow, plant, projection_units
+from ._building_orbit import (
+    building_settings,
+    peak_of,
+    period_end,
+    period_samples,
+    solve_orbit,
+)
 from ._checks import check_grid
 from ._peaks import local_peaks
 from ._settings import SolverSettings
+from ._steady_state import fixed_point_matrix
 
 # The default band of a building's design: these multiples of the bare structure's
 # first natural frequency.
 BUILDING_BAND = (0.5, 1.6)
 BAND_POINTS = 31
 _CANDIDATES = 2  # local maxima refined
-_ROUNDS = 4  # parabolas through ever closer frequencies
+_ROUNDS = 6  # parabolas through ever closer frequencies
 _SHRINK = 4.0
+_CHUNK = 3 * _CANDIDATES  # orbits solved together: a round's
+# the retune's range: k and c within these factors of the first mode's H-infinity tuning
+_RANGE = (4.0, 30.0)
+_PENALTY = 1.0  # log peak given to a design whose steady states were not all found
+_STALL = 12  # evaluations without a gain of rtol in the log peak that end a search
+# a search that ends otherwise has converged where no change of log k and log c within
+# _REACH lowers the highest log peak by more than _GAIN to first order
+_REACH = 1e-2
+_GAIN = 1e-4
+
+
+class _Stalled(Exception):
+    pass
 
 
 def default_omegas(system: BuildingTID, points: int = BAND_POINTS) -> np.ndarray:
     """`points` frequencies (rad/s) over `BUILDING_BAND` of the first mode."""
     return np.linspace(*BUILDING_BAND, points) * system.structure.modes()[0][0]
+
+
+def search_grid(system: BuildingTID, omegas) -> np.ndarray:
+    """The grid the peaks are looked for on: `omegas` (default `default_omegas`), or
+    `BAND_POINTS` frequencies evenly over their range where they are fewer (a coarser
+    grid can merge the two peaks)."""
+    if omegas is None:
+        return default_omegas(system)
+    omegas = np.asarray(check_grid("omegas", omegas), float)
+    if omegas.size < BAND_POINTS:
+        return np.linspace(omegas.min(), omegas.max(), BAND_POINTS)
+    return omegas
 
 
 class Peak(eqx.Module):
@@ -44,46 +79,165 @@ class Peak(eqx.Module):
     converged: Bool[Array, ""]  # every steady state it rests on was found
 
 
-def _solve(system, quantity, amplitude, omegas, settings, linear):
+class Band(eqx.Module):
+    """The steady states over a frequency grid and the two candidates for the peak."""
+
+    peak: Peak
+    values: Float[Array, " candidates"]  # the candidates' refined peaks, SI
+    omegas: Float[Array, " candidates"]  # the last frequencies solved about them, rad/s
+    states: Float[Array, "candidates s"]  # the orbits there
+    monodromies: Float[Array, "candidates s s"]
+    grid_states: Float[Array, "freqs s"]
+    grid_monodromies: Float[Array, "freqs s s"]
+
+
+def _solve(system, quantity, amplitude, omegas, settings, linear, start, cold=None):
+    """Values, convergence, states and monodromy matrices at `omegas`, from `start`
+    (states, monodromy matrices per frequency; see `solve_orbit`)."""
     if linear:  # no friction: the steady state in closed form
         u = linear_amplitudes(system, omegas)
         value = amplitude * jnp.abs(quantity_amplitude(system, quantity, omegas, u))
-        return value, jnp.isfinite(value)
-    orbits = jax.vmap(lambda w: solve_orbit(system, quantity, amplitude, w, settings))(omegas)
-    return orbits.response_max, orbits.converged
+        return value, jnp.isfinite(value), start[0], start[1]
+    orbits = jax.vmap(lambda w, z, m: solve_orbit(system, quantity, amplitude, w, settings,
+                                                  start=(z, m), cold=cold))(omegas, *start)
+    return orbits.response_max, orbits.converged, orbits.state, orbits.monodromy
+
+
+def _candidates(values, omegas):
+    """Grid indices of the two highest local maxima (a band end counts where it is above
+    its neighbour), in order; the highest twice where there is one."""
+    peaks, at, is_peak = local_peaks(values, omegas)
+    ends = jnp.zeros_like(is_peak).at[0].set(values[0] > values[1]).at[-1].set(
+        values[-1] > values[-2])
+    score = jnp.where(is_peak | ends, peaks, -jnp.inf)
+    order = jnp.argsort(-score)[:_CANDIDATES]
+    # (in order of frequency: each design's candidates are the same peaks)
+    return jnp.sort(jnp.where(jnp.isfinite(score[order]), order, order[0])), peaks, at
+
+
+def no_start(system: BuildingTID, points: int):
+    """A start for `points` orbits that has none: each from its linear equivalent."""
+    s = 2 * (system.floors + 1)
+    return jnp.zeros((points, s)), jnp.full((points, s, s), np.nan, dtype=float)
 
 
 def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omegas,
-                        settings: SolverSettings, linear: bool = False) -> Peak:
+                        settings: SolverSettings, linear: bool = False, start=None) -> Band:
     """The largest steady-state peak of `quantity` over the band of `omegas`: the grid's
-    highest local maxima (or band ends), each refined `_ROUNDS` times by the vertex of the
-    parabola through three frequencies about it, their spacing shrinking each round.
-    `linear`: the system has no friction, and its steady states are found in closed
-    form."""
-    values, ok = _solve(system, quantity, amplitude, omegas, settings, linear)
-    values = jnp.where(ok, values, jnp.inf)
-    peaks, at, _ = local_peaks(values, omegas)
-    order = jnp.argsort(-peaks)[:_CANDIDATES]
-    centres, step = at[order], (omegas[1] - omegas[0]) / _SHRINK
-    all_ok = jnp.all(ok)
-    best = peaks[order]
-    for _ in range(_ROUNDS):
-        points = centres[:, None] + step * jnp.asarray([-1.0, 0.0, 1.0])
-        points = jnp.clip(points, omegas[0], omegas[-1])
-        v, ok = _solve(system, quantity, amplitude, points.reshape(-1), settings, linear)
-        v = v.reshape(points.shape)
-        all_ok &= jnp.all(ok)
+    two highest local maxima (or band ends), each refined `_ROUNDS` times by the vertex
+    of the parabola through three frequencies about it, their spacing shrinking where
+    the middle one is the highest (else a step uphill), every orbit started from the
+    last round's. `linear`: the system has no
+    friction, and its steady states are found in closed form. `start`: states and
+    monodromy matrices on the grid of a nearby design (`no_start`: none).
+
+    The grid is solved in chunks of `_CHUNK` frequencies, the size of a round, all in
+    one loop: one compiled copy of the solver, and no orbit waits for the slowest of
+    the whole grid."""
+    count = omegas.shape[0]
+    chunks = -(-count // _CHUNK)
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], chunks * _CHUNK - count, axis=0)])
+    start = no_start(system, count) if start is None else start
+    cold = ~jnp.all(jnp.isfinite(start[1]))
+    grid_omegas, starts = pad(omegas), jax.tree.map(pad, start)
+    step = (omegas[1] - omegas[0]) / _SHRINK
+    take = lambda x, i: jax.lax.dynamic_slice_in_dim(x, i * _CHUNK, _CHUNK)
+
+    def body(i, state):
+        grid, centres, _, best, z, m, width, all_ok = state
+        on_grid = i < chunks
+        index, peaks, at = _candidates(jnp.where(grid[1], grid[0], jnp.inf)[:count], omegas)
+        first = i == chunks
+        centres = jnp.where(first, at[index], centres)
+        best = jnp.where(first, peaks[index], best)
+        z, m = jnp.where(first, grid[2][index], z), jnp.where(first, grid[3][index], m)
+        around = jnp.clip(centres[:, None] + width[:, None] * jnp.asarray([-1.0, 0.0, 1.0]),
+                          omegas[0], omegas[-1])
+        j = jnp.minimum(i, chunks - 1)
+        points = jnp.where(on_grid, take(grid_omegas, j), around.reshape(-1))
+        near = jax.tree.map(lambda g, r: jnp.where(on_grid, take(g, j), jnp.repeat(r, 3, axis=0)),
+                            starts, (z, m))
+        v, ok, zs, ms = _solve(system, quantity, amplitude, points, settings, linear, near,
+                               on_grid & cold)
+        grid = jax.tree.map(
+            lambda g, new: jnp.where(on_grid, jax.lax.dynamic_update_slice_in_dim(
+                g, new, j * _CHUNK, 0), g), grid, (v, ok, zs, ms))
+        v = v.reshape(around.shape)
         left, mid, right = v[:, 0], v[:, 1], v[:, 2]
         curvature = left - 2 * mid + right
+        # bracketed: the vertex, and the spacing shrinks; else a step uphill
         concave = (curvature < 0) & (mid >= left) & (mid >= right)
         shift = jnp.where(concave, 0.5 * (left - right) / jnp.where(concave, curvature, -1.0),
                           jnp.where(left > right, -1.0, 1.0))
-        best = jnp.where(concave, mid - 0.125 * (right - left) ** 2 / jnp.where(
+        refined = jnp.where(concave, mid - 0.125 * (right - left) ** 2 / jnp.where(
             concave, curvature, -1.0), jnp.max(v, axis=1))
-        centres = jnp.clip(centres + shift * step, omegas[0], omegas[-1])
-        step = step / _SHRINK
+        rounds = (jnp.clip(centres + shift * width, omegas[0], omegas[-1]), around[:, 1],
+                  refined, zs[1::3], ms[1::3], jnp.where(concave, width / _SHRINK, width),
+                  all_ok & jnp.all(ok))
+        return (grid,) + jax.tree.map(lambda a, b: jnp.where(on_grid, a, b), state[1:], rounds)
+
+    s = 2 * (system.floors + 1)
+    dtype = grid_omegas.dtype
+    grid = (jnp.zeros_like(grid_omegas), jnp.zeros(grid_omegas.shape, bool), starts[0],
+            starts[1])
+    pair = jnp.zeros(_CANDIDATES, dtype)
+    state = (grid, pair, pair, pair, jnp.zeros((_CANDIDATES, s), dtype),
+             jnp.zeros((_CANDIDATES, s, s), dtype), jnp.full(_CANDIDATES, step, dtype),
+             jnp.asarray(True))
+    grid, centres, mids, best, z, m, _, ok = jax.lax.fori_loop(0, chunks + _ROUNDS, body,
+                                                               state)
+    ok = ok & jnp.all(grid[1][:count]) & jnp.all(jnp.isfinite(best))
     top = jnp.argmax(best)
-    return Peak(best[top], centres[top], all_ok & jnp.all(jnp.isfinite(best)))
+    return Band(Peak(best[top], centres[top], ok), best, mids, z, m, grid[2][:count],
+                grid[3][:count])
+
+
+def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:
+    k, c = jnp.exp(log_tuning)
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
+
+
+def peak_derivatives(system: BuildingTID, quantity: Quantity, amplitude, omega, state,
+                     settings: SolverSettings, linear: bool, change, count: int):
+    """The derivatives of the steady-state peak of `quantity` at `omega` (SI) along each
+    of `count` coordinates theta, at theta = 0, of `change(theta) -> (system,
+    amplitude)`: those of the peak over frequency too where `omega` is its frequency
+    (the envelope theorem). They are implicit, given the periodic `state` of `system`
+    at `amplitude`: the derivatives of one Newton step from it, with its monodromy
+    matrix held. `linear`: no friction, the steady state in closed form."""
+    if linear:
+        def value(theta):
+            changed, a = change(theta)
+            u = linear_amplitudes(changed, omega[None])
+            return a * jnp.abs(quantity_amplitude(changed, quantity, omega[None], u))[0]
+    else:
+        pl = plant(system, quantity, amplitude, omega)
+        fl = flow(pl, settings.samples) if settings.exact_friction else None
+        basis = jnp.eye(state.shape[0], dtype=state.dtype)
+        monodromy = jax.vmap(lambda t: jax.jvp(lambda z: period_end(z, pl, fl, settings),
+                                               (state,), (t,))[1], out_axes=1)(basis)
+        lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
+
+        def value(theta):
+            changed, a = change(theta)
+            pl = plant(changed, quantity, a, omega)
+            fl = flow(pl, settings.samples) if settings.exact_friction else None
+            newton = state + jax.scipy.linalg.lu_solve(lu, period_end(state, pl, fl, settings)
+                                                       - state)
+            samples = period_samples(newton, pl, fl, settings)[0][:, 0]
+            return peak_of(samples) * projection_units(changed, quantity, a, omega)[0]
+    origin = jnp.zeros(count, dtype=state.dtype)
+    return jax.vmap(lambda t: jax.jvp(value, (origin,), (t,))[1])(
+        jnp.eye(count, dtype=state.dtype))
+
+
+def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, state,
+                  settings: SolverSettings, linear: bool):
+    """The derivatives of the steady-state peak at `omega` with respect to (log k,
+    log c) (`peak_derivatives`)."""
+    log_tuning = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    return peak_derivatives(system, quantity, amplitude, omega, state, settings, linear,
+                            lambda theta: (_tuned(system, log_tuning + theta), amplitude), 2)
 
 
 class BuildingRetune(eqx.Module):
@@ -105,74 +259,168 @@ class BuildingRetune(eqx.Module):
 
 
 @eqx.filter_jit
-def _retune_lanes(system, quantity, amplitudes, omegas, start, settings, rtol, max_steps,
-                  linear):
-    def one(amplitude):
-        def objective(log_tuning, _):
-            k, c = jnp.exp(log_tuning)
-            tuned = eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-            found = peak_over_frequency(tuned, quantity, amplitude, omegas, settings, linear)
-            return jnp.where(found.converged, jnp.log(found.value), jnp.inf)
+def _evaluate(system, quantity, amplitude, omegas, start, settings, linear):
+    """A design's band (`peak_over_frequency`, from `start`), and the two candidate
+    peaks and their derivatives (`peak_gradient`, the frequency of each held)."""
+    band = peak_over_frequency(system, quantity, amplitude, omegas, settings, linear, start)
+    gradients = jax.vmap(lambda w, z: peak_gradient(system, quantity, amplitude, w, z,
+                                                    settings, linear))(band.omegas, band.states)
+    ok = band.peak.converged & jnp.all(jnp.isfinite(gradients))
+    return band, band.values, gradients, ok
 
-        solver = optx.NelderMead(rtol=rtol, atol=rtol)
-        solution = optx.minimise(objective, solver, jnp.log(start), max_steps=max_steps,
-                                 throw=False)
-        k, c = jnp.exp(solution.value)
-        tuned = eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-        found = peak_over_frequency(tuned, quantity, amplitude, omegas, settings, linear)
-        ok = (solution.result == optx.RESULTS.successful) & found.converged
-        return k, c, found.value, found.omega, ok
 
-    return jax.vmap(one)(amplitudes)
+class _Design:
+    """One amplitude's search on the host: every design evaluated once, each from the
+    orbits of the last that was found."""
+
+    def __init__(self, system, quantity, amplitude, omegas, settings, linear, rtol):
+        self.args = (quantity, amplitude, omegas)
+        self.rtol, self.stalled = rtol, 0
+        self.system, self.settings, self.linear = system, settings, linear
+        self.start = no_start(system, omegas.shape[0])
+        self.seen = {}
+        self.best = None  # (max log peak, x, Peak, log peaks, their gradients)
+
+    def __call__(self, x):
+        key = tuple(np.asarray(x[:2], float))
+        if key not in self.seen:
+            tuned = _tuned(self.system, jnp.asarray(key))
+            band, values, gradients, ok = _evaluate(tuned, *self.args, self.start,
+                                                    self.settings, self.linear)
+            ok = bool(ok)
+            if not ok and bool(jnp.all(jnp.isfinite(self.start[1]))):  # again, cold
+                band, values, gradients, ok = _evaluate(
+                    tuned, *self.args, no_start(tuned, self.args[2].shape[0]),
+                    self.settings, self.linear)
+                ok = bool(ok)
+            logs, slopes = np.log(np.asarray(values)), np.asarray(gradients) / np.asarray(
+                values)[:, None]
+            self.seen[key] = (logs, slopes, ok)
+            self.stalled += 1
+            if ok:
+                self.start = (band.grid_states, band.grid_monodromies)
+                if self.best is None or logs.max() < self.best[0]:
+                    if self.best is None or logs.max() < self.best[0] - self.rtol:
+                        self.stalled = 0
+                    self.best = (logs.max(), np.asarray(key), band.peak, logs, slopes)
+            if self.stalled > _STALL:
+                raise _Stalled
+        return self.seen[key]
+
+    def stationary(self) -> bool:
+        """Whether the best design is a minimax point to first order: no change of k and
+        c within a factor exp(`_REACH`) lowers the highest log peak by more than `_GAIN`
+        in the peaks' linear model (a linear program)."""
+        top, _, _, logs, slopes = self.best
+        # min t over (dlog k, dlog c, t) subject to logs + slopes . d <= t
+        model = scipy.optimize.linprog(
+            [0.0, 0.0, 1.0], A_ub=np.column_stack([slopes, -np.ones(len(logs))]),
+            b_ub=-logs, bounds=[(-_REACH, _REACH)] * 2 + [(None, None)])
+        return bool(model.status == 0 and top - model.fun <= _GAIN)
+
+    def constraints(self, v):
+        logs, _, ok = self(v)
+        worst = self.best[0] + _PENALTY if self.best is not None else _PENALTY
+        return v[2] - (logs if ok else np.full(_CANDIDATES, worst))
+
+    def jacobian(self, v):
+        _, slopes, ok = self(v)
+        rows = np.zeros((_CANDIDATES, 3))
+        rows[:, 2] = 1.0
+        if ok:
+            rows[:, :2] = -slopes
+        return rows
+
+
+def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, max_steps,
+                linear):
+    """SLSQP on the epigraph form, min t subject to log peak_i(log k, log c) <= t for
+    the two candidate peaks, from the better of the first mode's tunings and within
+    `_RANGE` of its H-infinity tuning. Returns the tuning, its `Peak`, whether the
+    search converged, and the peaks of the first-mode tunings (`tunings`: name ->
+    (k, c))."""
+    design = _Design(system, quantity, amplitude, omegas, settings, linear, rtol)
+    centre = np.log(np.asarray(tunings["h_infinity"], float))
+    references = {}
+    for name, tuning in tunings.items():
+        logs, _, ok = design(np.log(np.asarray(tuning, float)))
+        references[name] = np.exp(logs.max()) if ok else np.nan
+    if design.best is None:
+        return np.exp(centre), None, False, references
+    x0 = design.best[1]  # the better of the two
+    logs, _, ok = design(x0)
+    bounds = [(x - np.log(r), x + np.log(r)) for x, r in zip(centre, _RANGE)] + [(None, None)]
+    try:
+        solution = scipy.optimize.minimize(
+            lambda v: v[2], np.append(x0, logs.max()), jac=lambda v: np.eye(3)[2],
+            method="SLSQP", bounds=bounds, options={"ftol": rtol, "maxiter": max_steps},
+            constraints=[{"type": "ineq", "fun": design.constraints,
+                          "jac": design.jacobian}])
+        success = solution.success
+    except _Stalled:
+        success = False
+    ok = success or design.stationary()
+    return np.exp(design.best[1]), design.best[2], ok, references
 
 
 @eqx.filter_jit
 def _peaks_at(system, quantity, amplitudes, omegas, settings, linear):
     return jax.vmap(lambda a: peak_over_frequency(system, quantity, a, omegas, settings,
-                                                  linear))(amplitudes)
+                                                  linear).peak)(amplitudes)
 
 
-def _frictionless(system: BuildingTID) -> bool:
+def frictionless(system: BuildingTID) -> bool:
     return bool(np.all(np.asarray(system.friction_force) == 0))
 
 
 def building_peaks(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(),
                    omegas=None, settings: SolverSettings | None = None) -> Peak:
-    """The peak of `quantity` over the band `omegas` (default `default_omegas`) at each
-    amplitude, with the system's own tuning."""
+    """The peak of `quantity` over the band of `omegas` (default `default_omegas`; at
+    least `BAND_POINTS` frequencies over their range) at each amplitude, with the
+    system's own tuning."""
     amplitudes = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(float)
-    omegas = default_omegas(system) if omegas is None else np.asarray(
-        check_grid("omegas", omegas), float)
+    omegas = search_grid(system, omegas)
     quantity.floor_of(system.floors)
     return _peaks_at(system, quantity, jnp.asarray(amplitudes), jnp.asarray(omegas),
-                     building_settings(system, settings), _frictionless(system))
+                     building_settings(system, settings), frictionless(system))
 
 
 def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(), *,
                     omegas=None, settings: SolverSettings | None = None,
-                    rtol: float = 1e-5, max_steps: int = 400) -> BuildingRetune:
-    """The TID's (k, c) that minimise the peak of `quantity` over the band `omegas`
-    (default `default_omegas`) at each of `amplitudes`, by a Nelder-Mead search in
-    (log k, log c) from the first mode's exact H-infinity tuning (`first_mode_tunings`),
-    the whole structure and the friction seen by each steady state; with the peaks of the
-    first-mode Den Hartog and H-infinity tunings for comparison."""
+                    rtol: float = 1e-6, max_steps: int = 100,
+                    progress: Callable[[int, int], None] | None = None) -> BuildingRetune:
+    """The TID's (k, c) that minimise the peak of `quantity` over the band of `omegas`
+    (default `default_omegas`; at least `BAND_POINTS` frequencies over their range) at
+    each of `amplitudes`: the whole structure and the
+    friction seen by each steady state, the two highest peaks over frequency and their
+    exact derivatives (`peak_gradient`) given to SLSQP (scipy) in the epigraph form
+    (`_retune_one`), from the first mode's exact H-infinity tuning
+    (`first_mode_tunings`) and within a factor `_RANGE` of it; `rtol`: the search's
+    tolerance on the log peak. With the peaks of the first-mode Den Hartog and
+    H-infinity tunings for comparison. `progress(done, total)` is called after each
+    amplitude."""
     amplitudes = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(float)
-    omegas = default_omegas(system) if omegas is None else np.asarray(
-        check_grid("omegas", omegas), float)
+    omegas = search_grid(system, omegas)
     quantity.floor_of(system.floors)
     settings = building_settings(system, settings)
     tunings = first_mode_tunings(system)
-    linear = _frictionless(system)
-    a, w = jnp.asarray(amplitudes), jnp.asarray(omegas)
-    reference = {name: _peaks_at(system.replace(tid_stiffness=k, tid_damping=c), quantity,
-                                 a, w, settings, linear) for name, (k, c) in tunings.items()}
-    k, c, value, at, ok = _retune_lanes(system, quantity, a, w,
-                                        jnp.asarray(tunings["h_infinity"]), settings, rtol,
-                                        max_steps, linear)
+    linear = frictionless(system)
+    w = jnp.asarray(omegas)
+    rows = []
+    for i, amplitude in enumerate(amplitudes):
+        rows.append(_retune_one(system, quantity, jnp.asarray(amplitude), w, tunings,
+                                settings, rtol, max_steps, linear))
+        if progress is not None:
+            progress(i + 1, amplitudes.size)
+    tuning = np.asarray([row[0] for row in rows])
+    found = [row[1] for row in rows]
+    ok = np.asarray([row[2] for row in rows])
+    reference = {name: np.asarray([row[3][name] for row in rows]) for name in tunings}
     bare = np.max(np.asarray(uncontrolled_amplitude(system, quantity, w)))
     return BuildingRetune(
-        amplitudes=amplitudes, tid_stiffness=np.asarray(k), tid_damping=np.asarray(c),
-        peak=np.where(ok, np.asarray(value), np.nan), peak_omega=np.asarray(at),
-        uncontrolled=amplitudes * bare, converged=np.asarray(ok),
-        den_hartog_peak=np.asarray(reference["den_hartog"].value),
-        h_infinity_peak=np.asarray(reference["h_infinity"].value))
+        amplitudes=amplitudes, tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
+        peak=np.asarray([np.nan if p is None or not o else float(p.value)
+                         for p, o in zip(found, ok)]),
+        peak_omega=np.asarray([np.nan if p is None else float(p.omega) for p in found]),
+        uncontrolled=amplitudes * bare, converged=ok,
+        den_hartog_peak=reference["den_hartog"], h_infinity_peak=reference["h_infinity"])

@@ -18,6 +18,11 @@ from ._settings import SolverSettings
 from ._steady_state import fixed_point_matrix, moving_part
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
+# bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
+# end, closer than Newton's first step needs
+_BISECTIONS = 24
+CHUNK = 2  # orbits solved together (vectorised) in a batch
+_WARM_CHORDS = 6  # chord steps from a warm start before Newton's from the start again
 
 
 def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
@@ -39,7 +44,7 @@ def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
         return jnp.where(further, middle, low), jnp.where(further, high, middle)
 
     high = jnp.log(jnp.abs(linear_amplitudes(system, omega)[n]))
-    low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
+    low, high = jax.lax.fori_loop(0, _BISECTIONS, bisect, (high - 40.0, high))
     slipping = stroke(0.5 * (low + high))
     held = linear_amplitudes(system, omega, stuck=True)
     stuck = jnp.abs(held[n]) * amplitude < system.friction_force
@@ -48,13 +53,13 @@ def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
     return jnp.concatenate([u.imag, u.real])
 
 
-def _period_end(z, pl, fl, settings: SolverSettings):
+def period_end(z, pl, fl, settings: SolverSettings):
     if settings.exact_friction:
         return period(z, fl, keep_samples=False)[1]
     return smoothed_period(z, pl, settings, keep_samples=False)[1]
 
 
-def _samples(z, pl, fl, settings: SolverSettings):
+def period_samples(z, pl, fl, settings: SolverSettings):
     if settings.exact_friction:
         return period(z, fl)
     return smoothed_period(z, pl, settings)
@@ -75,14 +80,17 @@ def _limited(z, update):
     return jnp.where(ok, z + update * jnp.minimum(1.0, limit / jnp.maximum(size, 1e-300)), z)
 
 
-def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int) -> _Newton:
+def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
+            monodromy=None) -> _Newton:
     """Iterations for z = Phi_T(z) from `z0`: `newton_steps` Newton steps, each with the
     monodromy matrix by forward derivatives of the period map (the stuck stroke's family
     of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
     held, each one period without tangents, until the residual is within `tol` or
-    twice `settings.max_newton_steps` steps in all."""
+    twice `settings.max_newton_steps` steps in all. Given a `monodromy` (of a nearby
+    orbit: a warm start), up to `_WARM_CHORDS` chord steps with it come first, and the
+    Newton steps start again from `z0` only where they did not converge."""
     basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
-    end = lambda z: _period_end(z, pl, fl, settings)
+    end = lambda z: period_end(z, pl, fl, settings)
 
     def newton(state):
         z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (state.z,), (t,)),
@@ -109,9 +117,16 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int) -> _Ne
     start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype),
                     jax.scipy.linalg.lu_factor(eye), jnp.asarray(jnp.inf, z0.dtype),
                     jnp.zeros((), int))
+    if monodromy is not None:
+        warm = _Newton(z0, monodromy, jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy)),
+                       start.residual, start.steps)
+        usable = jnp.all(jnp.isfinite(monodromy))
+        warm = jax.lax.while_loop(until(jnp.where(usable, _WARM_CHORDS, 0)), chord, warm)
+        cold = eqx.tree_at(lambda n: n.steps, start, warm.steps)
+        start = jax.tree.map(lambda a, b: jnp.where(warm.residual <= tol, a, b), warm, cold)
     # (two loops, not a switch in one: in a batch a switch would run both branches)
-    state = jax.lax.while_loop(until(newton_steps), newton, start)
-    return jax.lax.while_loop(until(2 * settings.max_newton_steps), chord, state)
+    state = jax.lax.while_loop(until(start.steps + newton_steps), newton, start)
+    return jax.lax.while_loop(until(2 * settings.max_newton_steps + start.steps), chord, state)
 
 
 class BuildingOrbit(eqx.Module):
@@ -127,9 +142,10 @@ class BuildingOrbit(eqx.Module):
     residual: Float[Array, ""]  # max |Phi_T(z) - z|, scaled
     newton_steps: Int[Array, ""]
     converged: Bool[Array, ""]
+    monodromy: Float[Array, "s s"]  # of the period map, at the last Newton step
 
 
-def _peak(samples):
+def peak_of(samples):
     """The largest |sample| of a periodic sequence, refined by a parabola."""
     values = jnp.abs(samples)
     i = jnp.argmax(values)
@@ -139,30 +155,39 @@ def _peak(samples):
 
 
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
-                settings: SolverSettings, newton_steps: int = 3) -> BuildingOrbit:
+                settings: SolverSettings, newton_steps: int = 3, start=None,
+                cold=None) -> BuildingOrbit:
     """The periodic steady state at one point (traceable; see `building_response`):
-    `newton_steps` Newton steps, then chord steps (`_newton`)."""
+    `newton_steps` Newton steps, then chord steps (`_newton`), from the linear equivalent
+    state or from `start`, the state and monodromy matrix of a nearby orbit (with a
+    scalar `cold`, where it is False; a monodromy matrix that is not finite is not
+    used)."""
     pl = plant(system, quantity, amplitude, omega)
     fl = flow(pl, settings.samples) if settings.exact_friction else None
-    z = initial_state(system, amplitude, omega)
     tol = settings.exact_periodicity_tol if settings.exact_friction else settings.periodicity_tol
-    if settings.transient_periods:
-        z = jax.lax.fori_loop(0, settings.transient_periods,
-                              lambda _, z: _period_end(z, pl, fl, settings), z)
-    newton = _newton(z, pl, fl, settings, tol, newton_steps)
-    values, z_end, transitions, stroke_events = _samples(newton.z, pl, fl, settings)
+    if start is None:
+        z, monodromy = initial_state(system, amplitude, omega), None
+        if settings.transient_periods:
+            z = jax.lax.fori_loop(0, settings.transient_periods,
+                                  lambda _, z: period_end(z, pl, fl, settings), z)
+    else:
+        z, monodromy = start
+        if cold is not None:
+            z = jax.lax.cond(cold, lambda: initial_state(system, amplitude, omega), lambda: z)
+    newton = _newton(z, pl, fl, settings, tol, newton_steps, monodromy)
+    values, z_end, transitions, stroke_events = period_samples(newton.z, pl, fl, settings)
     residual = jnp.max(jnp.abs(z_end - newton.z))
     unit_q, unit_r = projection_units(system, quantity, amplitude, omega)
     floquet = jnp.max(jnp.abs(eigenvalues(moving_part(newton.monodromy))))
     converged = (residual <= 10 * tol) & jnp.all(jnp.isfinite(values))
     return BuildingOrbit(
         state=newton.z,
-        response_max=_peak(values[:, 0]) * unit_q,
+        response_max=peak_of(values[:, 0]) * unit_q,
         # every extremum of a stroke that has events is at one (r' = 0) or on a stuck
         # segment, where the samples hold it
         stroke_max=jnp.where(transitions > 0,
                              jnp.maximum(jnp.max(jnp.abs(values[:, 1])), stroke_events),
-                             _peak(values[:, 1])) * unit_r,
+                             peak_of(values[:, 1])) * unit_r,
         quantity_samples=values[:, 0] * unit_q,
         stroke_samples=values[:, 1] * unit_r,
         transitions=transitions,
@@ -170,15 +195,21 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
         residual=residual,
         newton_steps=newton.steps,
         converged=converged,
+        monodromy=newton.monodromy,
     )
 
 
 @eqx.filter_jit
 def solve_orbits(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
                  settings: SolverSettings) -> BuildingOrbit:
-    """`solve_orbit` at each pair of `amplitudes` and `omegas` (1-d, one length)."""
-    return jax.vmap(lambda a, w: solve_orbit(system, quantity, a, w, settings))(amplitudes,
-                                                                                 omegas)
+    """`solve_orbit` at each pair of `amplitudes` and `omegas` (1-d, one length), in
+    batches of `CHUNK` (padded with the last pair): an orbit waits only for the slowest
+    of its batch."""
+    count = amplitudes.shape[0]
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], -count % CHUNK)])
+    orbits = jax.lax.map(lambda aw: solve_orbit(system, quantity, *aw, settings),
+                         (pad(amplitudes), pad(omegas)), batch_size=CHUNK)
+    return jax.tree.map(lambda x: x[:count], orbits)
 
 
 def building_settings(system: BuildingTID, settings: SolverSettings | None) -> SolverSettings:
@@ -208,8 +239,8 @@ def building_response(system: BuildingTID, omegas, amplitudes,
                       quantity: Quantity = Quantity(),
                       settings: SolverSettings | None = None) -> BuildingResponse:
     """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
-    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, each point solved by shooting from its
-    linear equivalent; a point whose orbit was not found has `converged` False (its
+    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, each point
+    solved by shooting from its linear equivalent; a point whose orbit was not found has `converged` False (its
     values NaN)."""
     amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
     omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))

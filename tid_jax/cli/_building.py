@@ -180,8 +180,11 @@ def run_retune(args, inputs: dict) -> int:
     output = _Output(args)
     output.say(f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies; "
                f"{_describe(system, quantity)}")
-    result = retune_building(system, amplitudes, quantity, omegas=omegas,
-                             settings=SolverSettings(**inputs[SOLVER_TABLE]))
+    with output.steps(amplitudes.size) as step:
+        result = retune_building(
+            system, amplitudes, quantity, omegas=omegas,
+            settings=SolverSettings(**inputs[SOLVER_TABLE]),
+            progress=lambda done, total: step(f"amplitude {done}/{total} retuned"))
     records = [{"amplitude": float(a), "k_N_per_m": float(result.tid_stiffness[i]),
                 "c_N_s_per_m": float(result.tid_damping[i]),
                 "peak": float(result.peak[i]),
