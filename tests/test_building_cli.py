@@ -88,9 +88,47 @@ def test_bad_building_configs_get_one_line_naming_the_key(tmp_path, change, mess
 
 
 def test_commands_for_the_single_storey_host_refuse_a_structure(tmp_path):
-    status, _, stderr = run(["sensitivity", "--config", _config(tmp_path), "--out",
+    status, _, stderr = run(["robust", "--config", _config(tmp_path), "--out",
                              tmp_path / "out"])
     assert status == 2 and "[structure]" in stderr and len(stderr.strip().splitlines()) == 1
+
+
+def test_sensitivity_of_a_building_names_every_floor_and_storey(tmp_path):
+    import jax.numpy as jnp
+
+    import tid_jax as tj
+
+    out = tmp_path / "out"
+    text = CONFIG.replace('amplitudes = ["0.1g", 2.0]', "amplitudes = [2.0]").replace(
+        "n_frequencies = 7", "n_frequencies = 31")
+    status, stdout, stderr = run(["sensitivity", "--config", _config(tmp_path, text),
+                                  "--out", out, "--json", "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    records = {r["parameter"]: r for r in data["results"]}
+    names = {"tid_stiffness", "tid_damping", "inertance", "friction_force", "amplitude"}
+    names |= {f"floor_mass_{i}" for i in (1, 2, 3)}
+    names |= {f"storey_stiffness_{i}" for i in (1, 2, 3)}
+    assert names <= set(records) and all(r["converged"] for r in records.values())
+    assert records["storey_stiffness_2"]["value"] == pytest.approx(1.25e6)
+    assert records["floor_mass_3"]["unit"] == "kg" and records["amplitude"]["unit"] == "m/s2"
+    # the library's elasticities, at the tuning the command reports
+    system = tj.BuildingTID(
+        tj.Structure.shear_building([2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6],
+                                    damping_ratio=0.02),
+        275.0, 135.0, data["tid_stiffness_N_per_m"], data["tid_damping_N_s_per_m"],
+        load="ground")
+    mine = tj.building_sensitivities(system, [2.0], tj.Quantity("drift", 1))
+    for j, name in enumerate(mine.names):
+        assert records[name]["elasticity"] == pytest.approx(
+            float(jnp.asarray(mine.elasticities)[0, j]), rel=1e-6, abs=1e-9)
+        record = records[name]
+        if record["value"]:
+            assert record["derivative_per_unit"] == pytest.approx(
+                record["elasticity"] * record["peak"] / record["value"])
+    for name in ("sensitivity.csv", "sensitivity.json", "sensitivity.png",
+                 "sensitivity_config.toml"):
+        assert (out / name).exists()
 
 
 def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):

@@ -535,3 +535,27 @@ def plot_building_retune(amplitudes, peaks: dict, *, ylabel, title=None):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return fig
+
+
+def plot_building_elasticities(amplitudes, names, elasticities, *, xlabel, title=None):
+    """Elasticities (amplitudes x parameters) of a building's peak: against amplitude,
+    one line per parameter, for several amplitudes; bars for one."""
+    elasticities = np.asarray(elasticities)
+    fig, ax = plt.subplots(figsize=(8.5, max(4.6, 0.22 * len(names))), layout="constrained")
+    if len(amplitudes) > 1:
+        colours = plt.get_cmap("tab20")
+        for j, name in enumerate(names):
+            ax.plot(amplitudes, elasticities[:, j], marker="o", markersize=3, linewidth=1.0,
+                    color=colours(j % 20), label=name)
+        ax.set(xlabel=xlabel, ylabel="d ln peak / d ln p")
+        ax.legend(fontsize=7, ncol=2)
+        ax.axhline(0.0, color="0.5", linewidth=0.6)
+    else:
+        ax.barh(np.arange(len(names)), elasticities[0])
+        ax.set_yticks(np.arange(len(names)), names, fontsize=7)
+        ax.invert_yaxis()
+        ax.set(xlabel="d ln peak / d ln p")
+        ax.axvline(0.0, color="0.5", linewidth=0.6)
+    ax.set_title(title or "elasticities of the peak")
+    ax.grid(alpha=0.3)
+    return fig

@@ -1,5 +1,5 @@
-"""`tid-jax frf` and `tid-jax retune` on a multi-storey structure: a config with a
-[structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
+"""`tid-jax frf`, `retune` and `sensitivity` on a multi-storey structure: a config with
+a [structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
 and their tables, CSV, JSON and PNG files."""
 
 import math
@@ -10,6 +10,7 @@ from .. import plot
 from .._building import BuildingTID, Quantity, first_mode_tunings
 from .._building_design import BUILDING_BAND, retune_building
 from .._building_orbit import building_response
+from .._building_sensitivity import building_sensitivities, storey_stiffnesses
 from .._io import write_json, write_toml
 from .._settings import SolverSettings
 from .._structure import Structure
@@ -217,3 +218,71 @@ def run_retune(args, inputs: dict) -> int:
                shown("converged", "converged", "")]
     title = f"Retuned per amplitude: {_describe(system, quantity)}"
     return output.finish(data, title + "\n" + table(columns, records))
+
+
+def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
+    """Each parameter of `building_sensitivities`: its value and unit."""
+    s = system.structure
+    values = {"tid_stiffness": (float(system.tid_stiffness), "N/m"),
+              "tid_damping": (float(system.tid_damping), "N s/m"),
+              "inertance": (float(system.inertance), "kg"),
+              "friction_force": (float(system.friction_force), "N"),
+              "parasitic_damping": (float(system.parasitic_damping), "N s/m"),
+              "terminal_mass": (float(system.terminal_mass), "kg"),
+              "amplitude": (None, amplitude_unit)}
+    for i, mass in enumerate(np.diagonal(np.asarray(s.mass_matrix))):
+        values[f"floor_mass_{i + 1}"] = (float(mass), "kg")
+    for i, spring in enumerate(np.asarray(storey_stiffnesses(s.stiffness_matrix))):
+        values[f"storey_stiffness_{i + 1}"] = (float(spring), "N/m")
+    return values
+
+
+def run_sensitivity(args, inputs: dict) -> int:
+    system, quantity, amplitudes = building_inputs(inputs)
+    frequencies_hz, omegas = _band(inputs, system)
+    output = _Output(args)
+    output.say(f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} "
+               f"frequencies, at the given tuning; {_describe(system, quantity)}")
+    unit = "m/s2" if system.load == "ground" else "N"
+    parameters = _parameters(system, unit)
+    with output.steps(amplitudes.size) as step:
+        results = []
+        for i, amplitude in enumerate(amplitudes):
+            results.append(building_sensitivities(
+                system, [amplitude], quantity, omegas=omegas,
+                settings=SolverSettings(**inputs[SOLVER_TABLE])))
+            step(f"amplitude {i + 1}/{amplitudes.size}")
+    records = []
+    for amplitude, result in zip(amplitudes, results, strict=True):
+        peak = float(result.peak[0])
+        for j, name in enumerate(result.names):
+            value, parameter_unit = parameters[name]
+            value = float(amplitude) if value is None else value
+            elasticity = float(result.elasticities[0, j])
+            records.append({
+                "amplitude": float(amplitude), "parameter": name, "value": value,
+                "unit": parameter_unit, "peak": peak,
+                "peak_frequency_hz": float(result.peak_omega[0]) / (2 * math.pi),
+                "elasticity": elasticity,
+                "derivative_per_unit": elasticity * peak / value if value else 0.0,
+                "converged": bool(result.converged[0])})
+    save_records(output, "sensitivity.csv", list(records[0]), records)
+    _config(inputs, output, "sensitivity")
+    elasticities = np.asarray([result.elasticities[0] for result in results])
+    plot.save_figure(plot.plot_building_elasticities(
+        amplitudes, results[0].names, elasticities, xlabel=f"amplitude ({unit})",
+        title=f"elasticities of the peak {quantity.describe(system.floors)}"),
+        output.path("sensitivity.png"))
+    data = _document("sensitivity", inputs, system, quantity, frequencies_hz, output,
+                     tid_stiffness_N_per_m=float(system.tid_stiffness),
+                     tid_damping_N_s_per_m=float(system.tid_damping), results=records)
+    write_json(output.path("sensitivity.json"), data)
+    columns = [shown(f"A ({unit})", "amplitude", "g"), shown("parameter", "parameter", "s"),
+               shown("value", "value", ".5g"), shown("unit", "unit", "s"),
+               shown(f"peak ({quantity.unit})", "peak", ".4g"),
+               shown("elasticity", "elasticity", ".4f"), shown("converged", "converged", "")]
+    ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"])))
+    title = (f"Elasticities of the peak (d ln peak / d ln p; damping matrix held), at "
+             f"k = {float(system.tid_stiffness):.5g} N/m, c = "
+             f"{float(system.tid_damping):.5g} N s/m: {_describe(system, quantity)}")
+    return output.finish(data, title + "\n" + table(columns, ranked))

@@ -8,8 +8,9 @@ from .._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._sensitivity import amplitude_sensitivities, elasticity_series
+from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
-from ._common import _config_comment, _config_data, _describe, _start
+from ._common import _config_comment, _config_data, _describe, _inputs, _start
 from ._tables import Shown, save_records, shown, table
 
 SENSITIVITY_COLUMNS = (
@@ -66,7 +67,9 @@ def _add_sensitivity_parser(subparsers) -> None:
         "at the tuning retuned for that amplitude (envelope theorem and implicit "
         "differentiation). Prints a table ranked by the host elasticity and saves "
         "sensitivity.csv, sensitivity.json, sensitivity_config.toml and, for several "
-        "amplitudes, sensitivity.png to --out.",
+        "amplitudes, sensitivity.png to --out. With a [structure]: the elasticities of the "
+        "peak of the [response] quantity at the given tuning, in the TID's parameters, the "
+        "amplitude, every floor's mass and every storey's stiffness.",
     )
     _add_system_arguments(parser)
     parser.add_argument(
@@ -78,6 +81,9 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 
 def _run_sensitivity(args) -> int:
+    inputs = _inputs(args)
+    if "structure" in inputs:
+        return _building.run_sensitivity(args, inputs)
     start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     optimum = not args.no_optimum
