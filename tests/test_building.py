@@ -309,3 +309,30 @@ def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction
         assert result.elasticities[0, result.names.index("amplitude")] < 0.999
     else:
         assert result.elasticities[0, result.names.index("amplitude")] == pytest.approx(1.0)
+
+
+def test_robust_tuning_beats_each_amplitudes_own_in_the_worst_case(building):
+    system = tj.BuildingTID(building, B, 0.05 * B * 9.81, 4e4, 500.0, load="ground")
+    amplitudes = [0.5, 2.0]
+    robust = tj.robust_building(system, amplitudes, stiffness_scales=[0.95, 1.05])
+    assert bool(robust.converged) and robust.ratio.shape == (2, 2)
+    assert np.all(robust.ratio >= 1 - 1e-6)
+    # each scenario's own tuning, in every scenario: its worst ratio is no better
+    own = tj.retune_building(system.replace(structure=tj.Structure(
+        *_scaled_matrices(building, 0.95))), amplitudes)
+    for k, c in zip(own.tid_stiffness, own.tid_damping, strict=True):
+        worst = 0.0
+        for j, scale in enumerate((0.95, 1.05)):
+            tuned = system.replace(structure=tj.Structure(*_scaled_matrices(building, scale)),
+                                   tid_stiffness=k, tid_damping=c)
+            peaks = np.asarray(tj.building_peaks(tuned, amplitudes).value)
+            worst = max(worst, float(np.max(peaks / robust.best[:, j])))
+        assert float(robust.worst_ratio) <= worst * (1 + 1e-6)
+    # one scenario: the robust tuning is its retune
+    single = tj.robust_building(system, [2.0])
+    assert float(single.worst_ratio) == pytest.approx(1.0, abs=1e-5)
+
+
+def _scaled_matrices(structure, scale):
+    M, K, C = _matrices(structure)
+    return M, scale * K, C

@@ -88,7 +88,7 @@ def test_bad_building_configs_get_one_line_naming_the_key(tmp_path, change, mess
 
 
 def test_commands_for_the_single_storey_host_refuse_a_structure(tmp_path):
-    status, _, stderr = run(["robust", "--config", _config(tmp_path), "--out",
+    status, _, stderr = run(["rtds", "--config", _config(tmp_path), "--out",
                              tmp_path / "out"])
     assert status == 2 and "[structure]" in stderr and len(stderr.strip().splitlines()) == 1
 
@@ -147,3 +147,22 @@ def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):
     assert results[1]["peak"] / results[0]["peak"] == pytest.approx(2.0 / 0.980665, rel=1e-6)
     for name in ("retune.csv", "retune.json", "retune.png", "retune_config.toml"):
         assert (out / name).stat().st_size > 0
+
+
+def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp_path):
+    out = tmp_path / "out"
+    text = CONFIG.replace('amplitudes = ["0.1g", 2.0]', "amplitudes = [2.0]")
+    status, stdout, stderr = run(["robust", "--config", _config(tmp_path, text), "--out", out,
+                                  "--host-frequency-tolerance", "0.05", "--json", "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    robust, records = data["robust"], data["results"]
+    assert robust["converged"] and not robust["stroke_limited"]
+    assert [r["structure_frequency_scale"] for r in records] == pytest.approx([0.95, 1.0, 1.05])
+    ratios = [r["robust_ratio"] for r in records]
+    assert min(ratios) >= 1 - 1e-6 and robust["worst_ratio"] == pytest.approx(max(ratios))
+    assert robust["worst_ratio"] <= robust["given_worst_ratio"] * (1 + 1e-6)
+    for r in records:
+        assert r["robust_peak"] == pytest.approx(r["robust_ratio"] * r["best_peak"])
+    for name in ("robust.csv", "robust.json", "robust.png", "robust_config.toml"):
+        assert (out / name).exists()

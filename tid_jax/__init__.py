@@ -17,6 +17,7 @@ _API = {
     "_building_design": ("BUILDING_BAND", "BuildingRetune", "building_peaks",
                          "retune_building"),
     "_building_orbit": ("BuildingResponse", "building_response"),
+    "_building_robust": ("BuildingRobust", "robust_building"),
     "_building_sensitivity": ("BuildingSensitivities", "building_sensitivities"),
     "_cache": ("enable_compilation_cache",),
     "_cache_folder": ("default_cache_dir",),

@@ -269,19 +269,19 @@ def _evaluate(system, quantity, amplitude, omegas, start, settings, linear):
     return band, band.values, gradients, ok
 
 
-class _Design:
-    """One amplitude's search on the host: every design evaluated once, each from the
-    orbits of the last that was found."""
+class BandSearch:
+    """One scenario (a system and an amplitude) on the host: every design (log k, log c)
+    evaluated once, each from the orbits of the last that was found."""
 
-    def __init__(self, system, quantity, amplitude, omegas, settings, linear, rtol):
-        self.args = (quantity, amplitude, omegas)
-        self.rtol, self.stalled = rtol, 0
+    def __init__(self, system, quantity, amplitude, omegas, settings, linear):
+        self.args = (quantity, jnp.asarray(amplitude), jnp.asarray(omegas))
         self.system, self.settings, self.linear = system, settings, linear
         self.start = no_start(system, omegas.shape[0])
         self.seen = {}
-        self.best = None  # (max log peak, x, Peak, log peaks, their gradients)
 
     def __call__(self, x):
+        """The log peaks of the two candidates, their gradients, whether they were found
+        and the `Peak` of design `x`."""
         key = tuple(np.asarray(x[:2], float))
         if key not in self.seen:
             tuned = _tuned(self.system, jnp.asarray(key))
@@ -293,25 +293,47 @@ class _Design:
                     tuned, *self.args, no_start(tuned, self.args[2].shape[0]),
                     self.settings, self.linear)
                 ok = bool(ok)
-            logs, slopes = np.log(np.asarray(values)), np.asarray(gradients) / np.asarray(
-                values)[:, None]
-            self.seen[key] = (logs, slopes, ok)
-            self.stalled += 1
             if ok:
                 self.start = (band.grid_states, band.grid_monodromies)
-                if self.best is None or logs.max() < self.best[0]:
-                    if self.best is None or logs.max() < self.best[0] - self.rtol:
-                        self.stalled = 0
-                    self.best = (logs.max(), np.asarray(key), band.peak, logs, slopes)
+            values = np.asarray(values)
+            self.seen[key] = (np.log(values), np.asarray(gradients) / values[:, None], ok,
+                              band.peak)
+        return self.seen[key]
+
+
+class _Minimax:
+    """The highest of the scenarios' log peaks less their `offsets`, as SLSQP's
+    constraints, with the best design so far; a search that gains less than `rtol` in
+    `_STALL` evaluations is stopped (`_Stalled`)."""
+
+    def __init__(self, searches, offsets, rtol):
+        self.searches, self.offsets, self.rtol = searches, np.asarray(offsets, float), rtol
+        self.stalled, self.seen = 0, set()
+        self.best = None  # (worst, x, log peaks less offsets, gradients)
+
+    def __call__(self, x):
+        found = [search(x) for search in self.searches]
+        ok = all(f[2] for f in found)
+        logs = np.concatenate([f[0] - offset for f, offset in zip(found, self.offsets,
+                                                                   strict=True)])
+        slopes = np.concatenate([f[1] for f in found])
+        key = tuple(np.asarray(x[:2], float))
+        if key not in self.seen:
+            self.seen.add(key)
+            self.stalled += 1
+            if ok and (self.best is None or logs.max() < self.best[0]):
+                if self.best is None or logs.max() < self.best[0] - self.rtol:
+                    self.stalled = 0
+                self.best = (logs.max(), np.asarray(key), logs, slopes)
             if self.stalled > _STALL:
                 raise _Stalled
-        return self.seen[key]
+        return logs, slopes, ok
 
     def stationary(self) -> bool:
         """Whether the best design is a minimax point to first order: no change of k and
         c within a factor exp(`_REACH`) lowers the highest log peak by more than `_GAIN`
         in the peaks' linear model (a linear program)."""
-        top, _, _, logs, slopes = self.best
+        top, _, logs, slopes = self.best
         # min t over (dlog k, dlog c, t) subject to logs + slopes . d <= t
         model = scipy.optimize.linprog(
             [0.0, 0.0, 1.0], A_ub=np.column_stack([slopes, -np.ones(len(logs))]),
@@ -321,46 +343,64 @@ class _Design:
     def constraints(self, v):
         logs, _, ok = self(v)
         worst = self.best[0] + _PENALTY if self.best is not None else _PENALTY
-        return v[2] - (logs if ok else np.full(_CANDIDATES, worst))
+        return v[2] - (logs if ok else np.full(logs.shape, worst))
 
     def jacobian(self, v):
-        _, slopes, ok = self(v)
-        rows = np.zeros((_CANDIDATES, 3))
+        logs, slopes, ok = self(v)
+        rows = np.zeros((logs.size, 3))
         rows[:, 2] = 1.0
         if ok:
             rows[:, :2] = -slopes
         return rows
 
 
-def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, max_steps,
-                linear):
-    """SLSQP on the epigraph form, min t subject to log peak_i(log k, log c) <= t for
-    the two candidate peaks, from the better of the first mode's tunings and within
-    `_RANGE` of its H-infinity tuning. Returns the tuning, its `Peak`, whether the
-    search converged, and the peaks of the first-mode tunings (`tunings`: name ->
-    (k, c))."""
-    design = _Design(system, quantity, amplitude, omegas, settings, linear, rtol)
-    centre = np.log(np.asarray(tunings["h_infinity"], float))
-    references = {}
-    for name, tuning in tunings.items():
-        logs, _, ok = design(np.log(np.asarray(tuning, float)))
-        references[name] = np.exp(logs.max()) if ok else np.nan
-    if design.best is None:
-        return np.exp(centre), None, False, references
-    x0 = design.best[1]  # the better of the two
-    logs, _, ok = design(x0)
-    bounds = [(x - np.log(r), x + np.log(r)) for x, r in zip(centre, _RANGE)] + [(None, None)]
+def minimax(searches, offsets, x0, centre, rtol: float, max_steps: int):
+    """The design (log k, log c) that minimises the highest over the `searches`
+    (`BandSearch`) of their log peaks less `offsets`: SLSQP (scipy) on the epigraph form,
+    min t subject to every log peak less its offset <= t, from `x0` and within `_RANGE`
+    of `centre`. Returns the best design, its worst value and whether the search
+    converged (SLSQP's test, or a stall at a first-order minimax point); None where the
+    start was not found."""
+    problem = _Minimax(searches, offsets, rtol)
+    logs, _, ok = problem(x0)
+    if not ok:
+        return None
+    bounds = [(x - np.log(r), x + np.log(r)) for x, r in zip(centre, _RANGE, strict=True)]
     try:
         solution = scipy.optimize.minimize(
             lambda v: v[2], np.append(x0, logs.max()), jac=lambda v: np.eye(3)[2],
-            method="SLSQP", bounds=bounds, options={"ftol": rtol, "maxiter": max_steps},
-            constraints=[{"type": "ineq", "fun": design.constraints,
-                          "jac": design.jacobian}])
+            method="SLSQP", bounds=bounds + [(None, None)],
+            options={"ftol": rtol, "maxiter": max_steps},
+            constraints=[{"type": "ineq", "fun": problem.constraints,
+                          "jac": problem.jacobian}])
         success = solution.success
     except _Stalled:
         success = False
-    ok = success or design.stationary()
-    return np.exp(design.best[1]), design.best[2], ok, references
+    return problem.best[1], problem.best[0], success or problem.stationary()
+
+
+def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, max_steps,
+                linear):
+    """The retune at one amplitude (`minimax` of one scenario), from the better of the
+    first mode's tunings and within `_RANGE` of its H-infinity tuning. Returns the
+    tuning, its `Peak`, whether the search converged, and the peaks of the first-mode
+    tunings (`tunings`: name -> (k, c))."""
+    search = BandSearch(system, quantity, amplitude, omegas, settings, linear)
+    references, starts = {}, {}
+    for name, tuning in tunings.items():
+        logs, _, ok, _ = search(np.log(np.asarray(tuning, float)))
+        references[name] = np.exp(logs.max()) if ok else np.nan
+        starts[name] = logs.max() if ok else np.inf
+    centre = np.log(np.asarray(tunings["h_infinity"], float))
+    first = min(starts, key=starts.get)
+    found = None
+    if np.isfinite(starts[first]):
+        found = minimax([search], [0.0], np.log(np.asarray(tunings[first], float)), centre,
+                        rtol, max_steps)
+    if found is None:
+        return np.exp(centre), None, False, references
+    x, _, ok = found
+    return np.exp(x), search(x)[3], ok, references
 
 
 @eqx.filter_jit

@@ -1,5 +1,5 @@
-"""`tid-jax frf`, `retune` and `sensitivity` on a multi-storey structure: a config with
-a [structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
+"""`tid-jax frf`, `retune`, `sensitivity` and `robust` on a multi-storey structure: a
+config with a [structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
 and their tables, CSV, JSON and PNG files."""
 
 import math
@@ -8,8 +8,9 @@ import numpy as np
 
 from .. import plot
 from .._building import BuildingTID, Quantity, first_mode_tunings
-from .._building_design import BUILDING_BAND, retune_building
+from .._building_design import BUILDING_BAND, building_peaks, retune_building
 from .._building_orbit import building_response
+from .._building_robust import robust_building, scaled_structure
 from .._building_sensitivity import building_sensitivities, storey_stiffnesses
 from .._io import write_json, write_toml
 from .._settings import SolverSettings
@@ -286,3 +287,58 @@ def run_sensitivity(args, inputs: dict) -> int:
              f"k = {float(system.tid_stiffness):.5g} N/m, c = "
              f"{float(system.tid_damping):.5g} N s/m: {_describe(system, quantity)}")
     return output.finish(data, title + "\n" + table(columns, ranked))
+
+
+def run_robust(args, inputs: dict, tolerance: float) -> int:
+    """One tuning for every amplitude and, with `tolerance` f, the structure's natural
+    frequencies (1 +- f) times the nominal (its stiffness (1 +- f)^2 times)."""
+    system, quantity, amplitudes = building_inputs(inputs)
+    frequencies_hz, omegas = _band(inputs, system)
+    output = _Output(args)
+    scales = [1.0] if tolerance == 0 else [(1 - tolerance) ** 2, 1.0, (1 + tolerance) ** 2]
+    output.say(f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} "
+               f"structure frequencies; {_describe(system, quantity)}; the stroke is not "
+               f"limited for a [structure]")
+    band = omegas if "band_hz" in inputs else None
+    settings = SolverSettings(**inputs[SOLVER_TABLE])
+    with output.steps(len(scales) + 2) as step:
+        result = robust_building(system, amplitudes, quantity, stiffness_scales=scales,
+                                 omegas=band, settings=settings, progress=step)
+    given = np.stack([np.asarray(building_peaks(
+        system.replace(structure=scaled_structure(system.structure, scale)), amplitudes,
+        quantity, omegas=band, settings=settings).value) for scale in scales], axis=1)
+    given_ratio = given / np.asarray(result.best)
+    records = [{"structure_frequency_scale": math.sqrt(scale), "amplitude": float(a),
+                "best_peak": float(result.best[i, j]), "robust_peak": float(result.peak[i, j]),
+                "robust_ratio": float(result.ratio[i, j]), "given_peak": float(given[i, j]),
+                "given_ratio": float(given_ratio[i, j])}
+               for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
+    save_records(output, "robust.csv", list(records[0]), records)
+    _config(inputs, output, "robust")
+    nominal = scales.index(1.0)
+    plot.save_figure(plot.plot_building_retune(
+        amplitudes, {"robust": np.asarray(result.ratio)[:, nominal],
+                     "given": given_ratio[:, nominal]},
+        ylabel="peak / best of a tuning of its own"), output.path("robust.png"))
+    summary = {"k_N_per_m": float(result.tid_stiffness),
+               "c_N_s_per_m": float(result.tid_damping),
+               "worst_ratio": float(result.worst_ratio), "converged": bool(result.converged),
+               "given_k_N_per_m": float(system.tid_stiffness),
+               "given_c_N_s_per_m": float(system.tid_damping),
+               "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False}
+    data = _document("robust", inputs, system, quantity, frequencies_hz, output,
+                     structure_frequency_scales=[math.sqrt(s) for s in scales],
+                     robust=summary, results=records)
+    write_json(output.path("robust.json"), data)
+    unit = data["amplitude_unit"]
+    columns = [shown("f scale", "structure_frequency_scale", ".3g"),
+               shown(f"A ({unit})", "amplitude", "g"),
+               shown(f"best ({quantity.unit})", "best_peak", ".4g"),
+               shown("robust / best", "robust_ratio", ".4f"),
+               shown("given / best", "given_ratio", ".4f")]
+    title = (f"Robust tuning k = {summary['k_N_per_m']:.5g} N/m, c = "
+             f"{summary['c_N_s_per_m']:.5g} N s/m: worst {summary['worst_ratio']:.4f} of "
+             f"the best (given tuning: {summary['given_worst_ratio']:.4f})"
+             f"{'' if summary['converged'] else ' (search not converged)'}; "
+             f"{_describe(system, quantity)}")
+    return output.finish(data, title + "\n" + table(columns, records))

@@ -281,7 +281,7 @@ def _single_storey(inputs: dict, command: str) -> None:
     [structure]."""
     if "structure" in inputs:
         raise CLIError(f"{PROG} {command} takes a single-storey host; a [structure] is "
-                       f"taken by {PROG} frf, retune and sensitivity")
+                       f"taken by {PROG} frf, retune, sensitivity and robust")
 
 
 def _start(args) -> _Start:

@@ -10,7 +10,16 @@ from .._response import _on_host
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance
 from ._arguments import _add_output_arguments, _add_system_arguments
-from ._common import CLIError, _config_comment, _config_data, _den_hartog, _describe, _start
+from . import _building
+from ._common import (
+    CLIError,
+    _config_comment,
+    _config_data,
+    _den_hartog,
+    _describe,
+    _inputs,
+    _start,
+)
 from ._tables import save_records, shown, table
 
 ROBUST_COLUMNS = (
@@ -36,7 +45,9 @@ def _add_robust_parser(subparsers) -> None:
         "the best achievable at that amplitude, with the inerter stroke within the "
         "stroke limit; compared with the given (default: Den Hartog) tuning. Prints a "
         "table and saves robust.csv, robust.json, robust_config.toml and robust.png "
-        "to --out.",
+        "to --out. With a [structure]: over the amplitudes and (with "
+        "--host-frequency-tolerance) the structure's natural frequencies, for the "
+        "[response] quantity, the stroke not limited.",
     )
     _add_system_arguments(parser)
     parser.add_argument(
@@ -60,6 +71,9 @@ def _run_robust(args) -> int:
     tolerance = args.host_frequency_tolerance
     if not (math.isfinite(tolerance) and 0 <= tolerance < 1):
         raise CLIError(f"host_frequency_tolerance must be a fraction in [0, 1), got {tolerance!r}")
+    inputs = _inputs(args)
+    if "structure" in inputs:
+        return _building.run_robust(args, inputs, tolerance)
     start = _start(args)
     inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     scales = (1 - tolerance, 1.0, 1 + tolerance) if tolerance > 0 else (1.0,)
