@@ -129,7 +129,8 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
     the middle one is the highest (else a step uphill), every orbit started from the
     last round's. `linear`: the system has no
     friction, and its steady states are found in closed form. `start`: states and
-    monodromy matrices on the grid of a nearby design (`no_start`: none).
+    monodromy matrices on the grid of a nearby design (`no_start`: none, and every orbit,
+    the rounds' too, starts from its linear equivalent).
 
     The grid is solved in chunks of `_CHUNK` frequencies, the size of a round, all in
     one loop: one compiled copy of the solver, and no orbit waits for the slowest of
@@ -158,7 +159,7 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
         near = jax.tree.map(lambda g, r: jnp.where(on_grid, take(g, j), jnp.repeat(r, 3, axis=0)),
                             starts, (z, m))
         v, ok, zs, ms = _solve(system, quantity, amplitude, points, settings, linear, near,
-                               on_grid & cold)
+                               cold)
         grid = jax.tree.map(
             lambda g, new: jnp.where(on_grid, jax.lax.dynamic_update_slice_in_dim(
                 g, new, j * _CHUNK, 0), g), grid, (v, ok, zs, ms))
