@@ -129,12 +129,21 @@ def _config(inputs, output, command):
     write_toml(output.path(f"{command}_config.toml"), data, comment=_config_comment(command))
 
 
-def run_frf(args, inputs: dict) -> int:
+def _begin(args, inputs: dict, doing: str):
+    """A command's system, quantity, amplitudes, band (Hz, rad/s) and output folder, and
+    its first message: `doing` (with {amplitudes} and {frequencies}) and the system."""
     system, quantity, amplitudes = building_inputs(inputs)
     frequencies_hz, omegas = _band(inputs, system)
     output = _Output(args)
-    output.say(f"frequency response at {amplitudes.size} amplitude(s) x {omegas.size} "
-               f"frequencies; {_describe(system, quantity)}")
+    output.say(doing.format(amplitudes=amplitudes.size, frequencies=omegas.size)
+               + f"; {_describe(system, quantity)}")
+    return system, quantity, amplitudes, frequencies_hz, omegas, output
+
+
+def run_frf(args, inputs: dict) -> int:
+    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+        args, inputs, "frequency response at {amplitudes} amplitude(s) x {frequencies} "
+        "frequencies")
     response = building_response(system, omegas, amplitudes, quantity,
                                  SolverSettings(**inputs[SOLVER_TABLE]))
     bare_peak = np.max(response.uncontrolled, axis=1)
@@ -177,11 +186,8 @@ def run_frf(args, inputs: dict) -> int:
 
 
 def run_retune(args, inputs: dict) -> int:
-    system, quantity, amplitudes = building_inputs(inputs)
-    frequencies_hz, omegas = _band(inputs, system)
-    output = _Output(args)
-    output.say(f"retuning {amplitudes.size} amplitude(s) over {omegas.size} frequencies; "
-               f"{_describe(system, quantity)}")
+    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+        args, inputs, "retuning {amplitudes} amplitude(s) over {frequencies} frequencies")
     with output.steps(amplitudes.size) as step:
         result = retune_building(
             system, amplitudes, quantity, omegas=omegas,
@@ -239,11 +245,9 @@ def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
 
 
 def run_sensitivity(args, inputs: dict) -> int:
-    system, quantity, amplitudes = building_inputs(inputs)
-    frequencies_hz, omegas = _band(inputs, system)
-    output = _Output(args)
-    output.say(f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} "
-               f"frequencies, at the given tuning; {_describe(system, quantity)}")
+    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+        args, inputs, "sensitivities at {amplitudes} amplitude(s) over {frequencies} "
+        "frequencies, at the given tuning")
     unit = "m/s2" if system.load == "ground" else "N"
     parameters = _parameters(system, unit)
     with output.steps(amplitudes.size) as step:
@@ -292,13 +296,10 @@ def run_sensitivity(args, inputs: dict) -> int:
 def run_robust(args, inputs: dict, tolerance: float) -> int:
     """One tuning for every amplitude and, with `tolerance` f, the structure's natural
     frequencies (1 +- f) times the nominal (its stiffness (1 +- f)^2 times)."""
-    system, quantity, amplitudes = building_inputs(inputs)
-    frequencies_hz, omegas = _band(inputs, system)
-    output = _Output(args)
     scales = [1.0] if tolerance == 0 else [(1 - tolerance) ** 2, 1.0, (1 + tolerance) ** 2]
-    output.say(f"robust tuning over {amplitudes.size} amplitude(s) x {len(scales)} "
-               f"structure frequencies; {_describe(system, quantity)}; the stroke is not "
-               f"limited for a [structure]")
+    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+        args, inputs, "robust tuning over {amplitudes} amplitude(s) x "
+        f"{len(scales)} structure frequencies, the stroke not limited for a [structure]")
     band = omegas if "band_hz" in inputs else None
     settings = SolverSettings(**inputs[SOLVER_TABLE])
     with output.steps(len(scales) + 2) as step:
