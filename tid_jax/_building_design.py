@@ -461,7 +461,7 @@ def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quanti
     return BuildingRetune(
         amplitudes=amplitudes, tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
         peak=np.asarray([np.nan if p is None or not o else float(p.value)
-                         for p, o in zip(found, ok)]),
+                         for p, o in zip(found, ok, strict=True)]),
         peak_omega=np.asarray([np.nan if p is None else float(p.omega) for p in found]),
         uncontrolled=amplitudes * bare, converged=ok,
         den_hartog_peak=reference["den_hartog"], h_infinity_peak=reference["h_infinity"])

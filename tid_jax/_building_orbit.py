@@ -240,8 +240,8 @@ def building_response(system: BuildingTID, omegas, amplitudes,
                       settings: SolverSettings | None = None) -> BuildingResponse:
     """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
     force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, each point
-    solved by shooting from its linear equivalent; a point whose orbit was not found has `converged` False (its
-    values NaN)."""
+    solved by shooting from its linear equivalent; a point whose orbit was not found has
+    `converged` False (its values NaN)."""
     amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
     omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))
     quantity.floor_of(system.floors)
