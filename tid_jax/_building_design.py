@@ -1,8 +1,9 @@
 """The peak of a `BuildingTID`'s response over frequency and the TID's retune per
-amplitude: steady states on a frequency grid (`_building_orbit`), the highest local
-maxima refined by parabolas through ever closer frequencies, and the tuning (k, c) that
-minimises that peak by optimistix's Nelder-Mead search (the minimax optimum, with two
-equal peaks, is not smooth)."""
+amplitude: steady states on a frequency grid (`_building_orbit`), the two highest local
+maxima refined by parabolas through ever closer frequencies, their exact derivatives
+(implicit, through the periodic orbit), and the tuning (k, c) that minimises the
+highest: the minimax of the two peaks by SLSQP (scipy) on its epigraph form, shared
+with the robust design (`minimax`)."""
 
 from collections.abc import Callable
 
@@ -245,8 +246,9 @@ class BuildingRetune(eqx.Module):
     """The retuned TID per amplitude (SI): `tid_stiffness` k (N/m), `tid_damping` c
     (N s/m), `peak` (of the quantity over the band), `peak_omega` (rad/s), `uncontrolled`
     (the bare structure's peak over the band at that amplitude), `converged` (the search
-    ended by its tolerance and every steady state was found), and the first-mode
-    tunings' peaks `den_hartog_peak`, `h_infinity_peak`."""
+    ended by its tolerance, or stalled at a first-order minimax point, and every steady
+    state was found), and the first-mode tunings' peaks `den_hartog_peak`,
+    `h_infinity_peak`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
