@@ -87,7 +87,6 @@ class Band(eqx.Module):
     values: Float[Array, " candidates"]  # the candidates' refined peaks, SI
     omegas: Float[Array, " candidates"]  # the last frequencies solved about them, rad/s
     states: Float[Array, "candidates s"]  # the orbits there
-    monodromies: Float[Array, "candidates s s"]
     grid_states: Float[Array, "freqs s"]
     grid_monodromies: Float[Array, "freqs s s"]
 
@@ -186,11 +185,11 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
     state = (grid, pair, pair, pair, jnp.zeros((_CANDIDATES, s), dtype),
              jnp.zeros((_CANDIDATES, s, s), dtype), jnp.full(_CANDIDATES, step, dtype),
              jnp.asarray(True))
-    grid, centres, mids, best, z, m, _, ok = jax.lax.fori_loop(0, chunks + _ROUNDS, body,
+    grid, centres, mids, best, z, _, _, ok = jax.lax.fori_loop(0, chunks + _ROUNDS, body,
                                                                state)
     ok = ok & jnp.all(grid[1][:count]) & jnp.all(jnp.isfinite(best))
     top = jnp.argmax(best)
-    return Band(Peak(best[top], centres[top], ok), best, mids, z, m, grid[2][:count],
+    return Band(Peak(best[top], centres[top], ok), best, mids, z, grid[2][:count],
                 grid[3][:count])
 
 

@@ -165,15 +165,20 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
     pl = plant(system, quantity, amplitude, omega)
     fl = flow(pl, settings.samples) if settings.exact_friction else None
     tol = settings.exact_periodicity_tol if settings.exact_friction else settings.periodicity_tol
-    if start is None:
-        z, monodromy = initial_state(system, amplitude, omega), None
+
+    def linear_start():
+        z = initial_state(system, amplitude, omega)
         if settings.transient_periods:
             z = jax.lax.fori_loop(0, settings.transient_periods,
                                   lambda _, z: period_end(z, pl, fl, settings), z)
+        return z
+
+    if start is None:
+        z, monodromy = linear_start(), None
     else:
         z, monodromy = start
         if cold is not None:
-            z = jax.lax.cond(cold, lambda: initial_state(system, amplitude, omega), lambda: z)
+            z = jax.lax.cond(cold, linear_start, lambda: z)
     newton = _newton(z, pl, fl, settings, tol, newton_steps, monodromy)
     values, z_end, transitions, stroke_events = period_samples(newton.z, pl, fl, settings)
     residual = jnp.max(jnp.abs(z_end - newton.z))
