@@ -65,6 +65,31 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     assert status == 0 and json.loads(again)["response_max"] == data["response_max"]
 
 
+def test_frf_of_a_building_with_a_compliant_device_is_the_library_s(tmp_path):
+    import tid_jax as tj
+
+    device = "terminal_mass = 20.0\nseries_stiffness = 2e6\nbacklash = 1e-4\n"
+    text = device + CONFIG.replace("n_frequencies = 7", "n_frequencies = 5")
+    status, stdout, stderr = run(["frf", "--config", _config(tmp_path, text), "--out",
+                                  tmp_path / "out", "--json", "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    assert data["tid"]["series_stiffness_N_per_m"] == 2e6 and data["tid"]["backlash_m"] == 1e-4
+    system = tj.BuildingTID(
+        tj.Structure.shear_building([2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6],
+                                    damping_ratio=0.02),
+        275.0, 135.0, 1.0, 0.0, None, load="ground",
+        terminal_mass=20.0, series_stiffness=2e6, backlash=1e-4)
+    k, c = tj.first_mode_tunings(system)["den_hartog"]  # the command's default tuning
+    system = system.replace(tid_stiffness=k, tid_damping=c)
+    mine = tj.building_response(system, 2 * np.pi * np.asarray(data["frequencies_hz"]),
+                                data["amplitudes"], tj.Quantity("drift", 1))
+    ok = np.asarray(data["converged"])
+    assert ok.sum() >= 8 and np.array_equal(ok, mine.converged)
+    np.testing.assert_allclose(np.asarray(data["response_max"], float)[ok],
+                               mine.response_max[ok], rtol=1e-9)
+
+
 @pytest.mark.parametrize("change, message", [
     (("storey_stiffnesses = [1.5e6, 1.25e6, 1.0e6]", "storey_stiffnesses = [1.5e6, 1.0e6]"),
      "storey_stiffnesses"),
@@ -78,6 +103,8 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     (("damping_ratio = 0.02", "mass_matrix = [[1.0, 2.0], [0.0, 1.0]]\nstiffness_matrix = "
       "[[1.0, 0.0], [0.0, 1.0]]\ndamping_matrix = [[0.0, 0.0], [0.0, 0.0]]"), "symmetric"),
     (("amplitudes = [\"0.1g\", 2.0]", "amplitudes = [\"much\"]"), "amplitudes"),
+    (("inertance = 275.0", "inertance = 275.0\nseries_stiffness = 2e6"), "terminal_mass"),
+    (("inertance = 275.0", "inertance = 275.0\nhost_stiffness = 2e6"), "host_stiffness"),
 ])
 def test_bad_building_configs_get_one_line_naming_the_key(tmp_path, change, message):
     path = _config(tmp_path, CONFIG.replace(*change))

@@ -7,18 +7,31 @@ the inerter's stroke `r = y - x_i`, its terminal `y` relative to floor i (the gr
 i = 0). The spring k and damper c join floor j to the terminal; with `d = e_j - e_i`
 (`e_0 = 0`) the spring's stretch is `d.x - r` and
 
-    Mg u'' + Cg u' + Kg u = G a(t) - phi e_r,
+    Mg u'' + Cg u' + Kg u = G a(t) - phi e_f,
     Mg = [[M + mt e_i e_i^T, mt e_i], [mt e_i^T, b + mt]],
     Kg = [[K + k d d^T, -k d], [-k d^T, k]],  Cg = [[C + c d d^T, -c d], [-c d^T, c + cp]],
 
-with `phi = ff sgn(r')` the inerter's friction, `a(t) = A sin(w t)` and `G` the load
-per unit amplitude: `(pattern, 0)` for a force, `-(M 1 + mt e_i, mt)` for a ground
-acceleration (responses relative to the ground).
+with `phi = ff sgn(u_f')` the inerter's friction on the last coordinate f (here r),
+`a(t) = A sin(w t)` and `G` the load per unit amplitude: `(pattern, 0)` for a force,
+`-(M 1 + mt e_i, mt)` for a ground acceleration (responses relative to the ground).
+
+A compliant device (a finite `series_stiffness` ks) adds its mechanism's stroke q
+(relative to floor i), joined to the terminal (mass mt > 0) by the series spring with
+its free play `gap` (a dead zone `D`), and carrying the inertance, the parasitic
+damping and the friction: `u = (x_1..x_n, r, q)`, f = q, and
+
+    Mg = [[M + mt e_i e_i^T, mt e_i, 0], [mt e_i^T, mt, 0], [0, 0, b]],
+    Kg = [[K + k d d^T, -k d, 0], [-k d^T, k + ks, -ks], [0, -ks, ks]],
+    Cg = [[C + c d d^T, -c d, 0], [-c d^T, c, 0], [0, 0, cp]],
+
+`G` with a last 0, and the backlash's force `ks (s - D(s)) (e_r - e_q)` on the right
+(s = r - q; zero without backlash).
 """
 
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
@@ -26,7 +39,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float
 from ._checks import check_grid
 from ._linear import den_hartog_tuning
 from ._structure import Structure
-from ._system import FRICTION_WIDTH_RATIO, check_values
+from ._system import FRICTION_WIDTH_RATIO, check_values, is_compliant
 
 LOADS = ("force", "ground")
 QUANTITIES = ("displacement", "drift", "acceleration")
@@ -91,7 +104,11 @@ class BuildingTID(eqx.Module):
     `tid_stiffness` k (N/m); `tid_damping` c (N s/m); `friction_width`: 0 (default) for
     exact Coulomb friction, a velocity scale (m/s) of `tanh` smoothing, or None for
     `FRICTION_WIDTH_RATIO` times omega times the static displacement scale;
-    `parasitic_damping` cp (N s/m, on the stroke's velocity); `terminal_mass` mt (kg).
+    `parasitic_damping` cp (N s/m, on the inerter's velocity); `terminal_mass` mt (kg);
+    `series_stiffness` ks (N/m; inf, the default: a rigid device) and `backlash` (m, the
+    total free play of the series connection) of a compliant device, which needs mt > 0
+    (the node between the TID's spring and the series stiffness), and smoothed friction
+    where it has backlash.
 
     **Placement and load** (static): `spring_floor` j (1..n) where the spring and damper
     attach; `inerter_floor` i (0..n, not j; 0: the ground) where the inerter attaches;
@@ -107,18 +124,22 @@ class BuildingTID(eqx.Module):
     friction_width: Float[Array, ""] | None
     parasitic_damping: Float[Array, ""]
     terminal_mass: Float[Array, ""]
+    series_stiffness: Float[Array, ""]
+    backlash: Float[Array, ""]
     force_pattern: Float[Array, " n"]
     spring_floor: int = eqx.field(static=True)
     inerter_floor: int = eqx.field(static=True)
     load: str = eqx.field(static=True)
     exact_friction: bool = eqx.field(static=True)
+    compliant: bool = eqx.field(static=True)
 
     def __init__(self, structure: Structure, inertance: ArrayLike, friction_force: ArrayLike,
                  tid_stiffness: ArrayLike, tid_damping: ArrayLike,
                  friction_width: ArrayLike | None = 0.0, *, spring_floor: int = 1,
                  inerter_floor: int = 0, load: str = "force",
                  force_pattern: ArrayLike | None = None, parasitic_damping: ArrayLike = 0.0,
-                 terminal_mass: ArrayLike = 0.0):
+                 terminal_mass: ArrayLike = 0.0, series_stiffness: ArrayLike = math.inf,
+                 backlash: ArrayLike = 0.0):
         if not isinstance(structure, Structure):
             raise ValueError("structure must be a tid_jax.Structure")
         floors = structure.floors
@@ -137,7 +158,9 @@ class BuildingTID(eqx.Module):
                 ("tid_stiffness", tid_stiffness, "positive"),
                 ("tid_damping", tid_damping, "non-negative"),
                 ("parasitic_damping", parasitic_damping, "non-negative"),
-                ("terminal_mass", terminal_mass, "non-negative")):
+                ("terminal_mass", terminal_mass, "non-negative"),
+                ("series_stiffness", series_stiffness, "positive or inf"),
+                ("backlash", backlash, "non-negative")):
             check_values(name, value, allowed)
             setattr(self, name, jnp.asarray(value, dtype=float))
         if friction_width is not None:
@@ -146,16 +169,39 @@ class BuildingTID(eqx.Module):
         self.friction_width = friction_width
         self.exact_friction = friction_width is not None and bool(
             np.all(np.asarray(friction_width) == 0))
+        self.compliant = is_compliant(series_stiffness)
+        self._check_device()
+
+    def _check_device(self):
+        concrete = lambda value: not isinstance(value, jax.core.Tracer)
+        if self.compliant and concrete(self.terminal_mass) and not np.all(
+                np.asarray(self.terminal_mass) > 0):
+            raise ValueError("a compliant device (series_stiffness finite) needs "
+                             "terminal_mass > 0: the mass of the node between the TID's "
+                             "spring and the series stiffness")
+        if concrete(self.backlash) and np.any(np.asarray(self.backlash) > 0):
+            if not self.compliant:
+                raise ValueError("backlash needs a finite series_stiffness (a rigid device "
+                                 "has no free play)")
+            if self.exact_friction:
+                raise ValueError("backlash takes smoothed friction: give friction_width > 0 "
+                                 "or None, not 0")
 
     @property
     def floors(self) -> int:
         return self.structure.floors
 
+    @property
+    def coordinates(self) -> int:
+        """The generalised coordinates: the floors, the stroke and a compliant device's
+        mechanism. The friction acts on the last; the stroke is number `floors`."""
+        return self.floors + (2 if self.compliant else 1)
+
     def replace(self, **changes) -> "BuildingTID":
         """A copy with some fields changed (validated like the constructor)."""
         names = ("structure", "inertance", "friction_force", "tid_stiffness", "tid_damping",
                  "friction_width", "spring_floor", "inerter_floor", "load", "force_pattern",
-                 "parasitic_damping", "terminal_mass")
+                 "parasitic_damping", "terminal_mass", "series_stiffness", "backlash")
         unknown = sorted(set(changes) - set(names))
         if unknown:
             raise ValueError(f"unknown BuildingTID field(s) {unknown}; fields are {list(names)}")
@@ -166,25 +212,35 @@ class BuildingTID(eqx.Module):
         return BuildingTID(structure, *args, **values)
 
     def generalised_matrices(self) -> tuple[Array, Array, Array]:
-        """`(Mg, Cg, Kg)`, (n + 1) x (n + 1): floors then the stroke."""
+        """`(Mg, Cg, Kg)`, square over the coordinates: floors, the stroke and a compliant
+        device's mechanism."""
         s = self.structure
-        n = s.floors
         d = self._direction()
         e_i = self._unit(self.inerter_floor)
-        mt, b = self.terminal_mass, self.inertance
-
-        def coupled(block, corner, coupling):
-            top = jnp.concatenate([block, coupling[:, None]], axis=1)
-            bottom = jnp.concatenate([coupling, corner[None]])[None, :]
-            return jnp.concatenate([top, bottom], axis=0)
-
-        mass = coupled(s.mass_matrix + mt * jnp.outer(e_i, e_i), b + mt, mt * e_i)
-        k, c = self.tid_stiffness, self.tid_damping
-        stiffness = coupled(s.stiffness_matrix + k * jnp.outer(d, d), k, -k * d)
-        damping = coupled(s.damping_matrix + c * jnp.outer(d, d), c + self.parasitic_damping,
-                          -c * d)
-        assert mass.shape == (n + 1, n + 1)
+        mt, b, k, c = self.terminal_mass, self.inertance, self.tid_stiffness, self.tid_damping
+        # the floors and the terminal; the inertance and cp on the friction's coordinate
+        inertance = jnp.zeros(self.coordinates - self.floors).at[-1].set(b)
+        parasitic = jnp.zeros_like(inertance).at[-1].set(self.parasitic_damping)
+        zero = jnp.zeros_like(inertance).at[0].set(1.0)  # the terminal's row
+        mass = _coupled(s.mass_matrix + mt * jnp.outer(e_i, e_i), mt * zero, mt * e_i,
+                        inertance)
+        stiffness = _coupled(s.stiffness_matrix + k * jnp.outer(d, d), k * zero, -k * d,
+                             jnp.zeros_like(inertance))
+        damping = _coupled(s.damping_matrix + c * jnp.outer(d, d), c * zero, -c * d,
+                           parasitic)
+        if self.compliant:
+            series = self.series_stiffness * jnp.array([[1.0, -1.0], [-1.0, 1.0]])
+            stiffness = stiffness.at[self.floors:, self.floors:].add(series)
         return mass, damping, stiffness
+
+    def play_direction(self) -> Float[Array, " m"]:
+        """`ks (e_r - e_q)`, zero for a rigid device: the generalised force of a compliant
+        device's backlash is this times `s - D(s)`, s = r - q its series spring's stretch
+        and D the dead zone (the spring's force is `ks D(s)`, not the `ks s` of `Kg`)."""
+        if not self.compliant:
+            return jnp.zeros(self.coordinates)
+        return jnp.zeros(self.coordinates).at[self.floors].set(self.series_stiffness).at[
+            -1].set(-self.series_stiffness)
 
     def _unit(self, floor: int) -> Array:
         return jnp.zeros(self.floors).at[floor - 1].set(1.0 if floor > 0 else 0.0)
@@ -192,20 +248,21 @@ class BuildingTID(eqx.Module):
     def _direction(self) -> Array:
         return self._unit(self.spring_floor) - self._unit(self.inerter_floor)
 
-    def load_vector(self) -> Float[Array, " n+1"]:
+    def load_vector(self) -> Float[Array, " m"]:
         """G, the generalised load per unit amplitude (N per N, or N per m/s2)."""
+        device = jnp.zeros(self.coordinates - self.floors)
         if self.load == "force":
-            return jnp.append(self.force_pattern, 0.0)
+            return jnp.concatenate([self.force_pattern, device])
         s = self.structure
         e_i = self._unit(self.inerter_floor)
         floors = s.mass_matrix @ jnp.ones(self.floors) + self.terminal_mass * e_i
-        return -jnp.append(floors, self.terminal_mass)
+        return -jnp.concatenate([floors, device.at[0].set(self.terminal_mass)])
 
     def static_scale(self) -> Float[Array, ""]:
         """d, the largest floor displacement of the bare structure under the static load
         per unit amplitude (m per N, or m per m/s2): the unit of the scaled states."""
         s = self.structure
-        g = self.load_vector()[:-1]
+        g = self.load_vector()[:self.floors]
         return jnp.max(jnp.abs(jnp.linalg.solve(s.stiffness_matrix, g)))
 
     def width_at(self, amplitude, omega) -> Float[Array, "..."]:
@@ -222,6 +279,16 @@ class BuildingTID(eqx.Module):
         shape = shapes[:, 0] / float(np.asarray(self._direction()) @ shapes[:, 0])
         mass = float(shape @ np.asarray(self.structure.mass_matrix) @ shape)
         return float(omegas[0]), mass, mass * float(omegas[0]) ** 2
+
+
+def _coupled(block, corner, coupling, device):
+    """The square matrix of a floors' `block`, the terminal's `corner` entry and
+    `coupling` column, and the device's diagonal (its first entry added to the
+    terminal's)."""
+    n, extra = block.shape[0], device.shape[0]
+    matrix = jnp.zeros((n + extra, n + extra)).at[:n, :n].set(block)
+    matrix = matrix.at[:n, n].set(coupling).at[n, :n].set(coupling)
+    return matrix.at[n:, n:].add(jnp.diag(device)).at[n, n].add(corner[0])
 
 
 def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
@@ -244,11 +311,11 @@ def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
 def selection(system: BuildingTID, quantity: Quantity):
     """The chosen quantity as `w . u + wd . u'' + kappa a(t)` per unit of displacement
     (for an acceleration, per unit of acceleration): `(w, wd, kappa, acceleration)` with
-    `w`, `wd` over the n + 1 coordinates."""
-    n = system.floors
+    `w`, `wd` over the coordinates."""
+    n, m = system.floors, system.coordinates
     floor = quantity.floor_of(n)
-    unit = lambda m: np.eye(n + 1)[m - 1] if m > 0 else np.zeros(n + 1)
-    zero = np.zeros(n + 1)
+    unit = lambda f: np.eye(m)[f - 1] if f > 0 else np.zeros(m)
+    zero = np.zeros(m)
     if quantity.kind == "displacement":
         return unit(floor), zero, 0.0, False
     if quantity.kind == "drift":
@@ -264,43 +331,43 @@ def _solve(matrices, vector):
 
 def linear_amplitudes(system: BuildingTID, omegas, friction_damping=0.0, stuck=False):
     """Complex amplitudes U per unit load amplitude (`a(t) = Im(e^{i w t})`) of the
-    frictionless TID, or with an extra viscous damping on the stroke, or with the inerter
-    stuck (`stuck`: the stroke held, returning the friction force it needs as the last
-    entry): `[..., n + 1]`."""
+    frictionless TID, or with an extra viscous damping on the friction's coordinate (the
+    last), or with that coordinate stuck (`stuck`: held, returning the friction force it
+    needs as the last entry): `[..., m]` over the coordinates. Backlash is left out."""
     mass, damping, stiffness = system.generalised_matrices()
     g = system.load_vector()
     w = jnp.asarray(omegas)[..., None, None]
-    n = system.floors
-    damping = damping + jnp.zeros_like(damping).at[n, n].set(1.0) * jnp.asarray(
+    f = system.coordinates - 1
+    damping = damping + jnp.zeros_like(damping).at[f, f].set(1.0) * jnp.asarray(
         friction_damping)[..., None, None]
     dynamic = stiffness - w**2 * mass + 1j * w * damping
     if stuck:
-        # the stroke's column replaced by the friction force's (-e_r): unknowns (x, phi)
-        dynamic = dynamic.at[..., :, n].set(0.0).at[..., n, n].set(1.0)
+        # the friction coordinate's column replaced by the friction force's (-e_f)
+        dynamic = dynamic.at[..., :, f].set(0.0).at[..., f, f].set(1.0)
     return _solve(dynamic, g)
 
 
 def quantity_amplitude(system: BuildingTID, quantity: Quantity, omegas,
                        amplitudes: Complex[Array, "... m"]) -> Complex[Array, "..."]:
-    """The quantity's complex amplitude from the coordinates' `amplitudes` at `omegas`."""
+    """The quantity's complex amplitude from the floors' `amplitudes` (the first n
+    entries are used) at `omegas`."""
     w, wd, kappa, _ = selection(system, quantity)
+    n = system.floors
     omegas = jnp.asarray(omegas)
-    coordinates = amplitudes[..., : system.floors + 1] @ jnp.asarray(w + 0j)
-    accelerations = -omegas**2 * (amplitudes[..., : system.floors + 1] @ jnp.asarray(wd + 0j))
+    coordinates = amplitudes[..., :n] @ jnp.asarray(w[:n] + 0j)
+    accelerations = -omegas**2 * (amplitudes[..., :n] @ jnp.asarray(wd[:n] + 0j))
     return coordinates + accelerations + kappa
 
 
 def uncontrolled_amplitude(system: BuildingTID, quantity: Quantity, omegas):
     """|quantity| per unit load amplitude of the bare structure (no TID) at `omegas`."""
     s = system.structure
-    g = system.load_vector()[:-1]
+    g = system.load_vector()[:system.floors]
     if system.load == "ground":
         g = -(s.mass_matrix @ jnp.ones(system.floors))
     w = jnp.asarray(omegas)[..., None, None]
     dynamic = s.stiffness_matrix - w**2 * s.mass_matrix + 1j * w * s.damping_matrix
-    x = _solve(dynamic, g)
-    x = jnp.concatenate([x, jnp.zeros_like(x[..., :1])], axis=-1)
-    return jnp.abs(quantity_amplitude(system, quantity, omegas, x))
+    return jnp.abs(quantity_amplitude(system, quantity, omegas, _solve(dynamic, g)))
 
 
 def linear_building_response(system: BuildingTID, omegas,

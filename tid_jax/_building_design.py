@@ -117,7 +117,7 @@ def _candidates(values, omegas):
 
 def no_start(system: BuildingTID, points: int):
     """A start for `points` orbits that has none: each from its linear equivalent."""
-    s = 2 * (system.floors + 1)
+    s = 2 * system.coordinates
     return jnp.zeros((points, s)), jnp.full((points, s, s), np.nan, dtype=float)
 
 
@@ -177,7 +177,7 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
                   all_ok & jnp.all(ok))
         return (grid,) + jax.tree.map(lambda a, b: jnp.where(on_grid, a, b), state[1:], rounds)
 
-    s = 2 * (system.floors + 1)
+    s = 2 * system.coordinates
     dtype = grid_omegas.dtype
     grid = (jnp.zeros_like(grid_omegas), jnp.zeros(grid_omegas.shape, bool), starts[0],
             starts[1])
@@ -412,7 +412,9 @@ def _peaks_at(system, quantity, amplitudes, omegas, settings, linear):
 
 
 def frictionless(system: BuildingTID) -> bool:
-    return bool(np.all(np.asarray(system.friction_force) == 0))
+    """Whether the system is linear: no friction and no backlash."""
+    return bool(np.all(np.asarray(system.friction_force) == 0)
+                and np.all(np.asarray(system.backlash) == 0))
 
 
 def building_peaks(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(),

@@ -3,21 +3,23 @@ Coulomb friction in closed form, or smoothed friction integrated by diffrax.
 
 Scaled units: phase `theta = omega t`, coordinates in units of `D = A d` (d: the static
 scale, `BuildingTID.static_scale`), velocities in `omega D`. The state is
-`z = (u, u')`, `u = (x_1..x_n, r)`, of 2 (n + 1) entries, and (`_building`'s equations)
+`z = (u, u')` over the coordinates u (`_building`: the floors, the stroke r and a
+compliant device's mechanism q; the friction on the last), and
 
     z' = S z + f sin(theta) - phi_s F,      phi_s = phi / (omega^2 D),
 
 with `S = [[0, I], [-Mg^-1 Kg / w^2, -Mg^-1 Cg / w]]`, `f = (0, Mg^-1 G / (w^2 d))`,
-`F = (0, Mg^-1 e_r)`. Exact friction is linear in each of three modes, as for the
-single-storey host (`_coulomb`): slipping with sign s (`phi = s ff`), and stuck (`r' = 0`,
-r held: the floors move as the structure with the spring and damper joined to the stuck
-terminal, and the friction force phi that holds it is linear in the state and the
-forcing). A slipping inerter sticks where `r'` reaches 0 with `|phi| <= ff`, else slips
-back; a stuck one slips with the sign of phi once `|phi|` reaches ff. Each mode's motion
-is a harmonic and a constant particular solution plus its modal homogeneous part; events
-are found on the sample grid and refined by safeguarded Newton steps, each event time
-carrying the implicit derivative of one Newton step so that forward derivatives include
-the jumps at the transitions.
+`F = (0, Mg^-1 e_f)` (f: the friction's coordinate, written r below; a compliant
+device's backlash adds its play, smoothed friction only). Exact friction is linear in
+each of three modes, as for the single-storey host (`_coulomb`): slipping with sign s
+(`phi = s ff`), and stuck (`r' = 0`, r held: the other coordinates move as the structure
+with the device held at that point, and the friction force phi that holds it is linear
+in the state and the forcing). A slipping inerter sticks where `r'` reaches 0 with
+`|phi| <= ff`, else slips back; a stuck one slips with the sign of phi once `|phi|`
+reaches ff. Each mode's motion is a harmonic and a constant particular solution plus its
+modal homogeneous part; events are found on the sample grid and refined by safeguarded
+Newton steps, each event time carrying the implicit derivative of one Newton step so
+that forward derivatives include the jumps at the transitions.
 
 Only projections of the state are sampled (the quantity, the stroke, r' and phi), so
 that a period costs O(samples n) beyond its events.
@@ -34,6 +36,7 @@ from jaxtyping import Array, Complex, Float, Int
 
 from ._building import BuildingTID, Quantity, selection
 from ._coulomb import bracketed_root, differentiable_root, segment_state
+from ._dynamics import dead_zone
 from ._eigen import eigensystem
 from ._period import integrate
 from ._settings import SolverSettings
@@ -63,13 +66,16 @@ class Plant(eqx.Module):
     rows_rate: Float[Array, "4 s"]
     rows_sin: Float[Array, " 4"]
     width: Float[Array, ""]  # scaled friction width (smoothed friction), velocity units
+    gap: Float[Array, ""]  # a compliant device's scaled backlash
+    play_vector: Float[Array, " s"]  # the backlash's field per unit of s - D(s)
+    stroke: int = eqx.field(static=True)  # the stroke's coordinate
 
 
 def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
     """The scaled model of `system` at load amplitude `amplitude` and frequency `omega`
     (rad/s); differentiable with respect to the system's arrays."""
-    n = system.floors
-    m = n + 1
+    m = system.coordinates
+    f = m - 1  # the friction's coordinate; the others move while it is stuck
     mass, damping, stiffness = system.generalised_matrices()
     scale = system.static_scale()
     g = system.load_vector() / (omega**2 * scale)
@@ -77,27 +83,31 @@ def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
     eye, zeros = jnp.eye(m), jnp.zeros((m, m))
     inverse = jnp.linalg.inv(mass)
     slip = jnp.block([[zeros, eye], [-inverse @ ks, -inverse @ cs]])
-    # stuck: the floors' accelerations with r'' = r' = 0 (unknowns x'' and phi)
-    held = mass.at[:, n].set(0.0).at[n, n].set(1.0)
+    # stuck: the other coordinates' accelerations with u_f'' = u_f' = 0 (unknowns: those
+    # and phi)
+    held = mass.at[:, f].set(0.0).at[f, f].set(1.0)
     solve = jnp.linalg.inv(held)
-    free = -solve @ jnp.concatenate([ks, cs.at[:, n].set(0.0)], axis=1)  # (x'', phi) rows
-    stuck = jnp.zeros((2 * m, 2 * m)).at[:n, m:m + n].set(jnp.eye(n)).at[m:m + n].set(free[:n])
-    stuck_forcing = jnp.zeros(2 * m).at[m:m + n].set((solve @ g)[:n])
+    free = -solve @ jnp.concatenate([ks, cs.at[:, f].set(0.0)], axis=1)
+    stuck = jnp.zeros((2 * m, 2 * m)).at[:f, m:m + f].set(jnp.eye(f)).at[m:m + f].set(free[:f])
+    stuck_forcing = jnp.zeros(2 * m).at[m:m + f].set((solve @ g)[:f])
     w, wd, kappa, _ = selection(system, quantity)
-    units = np.zeros((3, 2 * m))
-    units[_STROKE - 1, n] = units[_STROKE_VELOCITY - 1, m + n] = 1.0
+    units = np.zeros((2, 2 * m))
+    units[0, system.floors] = units[1, m + f] = 1.0  # the stroke; the friction's velocity
     rows = jnp.concatenate([jnp.append(jnp.asarray(w), jnp.zeros(m))[None],
-                            jnp.asarray(units[:2]), free[n][None]])
+                            jnp.asarray(units), free[f][None]])
     rows_rate = jnp.zeros((4, 2 * m)).at[_QUANTITY].set(jnp.append(jnp.zeros(m), wd))
-    rows_sin = jnp.stack([kappa / (omega**2 * scale), 0.0, 0.0, (solve @ g)[n]])
+    rows_sin = jnp.stack([kappa / (omega**2 * scale), 0.0, 0.0, (solve @ g)[f]])
     unit = amplitude * scale
     return Plant(slip=slip, forcing=jnp.concatenate([jnp.zeros(m), inverse @ g]),
-                 friction_vector=jnp.concatenate([jnp.zeros(m), inverse[:, n]]),
+                 friction_vector=jnp.concatenate([jnp.zeros(m), inverse[:, f]]),
                  friction=system.friction_force / (omega**2 * unit),
-                 stuck=stuck, stuck_forcing=stuck_forcing, demand=free[n],
-                 demand_sin=(solve @ g)[n], rows=rows, rows_rate=rows_rate,
+                 stuck=stuck, stuck_forcing=stuck_forcing, demand=free[f],
+                 demand_sin=(solve @ g)[f], rows=rows, rows_rate=rows_rate,
                  rows_sin=rows_sin,
-                 width=system.width_at(amplitude, omega) / (omega * unit))
+                 width=system.width_at(amplitude, omega) / (omega * unit),
+                 gap=system.backlash / unit,
+                 play_vector=jnp.concatenate([jnp.zeros(m), inverse @ system.play_direction()]) / omega**2,
+                 stroke=system.floors)
 
 
 def projection_units(system: BuildingTID, quantity: Quantity, amplitude, omega):
@@ -294,8 +304,9 @@ def period(z0, flow: Flow, keep_samples: bool = True):
             z_end=jnp.where(ends, jnp.where(too_many, jnp.nan, state.z_end),
                             segment_state(segment, mode, grid[-1])[0]),
             transitions=transitions,
-            stroke_events=jnp.where(ends, jnp.maximum(state.stroke_events, jnp.abs(z[m - 1])),
-                                    state.stroke_events),
+            stroke_events=jnp.where(
+                ends, jnp.maximum(state.stroke_events, jnp.abs(z[plant.stroke])),
+                state.stroke_events),
             done=~ends | too_many,
         )
 
@@ -311,7 +322,10 @@ def smoothed_field(theta, z, plant: Plant):
     """The scaled field with the friction smoothed as `tanh(r' / width)`."""
     m = z.shape[0] // 2
     friction = plant.friction * jnp.tanh(z[2 * m - 1] / plant.width)
-    return plant.slip @ z + plant.forcing * jnp.sin(theta) - friction * plant.friction_vector
+    stretch = z[plant.stroke] - z[m - 1]  # a compliant device's series spring (else 0)
+    play = stretch - dead_zone(stretch, plant.gap)
+    return (plant.slip @ z + plant.forcing * jnp.sin(theta) - friction * plant.friction_vector
+            + play * plant.play_vector)
 
 
 def smoothed_period(z0, plant: Plant, settings: SolverSettings, keep_samples: bool = True):

@@ -30,7 +30,7 @@ def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
     replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
     stroke amplitude |R| it lets through (found by bisection), or the steady state with
     the inerter stuck where the friction holds it."""
-    n = system.floors
+    n = system.coordinates - 1  # the friction's coordinate
     scale = system.static_scale()
 
     def stroke(log_amplitude):
@@ -188,9 +188,9 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
     return BuildingOrbit(
         state=newton.z,
         response_max=peak_of(values[:, 0]) * unit_q,
-        # every extremum of a stroke that has events is at one (r' = 0) or on a stuck
-        # segment, where the samples hold it
-        stroke_max=jnp.where(transitions > 0,
+        # every extremum of a rigid device's stroke that has events is at one (r' = 0)
+        # or on a stuck segment, where the samples hold it
+        stroke_max=jnp.where((transitions > 0) & (not system.compliant),
                              jnp.maximum(jnp.max(jnp.abs(values[:, 1])), stroke_events),
                              peak_of(values[:, 1])) * unit_r,
         quantity_samples=values[:, 0] * unit_q,

@@ -21,16 +21,25 @@ from ._building_orbit import building_settings
 from ._checks import check_grid
 from ._settings import SolverSettings
 
-# The TID's and the load's parameters, in the order of the elasticities (the floors'
-# masses and the storeys' stiffnesses follow, floor 1 first).
+# The TID's and the load's parameters, in the order of the elasticities (a compliant
+# device's series stiffness and backlash come before the amplitude; the floors' masses
+# and the storeys' stiffnesses follow, floor 1 first).
 DEVICE_PARAMETERS = ("tid_stiffness", "tid_damping", "inertance", "friction_force",
                      "parasitic_damping", "terminal_mass", "amplitude")
+COMPLIANT_PARAMETERS = ("series_stiffness", "backlash")
 
 
-def parameter_names(floors: int) -> tuple[str, ...]:
-    """The names of the elasticities: `DEVICE_PARAMETERS`, then `floor_mass_1..n` and
+def device_parameters(system: BuildingTID) -> tuple[str, ...]:
+    """The TID's and the load's parameters of `system`, in the elasticities' order."""
+    extra = COMPLIANT_PARAMETERS if system.compliant else ()
+    return DEVICE_PARAMETERS[:-1] + extra + DEVICE_PARAMETERS[-1:]
+
+
+def parameter_names(system: BuildingTID) -> tuple[str, ...]:
+    """The names of the elasticities: `device_parameters`, then `floor_mass_1..n` and
     `storey_stiffness_1..n`."""
-    return (DEVICE_PARAMETERS + tuple(f"floor_mass_{i}" for i in range(1, floors + 1))
+    floors = system.floors
+    return (device_parameters(system) + tuple(f"floor_mass_{i}" for i in range(1, floors + 1))
             + tuple(f"storey_stiffness_{i}" for i in range(1, floors + 1)))
 
 
@@ -61,20 +70,21 @@ def _changed(system: BuildingTID, amplitude, theta):
     floors' masses and storeys' stiffnesses changed by adding masses and storey springs
     (the damping matrix held)."""
     n = system.floors
+    names = device_parameters(system)[:-1]
     scale = jnp.exp(theta)
-    device = [getattr(system, name) * scale[i] for i, name in enumerate(DEVICE_PARAMETERS[:-1])]
+    load = len(names)  # the amplitude's index; the floors' follow
     s = system.structure
-    masses = jnp.diagonal(s.mass_matrix) * (scale[7:7 + n] - 1)
-    springs = storey_stiffnesses(s.stiffness_matrix) * (scale[7 + n:] - 1)
+    masses = jnp.diagonal(s.mass_matrix) * (scale[load + 1:load + 1 + n] - 1)
+    springs = storey_stiffnesses(s.stiffness_matrix) * (scale[load + 1 + n:] - 1)
     structure = eqx.tree_at(
         lambda x: (x.mass_matrix, x.stiffness_matrix), s,
         (s.mass_matrix + jnp.diag(masses),
          s.stiffness_matrix + jnp.tensordot(springs, jnp.asarray(storey_springs(n)), 1)))
     changed = eqx.tree_at(
-        lambda x: (x.inertance, x.friction_force, x.tid_stiffness, x.tid_damping,
-                   x.parasitic_damping, x.terminal_mass, x.structure), system,
-        (device[2], device[3], device[0], device[1], device[4], device[5], structure))
-    return changed, amplitude * scale[6]
+        lambda x: tuple(getattr(x, name) for name in names) + (x.structure,), system,
+        tuple(getattr(system, name) * scale[i] for i, name in enumerate(names))
+        + (structure,))
+    return changed, amplitude * scale[load]
 
 
 @eqx.filter_jit
@@ -82,7 +92,7 @@ def _elasticities(system, quantity, amplitude, omegas, settings, linear):
     band = peak_over_frequency(system, quantity, amplitude, omegas, settings, linear,
                                no_start(system, omegas.shape[0]))
     top = jnp.argmax(band.values)
-    count = len(DEVICE_PARAMETERS) + 2 * system.floors
+    count = len(parameter_names(system))
     derivatives = peak_derivatives(system, quantity, amplitude, band.omegas[top],
                                    band.states[top], settings, linear,
                                    lambda theta: _changed(system, amplitude, theta), count)
@@ -94,8 +104,9 @@ class BuildingSensitivities(eqx.Module):
     """Per amplitude (SI): the highest `peak` of the quantity over the band, its
     frequency `peak_omega` (rad/s), and `elasticities` (amplitudes x parameters): the
     relative change of the peak per relative change of each parameter of `names`
-    (`parameter_names`: the TID's k, c, b, ff, cp, mt, the amplitude, every floor's mass
-    and every storey's stiffness, the damping matrix held); `converged` False where a
+    (`parameter_names`: the TID's k, c, b, ff, cp, mt, a compliant device's series
+    stiffness and backlash, the amplitude, every floor's mass and every storey's
+    stiffness, the damping matrix held); `converged` False where a
     steady state was not found (its values NaN)."""
 
     amplitudes: Float[Array, " amps"]
@@ -125,7 +136,7 @@ def building_sensitivities(system: BuildingTID, amplitudes, quantity: Quantity |
     keep = lambda values: np.where(ok.reshape((-1,) + (1,) * (values.ndim - 1)), values,
                                    np.nan)
     return BuildingSensitivities(
-        amplitudes=amplitudes, names=parameter_names(system.floors),
+        amplitudes=amplitudes, names=parameter_names(system),
         peak=keep(np.asarray([float(row[0].value) for row in rows])),
         peak_omega=keep(np.asarray([float(row[0].omega) for row in rows])),
         elasticities=keep(np.asarray(jax.device_get([row[1] for row in rows]))),

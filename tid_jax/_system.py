@@ -92,7 +92,7 @@ def _as_float_array(name: str, value, allowed: str) -> Array:
     return jnp.asarray(value, dtype=jnp.result_type(float))
 
 
-def _is_compliant(stiffness) -> bool:
+def is_compliant(stiffness) -> bool:
     """Whether a `series_stiffness` makes the device compliant (finite, or traced); one
     that mixes finite and infinite entries is an error."""
     if isinstance(stiffness, jax.core.Tracer):
@@ -188,7 +188,7 @@ class TIDSystem(eqx.Module):
         if series_stiffness is None:
             values["series_stiffness"] = math.inf
         # decided on the value given: arrays made here are traced inside `jax.jit`
-        self.compliant = _is_compliant(values["series_stiffness"])
+        self.compliant = is_compliant(values["series_stiffness"])
         if friction_width is DEFAULT_FRICTION_WIDTH:
             values["friction_width"] = None if self.compliant else 0.0
         self.exact_friction = _is_exact(values["friction_width"])

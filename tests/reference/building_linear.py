@@ -14,6 +14,13 @@ inertance ``b`` [kg] with parasitic viscous damping ``cp`` [N s/m] joins T to fl
     Kg = [[K + k d d^T, -k d], [-k d^T, k]]
     Cg = [[C + c d d^T, -c d], [-c d^T, c + cp]]
 
+A compliant device (``ks`` [N/m] finite) puts a series spring ``ks`` between T and the
+inerter's mechanism Q, whose stroke ``q`` (relative to floor ``i``) carries the
+inertance, the parasitic damping (and the friction); T keeps ``mt`` (> 0).  Then
+``u = (x_1..x_n, r, q)`` and the kinetic energy ``(x'.M x' + mt (x_i' + r')^2 + b q'^2)/2``,
+the potential ``(x.K x + k (d.x - r)^2 + ks (r - q)^2)/2`` and the dissipation
+``(x'.C x' + c (d.x' - r')^2 + cp q'^2)/2`` give the matrices (``G`` with a last 0).
+
 Loads: ``"force"``: ``a(t) = A sin(w t)``, ``G = [pattern; 0]`` (pattern default: the
 top floor only); ``"ground"``: ground acceleration ``a_g = A sin(w t)`` [m/s2],
 ``G = -[M 1_n + mt e_i; mt]``.
@@ -59,13 +66,33 @@ def _check_floors(n, spring_floor, inerter_floor):
         raise ValueError(f"inerter_floor must be in 0..{n} and != spring_floor")
 
 
-def generalised_matrices(M, K, C, *, b, k, c, spring_floor, inerter_floor, cp=0.0, mt=0.0):
-    """(Mg, Cg, Kg), each (n+1) x (n+1), for coordinates (x_1..x_n, r)."""
+def generalised_matrices(M, K, C, *, b, k, c, spring_floor, inerter_floor, cp=0.0, mt=0.0,
+                         ks=None):
+    """(Mg, Cg, Kg) for coordinates (x_1..x_n, r), or (x_1..x_n, r, q) with a series
+    stiffness ``ks``."""
     M, K, C = (np.atleast_2d(np.asarray(a, float)) for a in (M, K, C))
     n = M.shape[0]
     _check_floors(n, spring_floor, inerter_floor)
     ei = unit(n, inerter_floor)
     d = unit(n, spring_floor) - ei
+    if ks is not None:
+        # kinetic energy, potential and dissipation as quadratic forms in (x, r, q)
+        N = n + 2
+        xi = np.zeros(N)  # x_i + r: the terminal's displacement relative to the ground
+        xi[:n], xi[n] = ei, 1.0
+        stretch = np.zeros(N)  # d.x - r
+        stretch[:n], stretch[n] = d, -1.0
+        series = np.zeros(N)  # r - q
+        series[n], series[n + 1] = 1.0, -1.0
+        Z = np.zeros((N, N))
+        Mg, Kg, Cg = Z.copy(), Z.copy(), Z.copy()
+        Mg[:n, :n], Kg[:n, :n], Cg[:n, :n] = M, K, C
+        Mg += mt * np.outer(xi, xi)
+        Mg[n + 1, n + 1] += b
+        Kg += k * np.outer(stretch, stretch) + ks * np.outer(series, series)
+        Cg += c * np.outer(stretch, stretch)
+        Cg[n + 1, n + 1] += cp
+        return Mg, Cg, Kg
     Mg = np.block([[M + mt * np.outer(ei, ei), mt * ei[:, None]],
                    [mt * ei[None, :], np.array([[b + mt]])]])
     Kg = np.block([[K + k * np.outer(d, d), -k * d[:, None]],
@@ -84,26 +111,31 @@ def _pattern(n, pattern):
     return p
 
 
-def generalised_load(M, *, load="force", pattern=None, inerter_floor=0, mt=0.0):
-    """Generalised force vector G (length n+1) per unit amplitude A."""
+def generalised_load(M, *, load="force", pattern=None, inerter_floor=0, mt=0.0,
+                     compliant=False):
+    """Generalised force vector G (length n+1, or n+2 for a compliant device) per unit
+    amplitude A."""
     M = np.atleast_2d(np.asarray(M, float))
     n = M.shape[0]
+    extra = [0.0] if compliant else []
     if load == "force":
-        return np.append(_pattern(n, pattern), 0.0)
+        return np.concatenate([_pattern(n, pattern), [0.0], extra])
     if load == "ground":
-        return -np.append(M @ np.ones(n) + mt * unit(n, inerter_floor), mt)
+        return -np.concatenate([M @ np.ones(n) + mt * unit(n, inerter_floor), [mt], extra])
     raise ValueError(f"load must be 'force' or 'ground', got {load!r}")
 
 
 def complex_amplitudes(omega, M, K, C, *, b, k, c, spring_floor, inerter_floor, load="force",
-                       pattern=None, cp=0.0, mt=0.0):
-    """Complex amplitudes U (floors 1..n, then stroke r) per unit A.
+                       pattern=None, cp=0.0, mt=0.0, ks=None):
+    """Complex amplitudes U (floors 1..n, then stroke r, then a compliant device's q) per
+    unit A.
 
-    ``omega`` [rad/s] scalar -> shape (n+1,); array -> shape omega.shape + (n+1,).
+    ``omega`` [rad/s] scalar -> shape (N,); array -> shape omega.shape + (N,).
     """
     Mg, Cg, Kg = generalised_matrices(M, K, C, b=b, k=k, c=c, spring_floor=spring_floor,
-                                      inerter_floor=inerter_floor, cp=cp, mt=mt)
-    G = generalised_load(M, load=load, pattern=pattern, inerter_floor=inerter_floor, mt=mt)
+                                      inerter_floor=inerter_floor, cp=cp, mt=mt, ks=ks)
+    G = generalised_load(M, load=load, pattern=pattern, inerter_floor=inerter_floor, mt=mt,
+                         compliant=ks is not None)
     return _solve(omega, Mg, Cg, Kg, G)
 
 
@@ -134,10 +166,12 @@ def _quantity(omega, U, n, *, load, kind, floor):
 
 
 def response_amplitude(omega, M, K, C, *, b, k, c, spring_floor, inerter_floor, load="force",
-                       pattern=None, kind="displacement", floor=None, cp=0.0, mt=0.0):
+                       pattern=None, kind="displacement", floor=None, cp=0.0, mt=0.0,
+                       ks=None):
     """|complex amplitude| of the chosen response per unit A (SI units)."""
     U = complex_amplitudes(omega, M, K, C, b=b, k=k, c=c, spring_floor=spring_floor,
-                           inerter_floor=inerter_floor, load=load, pattern=pattern, cp=cp, mt=mt)
+                           inerter_floor=inerter_floor, load=load, pattern=pattern, cp=cp, mt=mt,
+                           ks=ks)
     n = np.atleast_2d(M).shape[0]
     return np.abs(_quantity(omega, U, n, load=load, kind=kind, floor=floor))
 

@@ -7,6 +7,9 @@ Model (see ``building_linear`` for the matrices): generalised coordinates
 
 ``G = [pattern; 0]`` for a force load, ``G = -[M 1_n + mt e_i; mt]`` for a ground
 acceleration ``a_g = A sin(w t)`` [m/s2]; ``e_r`` the unit vector of the ``r`` row.
+With a compliant device (``ks``) the coordinates are ``(x_1..x_n, r, q)`` and the
+friction acts on the mechanism's ``q`` instead of ``r``: below, ``r`` stands for the
+last coordinate, and "stroke" is still the terminal's ``r``.
 The friction is exact Coulomb friction with stick (static = kinetic = ``ff``): while
 ``r' = 0`` the inerter is stuck (``r`` held) as long as the force needed to hold it,
 ``|phi| <= ff``, where ``phi`` is the net generalised force on the ``r`` row without
@@ -62,13 +65,15 @@ class _Model:
     """Slip and stick dynamics, phi, events and the period map for one (omega, A)."""
 
     def __init__(self, omega, M, K, C, b, ff, k, c, spring_floor, inerter_floor, A, load,
-                 pattern, cp, mt, ode_rtol, scale):
+                 pattern, cp, mt, ks, ode_rtol, scale):
         M = np.atleast_2d(np.asarray(M, float))
         Mg, Cg, Kg = generalised_matrices(M, K, C, b=b, k=k, c=c, spring_floor=spring_floor,
-                                          inerter_floor=inerter_floor, cp=cp, mt=mt)
+                                          inerter_floor=inerter_floor, cp=cp, mt=mt, ks=ks)
         G = A * generalised_load(M, load=load, pattern=pattern, inerter_floor=inerter_floor,
-                                 mt=mt)
-        n = M.shape[0]
+                                 mt=mt, compliant=ks is not None)
+        # n: the coordinates that move while the friction's (the last) is stuck
+        n = Mg.shape[0] - 1
+        self.floors = M.shape[0]
         self.n, self.N, self.w, self.T, self.ff = n, n + 1, omega, 2 * math.pi / omega, ff
         self.A, self.ground = A, load == "ground"
         self.Mg, self.Cg, self.Kg, self.G = Mg, Cg, Kg, G
@@ -267,14 +272,14 @@ def _newton(model, z, ts, norm, rtol, max_iter=8):
 def _quantity(model, seg, t, kind, floor):
     """Chosen response (or stroke) on a segment at times t (array)."""
     mode, _, _, sol, r = seg
-    n, N = model.n, model.N
+    n, N, s = model.n, model.N, model.floors  # s: the terminal's stroke
     if mode == STICK:
         y = sol(t)
-        x, stroke = y[:n], np.full(len(t), r)
+        x, stroke = y[:n], (y[s] if s < n else np.full(len(t), r))
         acc = model.stuck_rhs(r)(t, y)[n:]
     else:
         z = sol(t)
-        x, stroke = z[:n], z[n]
+        x, stroke = z[:n], z[s]
         acc = model.slip_rhs(mode)(t, z)[N:N + n]
     f = floor - 1
     if kind == "stroke":
@@ -312,11 +317,13 @@ def _peak_abs(model, segs, kind, floor, samples):
 
 def steady_state(omega, M, K, C, *, b, ff, k, c, spring_floor, inerter_floor, amplitude,
                  load="force", pattern=None, kind="displacement", floor=None, cp=0.0, mt=0.0,
-                 samples=2000, start=None, rtol=1e-10, ode_rtol=1e-11, max_periods=300):
+                 ks=None, samples=2000, start=None, rtol=1e-10, ode_rtol=1e-11,
+                 max_periods=300):
     """Periodic steady state with exact Coulomb friction (SI units).
 
     ``omega`` [rad/s], ``amplitude`` A [N per unit pattern, or m/s2 for a ground load],
-    ``ff`` [N] >= 0.  ``kind`` in displacement / drift / acceleration (absolute) / stroke
+    ``ff`` [N] >= 0; ``ks`` [N/m]: a compliant device's series stiffness (None: rigid).
+    ``kind`` in displacement / drift / acceleration (absolute) / stroke
     of ``floor`` (default top).  ``start``: optional full state (x, r, x', r') at t = 0,
     or ``"rest"`` (default: the fully stuck steady state with r = 0 when consistent, else the
     frictionless one).
@@ -333,8 +340,9 @@ def steady_state(omega, M, K, C, *, b, ff, k, c, spring_floor, inerter_floor, am
     if ff < 0 or amplitude == 0 or omega <= 0:
         raise ValueError("need ff >= 0, amplitude != 0, omega > 0")
     args = (omega, M, K, C, b, ff, k, c, spring_floor, inerter_floor, amplitude, load,
-            pattern, cp, mt)
+            pattern, cp, mt, ks)
     probe = _Model(*args, ode_rtol, (1.0, 1.0))
+    n = probe.n
     z_lin = probe.linear_state(0.0)
     z_st, phi_st = probe.stuck_state(0.0, 0.0)
     L = max(np.max(np.abs(z_lin[:n + 1])), np.max(np.abs(z_st[:n + 1])),

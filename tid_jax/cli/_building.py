@@ -55,11 +55,11 @@ def building_inputs(inputs: dict) -> tuple[BuildingTID, Quantity, np.ndarray]:
     """The system, the quantity and the amplitudes of a config with a [structure]."""
     structure = _structure(inputs["structure"])
     tid, load, response = (inputs.get(name, {}) for name in BUILDING_TABLES[1:])
-    for key in ("host_frequency_hz", "host_stiffness", "host_damping", "series_stiffness",
-                "backlash"):
-        if key in inputs and key not in ("host_frequency_hz",):
+    for key in ("host_stiffness", "host_damping"):
+        if key in inputs:
             raise CLIError(f"{key} does not apply to a [structure]")
-    width = inputs.get("friction_width", 0.0)
+    # exact friction, unless backlash needs it smoothed
+    width = inputs.get("friction_width", "relative" if inputs.get("backlash", 0) > 0 else 0.0)
     try:
         system = BuildingTID(
             structure, inputs["inertance"], inputs["friction_force"], 1.0, 0.0,
@@ -67,7 +67,9 @@ def building_inputs(inputs: dict) -> tuple[BuildingTID, Quantity, np.ndarray]:
             spring_floor=tid.get("spring_floor", 1), inerter_floor=tid.get("inerter_floor", 0),
             load=load.get("on", "force"), force_pattern=load.get("force_pattern"),
             parasitic_damping=inputs.get("parasitic_damping", 0.0),
-            terminal_mass=inputs.get("terminal_mass", 0.0))
+            terminal_mass=inputs.get("terminal_mass", 0.0),
+            series_stiffness=inputs.get("series_stiffness", math.inf),
+            backlash=inputs.get("backlash", 0.0))
         quantity = Quantity(response.get("kind", "displacement"), response.get("floor"))
         quantity.floor_of(structure.floors)
     except ValueError as error:
@@ -98,7 +100,15 @@ def _describe(system: BuildingTID, quantity: Quantity) -> str:
     load = "ground acceleration" if system.load == "ground" else "force"
     return (f"{floors}-storey structure (first mode {first:.3g} Hz), TID from floor "
             f"{system.spring_floor} to {where}, b = {float(system.inertance):g} kg, "
-            f"ff = {float(system.friction_force):g} N; {load}; {quantity.describe(floors)}")
+            f"ff = {float(system.friction_force):g} N{_compliance(system)}; {load}; "
+            f"{quantity.describe(floors)}")
+
+
+def _compliance(system: BuildingTID) -> str:
+    if not system.compliant:
+        return ""
+    return (f", series stiffness {float(system.series_stiffness):g} N/m, backlash "
+            f"{float(system.backlash):g} m")
 
 
 def _document(command, inputs, system, quantity, frequencies_hz, output, **results) -> dict:
@@ -112,7 +122,13 @@ def _document(command, inputs, system, quantity, frequencies_hz, output, **resul
                       "natural_frequencies_hz": s.natural_frequencies_hz().tolist()},
         "tid": {"spring_floor": system.spring_floor, "inerter_floor": system.inerter_floor,
                 "inertance_kg": float(system.inertance),
-                "friction_force_N": float(system.friction_force)},
+                "friction_force_N": float(system.friction_force),
+                "parasitic_damping_N_s_per_m": float(system.parasitic_damping),
+                "terminal_mass_kg": float(system.terminal_mass),
+                # null: a rigid device
+                "series_stiffness_N_per_m": (float(system.series_stiffness)
+                                             if system.compliant else None),
+                "backlash_m": float(system.backlash)},
         "load": system.load,
         "amplitude_unit": "m/s2" if system.load == "ground" else "N",
         "response": {"kind": quantity.kind, "floor": quantity.floor_of(system.floors),
