@@ -347,6 +347,19 @@ def linear_amplitudes(system: BuildingTID, omegas, friction_damping=0.0, stuck=F
     return _solve(dynamic, g)
 
 
+def friction_influence(system: BuildingTID, omega) -> tuple[Array, Array]:
+    """`(U, V)` at one frequency `omega`: the frictionless amplitudes per unit load (as
+    `linear_amplitudes`) and those per unit harmonic force on the friction's coordinate
+    (the last). An extra damping c there gives `U - V (i w c U_f) / (1 + i w c V_f)`
+    (Sherman and Morrison), the coordinate held `U - V U_f / V_f` with the friction force
+    `U_f / V_f` holding it."""
+    mass, damping, stiffness = system.generalised_matrices()
+    dynamic = stiffness - omega**2 * mass + 1j * omega * damping
+    unit = jnp.zeros(system.coordinates).at[-1].set(1.0)
+    both = jnp.linalg.solve(dynamic, jnp.stack([system.load_vector(), unit], axis=1) + 0j)
+    return both[:, 0], both[:, 1]
+
+
 def quantity_amplitude(system: BuildingTID, quantity: Quantity, omegas,
                        amplitudes: Complex[Array, "... m"]) -> Complex[Array, "..."]:
     """The quantity's complex amplitude from the floors' `amplitudes` (the first n

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._building import BuildingTID, Quantity, linear_amplitudes, uncontrolled_amplitude
+from ._building import BuildingTID, Quantity, friction_influence, uncontrolled_amplitude
 from ._building_flow import flow, period, plant, projection_units, smoothed_period
 from ._checks import check_grid
 from ._eigen import eigenvalues
@@ -30,25 +30,28 @@ def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
     replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
     stroke amplitude |R| it lets through (found by bisection), or the steady state with
     the inerter stuck where the friction holds it."""
-    n = system.coordinates - 1  # the friction's coordinate
     scale = system.static_scale()
+    free, influence = friction_influence(system, omega)
+    f = system.coordinates - 1  # the friction's coordinate
 
-    def stroke(log_amplitude):
-        damping = 4 * system.friction_force / (jnp.pi * omega * amplitude * jnp.exp(log_amplitude))
-        return linear_amplitudes(system, omega, damping)
+    def added(log_amplitude):
+        """i omega times the equivalent damping at a stroke amplitude of e^log_amplitude."""
+        return 4j * system.friction_force / (jnp.pi * amplitude * jnp.exp(log_amplitude))
 
     def bisect(_, bounds):
         low, high = bounds
         middle = 0.5 * (low + high)
-        further = jnp.log(jnp.abs(stroke(middle)[n])) > middle
+        stroke = free[f] / (1 + added(middle) * influence[f])
+        further = jnp.log(jnp.abs(stroke)) > middle
         return jnp.where(further, middle, low), jnp.where(further, high, middle)
 
-    high = jnp.log(jnp.abs(linear_amplitudes(system, omega)[n]))
+    high = jnp.log(jnp.abs(free[f]))
     low, high = jax.lax.fori_loop(0, _BISECTIONS, bisect, (high - 40.0, high))
-    slipping = stroke(0.5 * (low + high))
-    held = linear_amplitudes(system, omega, stuck=True)
-    stuck = jnp.abs(held[n]) * amplitude < system.friction_force
-    u = jnp.where(stuck, held.at[n].set(0.0), slipping) / scale
+    damped = added(0.5 * (low + high))
+    slipping = free - influence * (damped * free[f] / (1 + damped * influence[f]))
+    holding = free[f] / influence[f]  # the friction force that holds it, per unit load
+    stuck = jnp.abs(holding) * amplitude < system.friction_force
+    u = jnp.where(stuck, (free - influence * holding).at[f].set(0.0), slipping) / scale
     # load Im(e^{i theta}); response Im(U e^{i theta}); velocity in units of omega D
     return jnp.concatenate([u.imag, u.real])
 
