@@ -255,12 +255,12 @@ class _Period(eqx.Module):
     done: Array
 
 
-@ft.partial(jax.jit, static_argnums=2)
-def period(z0, flow: Flow, keep_samples: bool = True):
+@ft.partial(jax.jit, static_argnums=(2, 3))
+def period(z0, flow: Flow, keep_samples: bool = True, sample_tangents: bool = True):
     """One period of the stick-slip flow from `z0` at phase 0: the quantity and the
-    stroke sampled at the grid's phases (`samples x 2`), the state after the period (NaN
-    past `MAX_SEGMENTS` segments), the number of transitions and the largest |stroke| at
-    a transition."""
+    stroke sampled at the grid's phases (`samples x 2`; without their derivatives unless
+    `sample_tangents`), the state after the period (NaN past `MAX_SEGMENTS` segments),
+    the number of transitions and the largest |stroke| at a transition."""
     dtype = z0.dtype
     plant, modes = flow.plant, flow.modes
     samples = modes[0].powers.shape[0] - 1
@@ -272,7 +272,8 @@ def period(z0, flow: Flow, keep_samples: bool = True):
     def body(state: _Period):
         segment = state.segment
         mode = _select(segment.sign == _STICK, modes[1], modes[0])
-        sampled = segment if keep_samples else jax.lax.stop_gradient(segment)
+        tangents = keep_samples and sample_tangents
+        sampled = segment if tangents else jax.lax.stop_gradient(segment)
         values = _projections(sampled, mode, plant, grid, phasors)
         fixed = jax.lax.stop_gradient((segment, mode, plant, values))
         seg, fixed_values = fixed[0], fixed[3]

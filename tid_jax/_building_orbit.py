@@ -23,6 +23,7 @@ _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 _BISECTIONS = 24
 CHUNK = 2  # orbits solved together (vectorised) in a batch
 _WARM_CHORDS = 6  # chord steps from a warm start before Newton's from the start again
+_ROUNDS = 2  # rounds of Newton steps, each followed by chord steps
 
 
 def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
@@ -68,12 +69,26 @@ def period_samples(z, pl, fl, settings: SolverSettings):
     return smoothed_period(z, pl, settings)
 
 
+def _record(z, pl, fl, settings: SolverSettings):
+    """The period from `z`: its end, and (without derivatives) its samples, transitions
+    and largest stroke at a transition."""
+    if settings.exact_friction:
+        values, z_end, transitions, events = period(z, fl, sample_tangents=False)
+    else:
+        values, z_end, transitions, events = smoothed_period(z, pl, settings)
+    return z_end, jax.lax.stop_gradient((values, transitions, events, z))
+
+
 class _Newton(eqx.Module):
     z: Float[Array, " s"]
     monodromy: Float[Array, "s s"]
     lu: tuple  # LU factors of the fixed-point matrix held by the chord iterations
-    residual: Float[Array, ""]
+    residual: Float[Array, ""]  # inf until the iterations are done
     steps: Int[Array, ""]
+    # the last period computed: its samples, transitions and largest stroke at one, its
+    # start and |end - start|
+    record: tuple
+    checked: Float[Array, ""]
 
 
 def _limited(z, update):
@@ -89,47 +104,57 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
     monodromy matrix by forward derivatives of the period map (the stuck stroke's family
     of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
     held, each one period without tangents, until the residual is within `tol` or
-    twice `settings.max_newton_steps` steps in all. Given a `monodromy` (of a nearby
-    orbit: a warm start), up to `_WARM_CHORDS` chord steps with it come first, and the
-    Newton steps start again from `z0` only where they did not converge."""
+    after `settings.max_newton_steps` of them; then, where not done, all that again
+    (`_ROUNDS` in all). Given a `monodromy` (of a nearby orbit: a warm start), up to
+    `_WARM_CHORDS` chord steps with it come first, and the Newton steps start again from
+    `z0` only where they did not converge."""
     basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
-    end = lambda z: period_end(z, pl, fl, settings)
+    record = lambda z: _record(z, pl, fl, settings)
 
     def newton(state):
-        z_end, monodromy = jax.vmap(lambda t: jax.jvp(end, (state.z,), (t,)),
-                                    out_axes=(None, 1))(basis)
+        z_end, monodromy, kept = jax.vmap(
+            lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
+            out_axes=(None, 1, None))(basis)
         lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
-        return _step(state, z_end, monodromy, lu)
+        return _step(state, z_end, kept, monodromy, lu)
 
     def chord(state):
-        return _step(state, end(state.z), state.monodromy, state.lu)
+        return _step(state, *record(state.z), state.monodromy, state.lu)
 
-    def _step(state, z_end, monodromy, lu):
+    def _step(state, z_end, kept, monodromy, lu):
         residual = z_end - state.z
         value = jnp.where(jnp.all(jnp.isfinite(residual)), jnp.max(jnp.abs(residual)), jnp.inf)
         done = value <= tol
         update = jax.scipy.linalg.lu_solve(lu, jnp.where(jnp.isfinite(residual), residual, 0.0))
         return _Newton(jnp.where(done, state.z, _limited(state.z, update)), monodromy, lu,
-                       jnp.where(done, value, jnp.inf), state.steps + 1)
+                       jnp.where(done, value, jnp.inf), state.steps + 1, kept, value)
 
     def until(limit):
         return lambda state: (state.residual > tol) & (state.steps < limit)
 
     s = z0.shape[0]
     eye = jnp.eye(s, dtype=z0.dtype)
+    samples = settings.samples
+    empty = (jnp.full((samples, 2), jnp.nan, z0.dtype), jnp.zeros((), int),
+             jnp.zeros((), z0.dtype), z0)
     start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype),
                     jax.scipy.linalg.lu_factor(eye), jnp.asarray(jnp.inf, z0.dtype),
-                    jnp.zeros((), int))
+                    jnp.zeros((), int), empty, jnp.asarray(jnp.inf, z0.dtype))
     if monodromy is not None:
         warm = _Newton(z0, monodromy, jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy)),
-                       start.residual, start.steps)
+                       start.residual, start.steps, empty, start.checked)
         usable = jnp.all(jnp.isfinite(monodromy))
         warm = jax.lax.while_loop(until(jnp.where(usable, _WARM_CHORDS, 0)), chord, warm)
         cold = eqx.tree_at(lambda n: n.steps, start, warm.steps)
         start = jax.tree.map(lambda a, b: jnp.where(warm.residual <= tol, a, b), warm, cold)
-    # (two loops, not a switch in one: in a batch a switch would run both branches)
-    state = jax.lax.while_loop(until(start.steps + newton_steps), newton, start)
-    return jax.lax.while_loop(until(2 * settings.max_newton_steps + start.steps), chord, state)
+    # (loops, not a switch in one: in a batch a switch would run both branches) Where the
+    # chord steps stall (a period map with corners, as of backlash), Newton's again.
+    state = start
+    for _ in range(_ROUNDS):
+        state = jax.lax.while_loop(until(state.steps + newton_steps), newton, state)
+        state = jax.lax.while_loop(until(state.steps + settings.max_newton_steps), chord,
+                                   state)
+    return state
 
 
 class BuildingOrbit(eqx.Module):
@@ -183,13 +208,14 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
         if cold is not None:
             z = jax.lax.cond(cold, linear_start, lambda: z)
     newton = _newton(z, pl, fl, settings, tol, newton_steps, monodromy)
-    values, z_end, transitions, stroke_events = period_samples(newton.z, pl, fl, settings)
-    residual = jnp.max(jnp.abs(z_end - newton.z))
+    # the last period the iterations computed: from the orbit's state where they are done
+    values, transitions, stroke_events, state = newton.record
+    residual = newton.checked
     unit_q, unit_r = projection_units(system, quantity, amplitude, omega)
     floquet = jnp.max(jnp.abs(eigenvalues(moving_part(newton.monodromy))))
     converged = (residual <= 10 * tol) & jnp.all(jnp.isfinite(values))
     return BuildingOrbit(
-        state=newton.z,
+        state=state,
         response_max=peak_of(values[:, 0]) * unit_q,
         # every extremum of a rigid device's stroke that has events is at one (r' = 0)
         # or on a stuck segment, where the samples hold it
