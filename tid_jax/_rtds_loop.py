@@ -55,36 +55,67 @@ class Point(eqx.Module):
 # Numerical substructure ------------------------------------------------------------------
 
 
-def _numerical_field(plan: Plan, system: TIDSystem, point: Point, t, z, force):
-    """Time derivative of the numerical substructure with the fed-back `force` held.
-    Error feedback, eq. (16): z = (x, x', y, y'). Conventional, eqs. (13)-(14):
-    z = (x, x', y), y' solved from c (y' - x') + k (y - x) = -f_s."""
-    forcing = point.amplitude * jnp.sin(point.omega * t)
-    mass, stiffness, damping = system.host_mass, system.host_stiffness, system.host_damping
-    k, c = system.tid_stiffness, system.tid_damping
-    x, v, y = z[0], z[1], z[2]
-    if plan.scheme == "error_feedback":
-        w = z[3]
-        spring = c * (v - w) + k * (x - y)
-        dv = (forcing - damping * v - stiffness * x - spring) / mass
-        dw = (spring - force) / point.guessed_inertance  # b_g y'' + c(y'-x') + k(y-x) = -e
-        return jnp.stack([v, dv, w, dw])
-    w = v - (k * (y - x) + force) / c
-    dv = (forcing - damping * v - stiffness * x - force) / mass  # the host feels f_s
-    return jnp.stack([v, dv, w])
+class HostModel(eqx.Module):
+    """The numerical substructure of the single-storey host: the host and the TID's spring
+    and damper (and b_g for error feedback); `system` is the emulated `TIDSystem`, whose
+    device terms are the physical device's. What the loop asks of a numerical model:
+    `field`, `interface_rate`, `interface`, `outputs` and `linear`."""
+
+    system: TIDSystem
+
+    def field(self, plan: Plan, point: Point, t, z, force):
+        """Time derivative of the numerical substructure with the fed-back `force` held.
+        Error feedback, eq. (16): z = (x, x', y, y'). Conventional, eqs. (13)-(14):
+        z = (x, x', y), y' solved from c (y' - x') + k (y - x) = -f_s."""
+        system = self.system
+        forcing = point.amplitude * jnp.sin(point.omega * t)
+        mass, stiffness, damping = system.host_mass, system.host_stiffness, system.host_damping
+        k, c = system.tid_stiffness, system.tid_damping
+        x, v, y = z[0], z[1], z[2]
+        if plan.scheme == "error_feedback":
+            w = z[3]
+            spring = c * (v - w) + k * (x - y)
+            dv = (forcing - damping * v - stiffness * x - spring) / mass
+            dw = (spring - force) / point.guessed_inertance  # b_g y'' + c(y'-x') + k(y-x) = -e
+            return jnp.stack([v, dv, w, dw])
+        w = v - (k * (y - x) + force) / c
+        dv = (forcing - damping * v - stiffness * x - force) / mass  # the host feels f_s
+        return jnp.stack([v, dv, w])
+
+    def interface(self, z):
+        """The interface's displacement y."""
+        return z[2]
+
+    def interface_rate(self, plan: Plan, point: Point, t, z, force):
+        return self.field(plan, point, t, z, force)[2]
+
+    def outputs(self, plan: Plan, point: Point, t, z, force):
+        """The measured pair: the host's x and the interface's y."""
+        return jnp.stack([z[0], z[2]])
+
+    def linear(self, plan: Plan, point: Point, times):
+        """The frictionless whole system's steady state at `times`: the numerical
+        substructure's states (rows) and the interface's y, y', y'' (rows)."""
+        receptance = linear_receptance(self.system, point.omega)
+        jw = 1j * point.omega
+        phase = point.amplitude * jnp.exp(jw * times)
+        host, inerter = receptance.host * phase, receptance.inerter * phase
+        rows = jnp.stack([host.imag, (jw * host).imag, inerter.imag, (jw * inerter).imag,
+                          (jw**2 * inerter).imag])
+        return (rows[:4] if plan.scheme == "error_feedback" else rows[:3]), rows[2:]
 
 
-def _interface_kinematics(plan, system, point, t, z, force):
+def _interface_kinematics(plan, model, point, t, z, force):
     """(y, y', y'') of the numerical substructure at time `t`, the force held."""
 
     def field(s, state):
-        return _numerical_field(plan, system, point, s, state, force)
+        return model.field(plan, point, s, state, force)
 
     def rate(s, state):  # y'
-        return field(s, state)[2]
+        return model.interface_rate(plan, point, s, state, force)
 
     _, acceleration = jax.jvp(rate, (t, z), (jnp.ones_like(t), field(t, z)))
-    return jnp.stack([z[2], rate(t, z), acceleration])
+    return jnp.stack([model.interface(z), rate(t, z), acceleration])
 
 
 def _rk4(field, t, state, dt, substeps: int):
@@ -173,15 +204,12 @@ def _physical_field(system, point, s, state, actuator):
     return jnp.stack([du, (_spring_force(system, position, u) - rest) / system.inertance])
 
 
-def _linear_kinematics(system, point, times):
-    """Frictionless whole-system steady state at `times`: rows x, x', y, y', y''."""
-    receptance = linear_receptance(system, point.omega)
-    jw = 1j * point.omega
-    phase = point.amplitude * jnp.exp(jw * times)
-    host, inerter = receptance.host * phase, receptance.inerter * phase
-    return jnp.stack(
-        [host.imag, (jw * host).imag, inerter.imag, (jw * inerter).imag, (jw**2 * inerter).imag]
-    )
+def first_harmonic_phase(samples):
+    """Phase of the first harmonic of samples over one period from phase 0 (the last
+    axis), rad: `X sin(theta + phase)`."""
+    theta = 2 * jnp.pi * jnp.arange(samples.shape[-1]) / samples.shape[-1]
+    return jnp.arctan2(jnp.sum(samples * jnp.cos(theta), axis=-1),
+                       jnp.sum(samples * jnp.sin(theta), axis=-1))
 
 
 # One test --------------------------------------------------------------------------------
@@ -266,37 +294,37 @@ def _timing(plan: Plan, controller: Controller, point: Point) -> _Timing:
     )
 
 
-def _initial_loop(plan: Plan, controller: Controller, system: TIDSystem,
-                  point: Point) -> _Loop:
+def _initial_loop(plan: Plan, controller: Controller, model, point: Point) -> _Loop:
     """The frictionless steady state, with the matching history for t < 0."""
     dt, length, dtype = controller.dt, plan.buffer_length, point.omega.dtype
-    start = _linear_kinematics(system, point, jnp.zeros((), dtype))
-    z0 = start[:4] if plan.scheme == "error_feedback" else start[:3]
+    z0, start = model.linear(plan, point, jnp.zeros((), dtype))
+    interface = lambda times: model.linear(plan, point, times)[1]
     sample_times = (jnp.arange(length) - length) * dt  # slot n mod L holds sample n < 0
     past_times = -jnp.arange(1, MAX_PREDICTION_ORDER + 1) * dt
     delay = point.delay_samples * dt
-    first = jnp.abs(jnp.stack([z0[0], z0[2]]))
+    held = _fed_back_force(plan, controller, point, start,
+                           _inerter_force(model.system, point, start))
+    first = jnp.abs(model.outputs(plan, point, jnp.zeros((), dtype), z0, held))
     zero = jnp.zeros((), dtype)
     return _Loop(
         z=z0,
-        held=_fed_back_force(plan, controller, point, start[2:],
-                             _inerter_force(system, point, start[2:])),
-        commands=_linear_kinematics(system, point, sample_times + point.horizon)[2:].T,
-        past=_linear_kinematics(system, point, past_times)[2:].T,  # samples n-1, n-2, ...
-        actuator=_linear_kinematics(system, point, -dt - delay + point.horizon)[2:],
-        physical=start[2:4],
+        held=held,
+        commands=interface(sample_times + point.horizon).T,
+        past=interface(past_times).T,  # samples n-1, n-2, ...
+        actuator=interface(-dt - delay + point.horizon),
+        physical=start[:2],
         diverged=jnp.zeros((), bool),
         stats=_Stats(jnp.zeros(2, dtype), jnp.zeros(2, dtype), jnp.stack([first, first]),
                      _Harmonics(*[zero] * 7)),
     )
 
 
-def _actuate(plan, controller, system, point, timing: _Timing, n, loop: _Loop):
+def _actuate(plan, controller, model, point, timing: _Timing, n, loop: _Loop):
     """The controller's command at sample `n` (predicted if asked) into the delay line,
     and the actuator's motion after the delay and the lag: `(commands, past,
     actuator)`."""
     t = n * controller.dt
-    current = _interface_kinematics(plan, system, point, t, loop.z, loop.held)
+    current = _interface_kinematics(plan, model, point, t, loop.z, loop.held)
     samples = jnp.concatenate([current[None], loop.past], axis=0)
     command = jnp.select(
         [controller.prediction == 1, controller.prediction == 2],
@@ -312,14 +340,14 @@ def _actuate(plan, controller, system, point, timing: _Timing, n, loop: _Loop):
     return commands, samples[:-1], actuator
 
 
-def _record(stats: _Stats, z, t, point: Point, timing: _Timing) -> _Stats:
-    """`stats` after the sample at time `t` of the state `z`."""
+def _record(stats: _Stats, outputs, t, point: Point, timing: _Timing) -> _Stats:
+    """`stats` after the sample at time `t` of the measured `outputs` (x, y)."""
     in_window = t > timing.window_start
     in_previous = (t > timing.previous_start) & ~in_window
-    values = jnp.abs(jnp.stack([z[0], z[2]]))
+    values = jnp.abs(outputs)
     candidates = jnp.maximum(values, parabola_top(stats.recent[1], stats.recent[0], values))
     sine, cosine = jnp.sin(point.omega * t), jnp.cos(point.omega * t)
-    x, y = z[0], z[2]
+    x, y = outputs
     terms = _Harmonics(sine * sine, cosine * cosine, sine * cosine, x * sine, x * cosine,
                        y * sine, y * cosine)
     return _Stats(
@@ -332,36 +360,38 @@ def _record(stats: _Stats, z, t, point: Point, timing: _Timing) -> _Stats:
     )
 
 
-def _step(plan, controller, system, point, timing: _Timing, n, loop: _Loop) -> _Loop:
+def _step(plan, controller, model, point, timing: _Timing, n, loop: _Loop) -> _Loop:
     """The test from sample `n` to sample `n + 1`."""
     dt = controller.dt
     t = n * dt
-    commands, past, actuator = _actuate(plan, controller, system, point, timing, n, loop)
+    device = model.system
+    commands, past, actuator = _actuate(plan, controller, model, point, timing, n, loop)
     # The physical device's force and the signal fed back, held over the sample.
     if plan.compliant:
-        measured = (system.terminal_mass * actuator[2]
-                    + _spring_force(system, actuator[0], loop.physical[0]))
+        measured = (device.terminal_mass * actuator[2]
+                    + _spring_force(device, actuator[0], loop.physical[0]))
     else:
-        measured = _inerter_force(system, point, actuator)
+        measured = _inerter_force(device, point, actuator)
     force = _fed_back_force(plan, controller, point, actuator, measured)
 
     def field(s, state):
         numerical, physical = state
-        d_numerical = _numerical_field(plan, system, point, s, numerical, force)
+        d_numerical = model.field(plan, point, s, numerical, force)
         if plan.compliant:
-            return d_numerical, _physical_field(system, point, s - t, physical, actuator)
+            return d_numerical, _physical_field(device, point, s - t, physical, actuator)
         return d_numerical, jnp.zeros_like(physical)
 
     z_new, physical_new = _rk4(field, t, (loop.z, loop.physical), dt, plan.substeps)
+    outputs = model.outputs(plan, point, t + dt, z_new, force)
     inside = (
         jnp.all(jnp.isfinite(z_new))
         & jnp.all(jnp.isfinite(physical_new))
-        & (jnp.abs(z_new[0]) < point.bound)
-        & (jnp.abs(z_new[2]) < point.bound)
+        & jnp.all(jnp.abs(outputs) < point.bound)
         & (jnp.abs(physical_new[0]) < point.bound)
     )
     diverged = loop.diverged | ~inside
     z = jnp.where(diverged, loop.z, z_new)
+    outputs = jnp.where(diverged, model.outputs(plan, point, t + dt, z, force), outputs)
     return _Loop(
         z=z,
         held=jnp.where(diverged, loop.held, force),
@@ -370,17 +400,16 @@ def _step(plan, controller, system, point, timing: _Timing, n, loop: _Loop) -> _
         actuator=actuator,
         physical=jnp.where(diverged, loop.physical, physical_new),
         diverged=diverged,
-        stats=_record(loop.stats, z, (n + 1) * dt, point, timing),
+        stats=_record(loop.stats, outputs, (n + 1) * dt, point, timing),
     )
 
 
-def _simulate_point(plan: Plan, controller: Controller, system: TIDSystem,
-                    point: Point) -> _Measured:
+def _simulate_point(plan: Plan, controller: Controller, model, point: Point) -> _Measured:
     timing = _timing(plan, controller, point)
     loop = jax.lax.fori_loop(
         0, controller.n_steps,
-        lambda n, loop: _step(plan, controller, system, point, timing, n, loop),
-        _initial_loop(plan, controller, system, point),
+        lambda n, loop: _step(plan, controller, model, point, timing, n, loop),
+        _initial_loop(plan, controller, model, point),
     )
     stats = loop.stats
     x_phase, y_phase = stats.harmonics.phases()
@@ -396,7 +425,8 @@ def _simulate_point(plan: Plan, controller: Controller, system: TIDSystem,
 
 
 @compiled
-def simulate_batch(plan: Plan, controller: Controller, system: TIDSystem,
-                   points: Point) -> _Measured:
-    """The tests at every point of the batch `points`, as one vmapped loop."""
-    return jax.vmap(lambda point: _simulate_point(plan, controller, system, point))(points)
+def simulate_batch(plan: Plan, controller: Controller, model, points: Point) -> _Measured:
+    """The tests at every point of the batch `points`, as one vmapped loop, of the
+    numerical substructure `model` (`HostModel` or a building's) whose `system`'s device
+    is the physical one."""
+    return jax.vmap(lambda point: _simulate_point(plan, controller, model, point))(points)

@@ -21,7 +21,18 @@ from ._cache import compiled
 from ._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from ._linear import linear_receptance
 from ._response import point_response
-from ._rtds_loop import MAX_PREDICTION_ORDER, Controller, Plan, Point, simulate_batch
+from ._building import BuildingTID, Quantity
+from ._building_orbit import building_settings
+from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
+from ._rtds_loop import (
+    MAX_PREDICTION_ORDER,
+    Controller,
+    HostModel,
+    Plan,
+    Point,
+    first_harmonic_phase,
+    simulate_batch,
+)
 from ._settings import SolverSettings
 from ._system import TIDSystem
 
@@ -96,12 +107,6 @@ class SubstructuringStability(eqx.Module):
     largest_stable_delay: Float[Array, " guesses"]
 
 
-def _first_harmonic_phase(samples):
-    """Phase of the first harmonic of samples over one period from phase 0, rad."""
-    theta = 2 * jnp.pi * jnp.arange(samples.shape[-1]) / samples.shape[-1]
-    return jnp.arctan2(jnp.sum(samples * jnp.cos(theta)), jnp.sum(samples * jnp.sin(theta)))
-
-
 class _Whole(eqx.Module):
     """The whole system's steady state: peaks (m) and first-harmonic phases (rad)."""
 
@@ -119,8 +124,8 @@ def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSett
         return _Whole(
             x_max=x_max,
             y_max=y_max,
-            x_phase=_first_harmonic_phase(orbit.x_samples),
-            y_phase=_first_harmonic_phase(orbit.y_samples),
+            x_phase=first_harmonic_phase(orbit.x_samples),
+            y_phase=first_harmonic_phase(orbit.y_samples),
             converged=orbit.converged,
         )
 
@@ -130,13 +135,14 @@ def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSett
 # Public functions ------------------------------------------------------------------------
 
 
-def _planned_tests(system, omega, amplitude, *, scheme, delay, guessed_inertance,
+def _planned_tests(system, omega, amplitude, *, scale, scheme, delay, guessed_inertance,
                    guessed_force, prediction, prediction_order, prediction_horizon,
                    actuator_lag, sample_rate, substeps, periods,
                    measure_periods, divergence_factor, growth_tolerance):
     """The checked options of `simulate_substructuring` as the static `Plan`, the
     `Controller` and the flat batch of `Point`s, with the broadcast grid's shape and
-    arrays `(omega, amplitude, delay, guessed_inertance)`."""
+    arrays `(omega, amplitude, delay, guessed_inertance)`; `scale(omegas)`: the size of
+    the motion per unit amplitude that a diverged test leaves (m)."""
     choice("scheme", scheme, SCHEMES)
     choice("guessed_force", guessed_force, GUESSED_FORCES)
     if prediction is not None:
@@ -154,20 +160,15 @@ def _planned_tests(system, omega, amplitude, *, scheme, delay, guessed_inertance
     if factor <= 1:
         raise ValueError(f"divergence_factor must be > 1, got {divergence_factor!r}")
     growth_tolerance = real_scalar("growth_tolerance", growth_tolerance, "positive")
-    if scheme == "conventional" and not float(system.tid_damping) > 0:
-        raise ValueError(
-            "system.tid_damping must be positive for the conventional scheme (it solves y' "
-            f"from the damper), got {float(system.tid_damping)!r}"
-        )
     n_steps, horizon = _duration(arrays, rate, periods, prediction, prediction_horizon)
-    points = _points(system, shape, arrays, horizon, rate=rate, lag=lag, factor=factor,
+    points = _points(scale, shape, arrays, horizon, rate=rate, lag=lag, factor=factor,
                      measure_periods=measure_periods)
     # One spare slot beyond the two read (against rounding of the delay), rounded up to a
     # power of two (at least 32) so that nearby delays share the compiled code.
     needed = int(math.floor(float(np.max(points.delay_samples)))) + 3
     plan = Plan(
         scheme=scheme,
-        compliant=not system.rigid,
+        compliant=bool(system.compliant),
         substeps=substeps,
         buffer_length=max(32, 1 << (needed - 1).bit_length()),
     )
@@ -232,15 +233,20 @@ def _duration(arrays, rate, periods, prediction, prediction_horizon):
     return n_steps, np.asarray(horizon)
 
 
-def _points(system, shape, arrays, horizon, *, rate, lag, factor, measure_periods) -> Point:
+def _host_scale(system: TIDSystem, omegas) -> np.ndarray:
+    """The larger of the frictionless |X|, |Y| per unit force and 1 / K."""
+    receptance = linear_receptance(system, omegas)
+    linear = np.maximum(np.abs(np.asarray(receptance.host)), np.abs(np.asarray(receptance.inerter)))
+    return np.maximum(linear, 1 / float(system.host_stiffness))
+
+
+def _points(scale, shape, arrays, horizon, *, rate, lag, factor, measure_periods) -> Point:
     """The flat batch of tests over the broadcast grid."""
     omegas, amplitudes, delays, guesses, horizons = (
         np.broadcast_to(a, shape).reshape(-1)
         for a in (*arrays, np.broadcast_to(horizon, arrays[2].shape))
     )
-    receptance = linear_receptance(system, omegas)
-    linear = np.maximum(np.abs(np.asarray(receptance.host)), np.abs(np.asarray(receptance.inerter)))
-    scale = np.maximum(linear, 1 / float(system.host_stiffness)) * amplitudes
+    scale = scale(omegas) * amplitudes
     dtype = jnp.result_type(float)
     return Point(
         omega=jnp.asarray(omegas, dtype),
@@ -255,10 +261,11 @@ def _points(system, shape, arrays, horizon, *, rate, lag, factor, measure_period
 
 
 def simulate_substructuring(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     omega: ArrayLike,
     amplitude: ArrayLike,
     *,
+    quantity: Quantity | None = None,
     scheme: str = "error_feedback",
     delay: ArrayLike = DEFAULT_DELAY,
     guessed_inertance: ArrayLike | None = None,
@@ -298,9 +305,15 @@ def simulate_substructuring(
 
     - `system`: the emulated `TIDSystem`; its inertance, friction and device terms
       (`parasitic_damping`, `terminal_mass`, `series_stiffness`, `backlash`) are the
-      physical device's.
+      physical device's. Or a `BuildingTID` (smoothed friction): the numerical
+      substructure is the structure with the spring and damper (`_building_rtds`), the
+      interface the stroke r (y below), and x is `quantity` (default: the top floor's
+      displacement); a terminal mass on a floor couples its motion to the floor's, and
+      that part stays numerical.
     - `omega`: forcing circular frequency, rad/s.
-    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N.
+    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (a building's load: N or
+      m/s2).
+    - `quantity`: a building's measured `Quantity` (None for a `TIDSystem`).
     - `scheme`: "conventional" (feed back f_s, eqs. (13)-(14): an advanced equation,
       unstable for any delay) or "error_feedback" (feed back e = f_s - b_g y*'',
       eq. (16)).
@@ -331,7 +344,8 @@ def simulate_substructuring(
     - `reference`: also solve the whole system (`frequency_response`'s model) and report
       amplitude and phase errors; a compliant device is compared with the whole system
       of its rigid counterpart (no series stiffness or backlash), the design the test
-      checks.
+      checks. A building is compared with its own whole system (`building_response`'s
+      model, the compliant device included).
     - `settings`: `SolverSettings` of that whole-system solve.
 
     `omega`, `amplitude`, `delay` and `guessed_inertance` broadcast against each other;
@@ -339,17 +353,34 @@ def simulate_substructuring(
 
     **Returns:** a `Substructuring`.
     """
-    check_concrete_system(system)
-    if system.exact_friction:
-        raise ValueError(
-            "simulate_substructuring integrates the test in real time with fixed steps and "
-            "needs smoothed friction: give system.friction_width > 0 or None, not 0 (exact "
-            "Coulomb friction)"
-        )
+    building = isinstance(system, BuildingTID)
+    if building:
+        quantity = Quantity() if quantity is None else quantity
+        quantity.floor_of(system.floors)
+        check_building_test(system, scheme)
+        model = BuildingModel(system, quantity)
+        scale = lambda omegas: building_scale(system, quantity, omegas)
+    else:
+        check_concrete_system(system)
+        if quantity is not None:
+            raise ValueError("quantity is for a BuildingTID; a TIDSystem measures x and y")
+        if system.exact_friction:
+            raise ValueError(
+                "simulate_substructuring integrates the test in real time with fixed steps "
+                "and needs smoothed friction: give system.friction_width > 0 or None, not 0 "
+                "(exact Coulomb friction)"
+            )
+        if scheme == "conventional" and not float(system.tid_damping) > 0:
+            raise ValueError(
+                "system.tid_damping must be positive for the conventional scheme (it solves "
+                f"y' from the damper), got {float(system.tid_damping)!r}"
+            )
+        model = HostModel(system)
+        scale = lambda omegas: _host_scale(system, omegas)
     if not isinstance(settings, SolverSettings):
         raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
     plan, controller, points, shape, arrays, growth_tolerance = _planned_tests(
-        system, omega, amplitude, scheme=scheme, delay=delay,
+        system, omega, amplitude, scale=scale, scheme=scheme, delay=delay,
         guessed_inertance=guessed_inertance, guessed_force=guessed_force,
         prediction=prediction, prediction_order=prediction_order,
         prediction_horizon=prediction_horizon, actuator_lag=actuator_lag,
@@ -357,11 +388,16 @@ def simulate_substructuring(
         substeps=substeps, periods=periods, measure_periods=measure_periods,
         divergence_factor=divergence_factor, growth_tolerance=growth_tolerance,
     )
-    measured = simulate_batch(plan, controller, system, points)
+    measured = simulate_batch(plan, controller, model, points)
     fields = {name: jnp.reshape(getattr(measured, name), shape)
               for name in ("x_max", "y_max", "x_phase", "y_phase", "diverged", "growth")}
     fields["stable"] = ~fields["diverged"] & (fields["growth"] <= 1 + growth_tolerance)
-    if reference:
+    if reference and building:
+        whole = building_reference(system, quantity, points.omega, points.amplitude,
+                                   building_settings(system, settings))
+        fields.update(_errors(fields, jax.tree.map(lambda v: jnp.reshape(v, shape),
+                                                   _Whole(*whole))))
+    elif reference:
         rigid = system.replace(series_stiffness=None, backlash=0.0)
         fields.update(_against_whole(rigid, points, shape, fields, settings))
     dtype = jnp.result_type(float)
@@ -383,6 +419,11 @@ def _against_whole(system, points: Point, shape, fields, settings) -> dict:
         system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype), settings
     )
     whole = jax.tree.map(lambda value: jnp.reshape(value[inverse.reshape(-1)], shape), whole)
+    return _errors(fields, whole)
+
+
+def _errors(fields, whole: _Whole) -> dict:
+    """The whole system's values and the test's errors against them."""
 
     def wrap(angle):
         return jnp.angle(jnp.exp(1j * angle))
