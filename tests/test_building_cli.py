@@ -114,10 +114,34 @@ def test_bad_building_configs_get_one_line_naming_the_key(tmp_path, change, mess
     assert not (tmp_path / "out" / "frf.json").exists()
 
 
-def test_commands_for_the_single_storey_host_refuse_a_structure(tmp_path):
-    status, _, stderr = run(["rtds", "--config", _config(tmp_path), "--out",
-                             tmp_path / "out"])
-    assert status == 2 and "[structure]" in stderr and len(stderr.strip().splitlines()) == 1
+def test_rtds_of_a_building_is_the_library_s_test(tmp_path):
+    import tid_jax as tj
+
+    text = CONFIG.replace('amplitudes = ["0.1g", 2.0]', 'amplitudes = ["0.1g"]')
+    out = tmp_path / "out"
+    status, stdout, stderr = run(["rtds", "--config", _config(tmp_path, text), "--out", out,
+                                  "--frequency-hz", "2.0", "--delay-ms", "5", "--periods",
+                                  "20", "--json", "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    system = tj.BuildingTID(
+        tj.Structure.shear_building([2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6],
+                                    damping_ratio=0.02),
+        275.0, 135.0, 1.0, 0.0, None, load="ground")
+    k, c = tj.first_mode_tunings(system)["den_hartog"]  # the command's default tuning
+    mine = tj.simulate_substructuring(system.replace(tid_stiffness=k, tid_damping=c),
+                                      2 * np.pi * 2.0, 0.980665, quantity=tj.Quantity("drift", 1),
+                                      delay=0.005, periods=20)
+    assert data["response_test"] == pytest.approx([float(mine.x_max)], rel=1e-9)
+    assert data["stroke_whole_m"] == pytest.approx([float(mine.reference_y_max)], rel=1e-9)
+    assert data["stable"] == [True] and data["response"]["describes"] == "storey 1 drift"
+    assert data["test"]["amplitude"] == pytest.approx(0.980665)
+    for name in ("rtds.csv", "rtds.json", "rtds.png", "rtds_config.toml"):
+        assert (out / name).stat().st_size > 0
+    # a building needs its amplitude: the ground motion's has no default
+    status, _, stderr = run(["rtds", "--config", _config(tmp_path, text.replace(
+        'amplitudes = ["0.1g"]\n', "")), "--out", tmp_path / "other"])
+    assert status == 2 and "amplitude" in stderr and len(stderr.strip().splitlines()) == 1
 
 
 def test_sensitivity_of_a_building_names_every_floor_and_storey(tmp_path):

@@ -106,7 +106,8 @@ def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
                  rows_sin=rows_sin,
                  width=system.width_at(amplitude, omega) / (omega * unit),
                  gap=system.backlash / unit,
-                 play_vector=jnp.concatenate([jnp.zeros(m), inverse @ system.play_direction()]) / omega**2,
+                 play_vector=jnp.concatenate([jnp.zeros(m),
+                                              inverse @ system.play_direction() / omega**2]),
                  stroke=system.floors)
 
 

@@ -17,13 +17,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ._building import BuildingTID, Quantity
+from ._building_orbit import building_settings
+from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
 from ._cache import compiled
 from ._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from ._linear import linear_receptance
 from ._response import point_response
-from ._building import BuildingTID, Quantity
-from ._building_orbit import building_settings
-from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
 from ._rtds_loop import (
     MAX_PREDICTION_ORDER,
     Controller,

@@ -313,22 +313,26 @@ def plot_retune_summary(
     return fig
 
 
-def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, title=None):
+_SUBSTRUCTURING_PANELS = (("(a) host structure, x", "peak displacement [mm]", 1e3),
+                          ("(b) TID (inerter terminal), y", "peak displacement [mm]", 1e3))
+
+
+def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, title=None,
+                                 panels=_SUBSTRUCTURING_PANELS):
     """The paper's Figure 14: peak host displacement x and inerter displacement y (m, drawn
     in mm) against forcing frequency (Hz), the whole system as a dashed line and each
     virtual substructuring test as markers. `tests` is a sequence of
     `(label, x_max, y_max, stable)` on the same frequencies; unstable points are left out
-    and marked by a cross on the frequency axis."""
+    and marked by a cross on the frequency axis. `panels`: each panel's title, y label
+    and the factor from SI to its unit (a building's quantity and stroke, say)."""
     frequencies_hz = np.asarray(frequencies_hz, dtype=float)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     markers = ("o", "s", "^", "D", "v")
-    for ax, whole, index, name in (
-        (axes[0], whole_x, 1, "(a) host structure, x"),
-        (axes[1], whole_y, 2, "(b) TID (inerter terminal), y"),
-    ):
+    for ax, whole, index, (name, ylabel, factor) in zip(
+            axes, (whole_x, whole_y), (1, 2), panels, strict=True):
         ax.plot(
             frequencies_hz,
-            1e3 * np.asarray(whole),
+            factor * np.asarray(whole),
             color="black",
             linestyle="--",
             linewidth=1.5,
@@ -336,7 +340,7 @@ def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, tit
         )
         for number, test in enumerate(tests):
             label, stable = test[0], np.asarray(test[3], dtype=bool)
-            values = 1e3 * np.asarray(test[index], dtype=float)
+            values = factor * np.asarray(test[index], dtype=float)
             ax.plot(
                 frequencies_hz[stable],
                 values[stable],
@@ -354,7 +358,7 @@ def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, tit
                     color="tab:red",
                     label=f"{label}: unstable",
                 )
-        ax.set(xlabel="forcing frequency [Hz]", ylabel="peak displacement [mm]", title=name)
+        ax.set(xlabel="forcing frequency [Hz]", ylabel=ylabel, title=name)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower center")

@@ -86,14 +86,14 @@ def building_inputs(inputs: dict) -> tuple[BuildingTID, Quantity, np.ndarray]:
     return system, quantity, amplitudes
 
 
-def _band(inputs: dict, system: BuildingTID) -> tuple[np.ndarray, np.ndarray]:
+def band(inputs: dict, system: BuildingTID) -> tuple[np.ndarray, np.ndarray]:
     first = system.structure.modes()[0][0] / (2 * math.pi)
     low, high = inputs.get("band_hz", [BUILDING_BAND[0] * first, BUILDING_BAND[1] * first])
     hz = np.linspace(low, high, inputs["n_frequencies"])
     return hz, 2 * math.pi * hz
 
 
-def _describe(system: BuildingTID, quantity: Quantity) -> str:
+def describe(system: BuildingTID, quantity: Quantity) -> str:
     floors = system.floors
     first = system.structure.natural_frequencies_hz()[0]
     where = "the ground" if system.inerter_floor == 0 else f"floor {system.inerter_floor}"
@@ -111,7 +111,7 @@ def _compliance(system: BuildingTID) -> str:
             f"{float(system.backlash):g} m")
 
 
-def _document(command, inputs, system, quantity, frequencies_hz, output, **results) -> dict:
+def document(command, inputs, system, quantity, frequencies_hz, output, **results) -> dict:
     s = system.structure
     return {
         "command": f"{PROG} {command}",
@@ -139,7 +139,7 @@ def _document(command, inputs, system, quantity, frequencies_hz, output, **resul
     }
 
 
-def _config(inputs, output, command):
+def save_config(inputs, output, command):
     data = _config_data({key: value for key, value in inputs.items()
                          if key != "amplitudes_given"})
     write_toml(output.path(f"{command}_config.toml"), data, comment=_config_comment(command))
@@ -149,10 +149,10 @@ def _begin(args, inputs: dict, doing: str):
     """A command's system, quantity, amplitudes, band (Hz, rad/s) and output folder, and
     its first message: `doing` (with {amplitudes} and {frequencies}) and the system."""
     system, quantity, amplitudes = building_inputs(inputs)
-    frequencies_hz, omegas = _band(inputs, system)
+    frequencies_hz, omegas = band(inputs, system)
     output = _Output(args)
     output.say(doing.format(amplitudes=amplitudes.size, frequencies=omegas.size)
-               + f"; {_describe(system, quantity)}")
+               + f"; {describe(system, quantity)}")
     return system, quantity, amplitudes, frequencies_hz, omegas, output
 
 
@@ -173,7 +173,7 @@ def run_frf(args, inputs: dict) -> int:
                 "transitions": int(response.transitions[i, j])}
                for i, a in enumerate(amplitudes) for j, f in enumerate(frequencies_hz)]
     save_records(output, "frf.csv", list(records[0]), records)
-    _config(inputs, output, "frf")
+    save_config(inputs, output, "frf")
     plot.save_figure(plot.plot_building_response(
         frequencies_hz, amplitudes, response.response_max, response.uncontrolled,
         ylabel=f"{quantity.describe(system.floors)} ({quantity.unit})"), output.path("frf.png"))
@@ -183,7 +183,7 @@ def run_frf(args, inputs: dict) -> int:
                 "stroke_cm": 100 * float(np.nanmax(response.stroke_max[i])),
                 "converged": f"{int(response.converged[i].sum())}/{omegas.size}"}
                for i, a in enumerate(amplitudes)]
-    data = _document("frf", inputs, system, quantity, frequencies_hz, output,
+    data = document("frf", inputs, system, quantity, frequencies_hz, output,
                      amplitudes=amplitudes.tolist(),
                      response_max=np.asarray(response.response_max).tolist(),
                      uncontrolled=np.asarray(response.uncontrolled).tolist(),
@@ -197,7 +197,7 @@ def run_frf(args, inputs: dict) -> int:
                shown(f"peak ({quantity.unit})", "peak", ".4g"),
                shown("/ uncontrolled", "ratio", ".3f"), shown("stroke (cm)", "stroke_cm", ".2f"),
                shown("converged", "converged", "s")]
-    title = f"Frequency response: {_describe(system, quantity)}"
+    title = f"Frequency response: {describe(system, quantity)}"
     return output.finish(data, title + "\n" + table(columns, summary))
 
 
@@ -219,14 +219,14 @@ def run_retune(args, inputs: dict) -> int:
                 "converged": bool(result.converged[i])}
                for i, a in enumerate(amplitudes)]
     save_records(output, "retune.csv", list(records[0]), records)
-    _config(inputs, output, "retune")
+    save_config(inputs, output, "retune")
     plot.save_figure(plot.plot_building_retune(
         amplitudes, {"retuned": result.peak, "first-mode Den Hartog": result.den_hartog_peak,
                      "first-mode H-infinity": result.h_infinity_peak},
         ylabel=f"peak {quantity.describe(system.floors)} ({quantity.unit})"),
         output.path("retune.png"))
     tunings = first_mode_tunings(system)
-    data = _document("retune", inputs, system, quantity, frequencies_hz, output,
+    data = document("retune", inputs, system, quantity, frequencies_hz, output,
                      first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
                                          for name, (k, c) in tunings.items()},
                      results=records)
@@ -239,7 +239,7 @@ def run_retune(args, inputs: dict) -> int:
                shown("Den Hartog", "den_hartog_peak", ".4g"),
                shown("H-infinity", "h_infinity_peak", ".4g"),
                shown("converged", "converged", "")]
-    title = f"Retuned per amplitude: {_describe(system, quantity)}"
+    title = f"Retuned per amplitude: {describe(system, quantity)}"
     return output.finish(data, title + "\n" + table(columns, records))
 
 
@@ -288,13 +288,13 @@ def run_sensitivity(args, inputs: dict) -> int:
                 "derivative_per_unit": elasticity * peak / value if value else 0.0,
                 "converged": bool(result.converged[0])})
     save_records(output, "sensitivity.csv", list(records[0]), records)
-    _config(inputs, output, "sensitivity")
+    save_config(inputs, output, "sensitivity")
     elasticities = np.asarray([result.elasticities[0] for result in results])
     plot.save_figure(plot.plot_building_elasticities(
         amplitudes, results[0].names, elasticities, xlabel=f"amplitude ({unit})",
         title=f"elasticities of the peak {quantity.describe(system.floors)}"),
         output.path("sensitivity.png"))
-    data = _document("sensitivity", inputs, system, quantity, frequencies_hz, output,
+    data = document("sensitivity", inputs, system, quantity, frequencies_hz, output,
                      tid_stiffness_N_per_m=float(system.tid_stiffness),
                      tid_damping_N_s_per_m=float(system.tid_damping), results=records)
     write_json(output.path("sensitivity.json"), data)
@@ -305,7 +305,7 @@ def run_sensitivity(args, inputs: dict) -> int:
     ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"])))
     title = (f"Elasticities of the peak (d ln peak / d ln p; damping matrix held), at "
              f"k = {float(system.tid_stiffness):.5g} N/m, c = "
-             f"{float(system.tid_damping):.5g} N s/m: {_describe(system, quantity)}")
+             f"{float(system.tid_damping):.5g} N s/m: {describe(system, quantity)}")
     return output.finish(data, title + "\n" + table(columns, ranked))
 
 
@@ -331,7 +331,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                 "given_ratio": float(given_ratio[i, j])}
                for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
     save_records(output, "robust.csv", list(records[0]), records)
-    _config(inputs, output, "robust")
+    save_config(inputs, output, "robust")
     nominal = scales.index(1.0)
     plot.save_figure(plot.plot_building_retune(
         amplitudes, {"robust": np.asarray(result.ratio)[:, nominal],
@@ -343,7 +343,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                "given_k_N_per_m": float(system.tid_stiffness),
                "given_c_N_s_per_m": float(system.tid_damping),
                "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False}
-    data = _document("robust", inputs, system, quantity, frequencies_hz, output,
+    data = document("robust", inputs, system, quantity, frequencies_hz, output,
                      structure_frequency_scales=[math.sqrt(s) for s in scales],
                      robust=summary, results=records)
     write_json(output.path("robust.json"), data)
@@ -357,5 +357,5 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
              f"{summary['c_N_s_per_m']:.5g} N s/m: worst {summary['worst_ratio']:.4f} of "
              f"the best (given tuning: {summary['given_worst_ratio']:.4f})"
              f"{'' if summary['converged'] else ' (search not converged)'}; "
-             f"{_describe(system, quantity)}")
+             f"{describe(system, quantity)}")
     return output.finish(data, title + "\n" + table(columns, records))

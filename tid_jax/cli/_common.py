@@ -276,18 +276,9 @@ class _Start(NamedTuple):
     output: "_Output"
 
 
-def _single_storey(inputs: dict, command: str) -> None:
-    """`CLIError` where a command that takes the single-storey host is given a
-    [structure]."""
-    if "structure" in inputs:
-        raise CLIError(f"{PROG} {command} takes a single-storey host; a [structure] is "
-                       f"taken by {PROG} frf, retune, sensitivity and robust")
-
-
 def _start(args) -> _Start:
     """The inputs of a command and what follows from them."""
     inputs = _inputs(args)
-    _single_storey(inputs, args.command)
     system = _system(inputs)
     check_steady_state_device(system, f"{PROG} {args.command}")
     frequencies_hz, omegas = _frequencies(inputs, system)

@@ -7,8 +7,10 @@ import numpy as np
 from .. import plot
 from .._io import write_json
 from .._substructuring import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
+from . import _building
 from ._arguments import _add_band_arguments, _add_output_arguments, _add_structure_arguments
 from ._common import (
+    RELATIVE_WIDTH,
     CLIError,
     _describe,
     _frequencies,
@@ -17,7 +19,6 @@ from ._common import (
     _Output,
     _read_config,
     _settings,
-    _single_storey,
     _system,
 )
 from ._tables import Shown, save_records, shown, table
@@ -53,7 +54,9 @@ def _add_rtds_parser(subparsers) -> None:
         "whole system (amplitude and phase errors) and reports unstable tests. The "
         "friction is smoothed (the default width 0.02 omega A/K unless --friction-width "
         "gives one). Prints a "
-        "table and saves rtds.csv, rtds.json and rtds.png to --out.",
+        "table and saves rtds.csv, rtds.json and rtds.png to --out. With a [structure]: the "
+        "structure, spring and damper numerical, the device along the stroke, the "
+        "[response] and the stroke compared (one --amplitude, N or m/s2).",
     )
     _add_structure_arguments(
         parser,
@@ -139,56 +142,66 @@ def _add_test_arguments(test) -> None:
     )
 
 
-def _run_rtds(args) -> int:
-    if args.amplitudes is None and not (args.config and "amplitudes" in _read_config(args.config)):
-        args.amplitudes = RTDS_AMPLITUDE
-    inputs = _inputs(args)
-    _single_storey(inputs, args.command)
-    if len(inputs["amplitudes"]) != 1:
-        raise CLIError(f"rtds takes one amplitude, got {inputs['amplitudes']}")
-    amplitude = inputs["amplitudes"][0]
-    delay = _number("delay_ms", args.delay_ms, "non-negative") / 1e3
+def _test_options(args, system, amplitude: float) -> dict:
+    """The test's options (SI) as the JSON reports them."""
     ratio = _number("guessed_inertance_ratio", args.guessed_inertance_ratio, "positive")
-    lag = _number("actuator_lag_ms", args.actuator_lag_ms, "non-negative") / 1e3
-    rate = _number("sample_rate", args.sample_rate, "positive")
-    system, settings = _system(inputs), _settings(inputs)
-    if "friction_width" not in inputs:
-        # the test runs in real time with fixed steps: the friction smoothed, at the
-        # relative width (exact Coulomb friction, the default elsewhere, needs events)
-        system = system.replace(friction_width=None)
-    frequencies_hz, omegas = _test_frequencies(args, inputs, system)
-    prediction = None if args.prediction == "none" else args.prediction
-    test = {
+    return {
         "scheme": args.scheme,
         "amplitude_N": amplitude,
-        "delay_s": delay,
+        "delay_s": _number("delay_ms", args.delay_ms, "non-negative") / 1e3,
         "guessed_inertance_kg": ratio * float(system.inertance + system.terminal_mass),
         "guessed_force": args.guessed_force,
         "prediction": args.prediction,
-        "actuator_lag_s": lag,
-        "sample_rate_Hz": rate,
+        "actuator_lag_s": _number("actuator_lag_ms", args.actuator_lag_ms, "non-negative") / 1e3,
+        "sample_rate_Hz": _number("sample_rate", args.sample_rate, "positive"),
         "periods": args.periods,
     }
+
+
+def _simulate(args, system, omegas, amplitude, test: dict, settings, **options):
+    return simulate_substructuring(
+        system,
+        omegas,
+        amplitude,
+        scheme=args.scheme,
+        delay=test["delay_s"],
+        guessed_inertance=test["guessed_inertance_kg"],
+        guessed_force=args.guessed_force,
+        prediction=None if args.prediction == "none" else args.prediction,
+        actuator_lag=test["actuator_lag_s"],
+        sample_rate=test["sample_rate_Hz"],
+        periods=args.periods,
+        settings=settings,
+        **options,
+    )
+
+
+def _run_rtds(args) -> int:
+    config = _read_config(args.config) if args.config else {}
+    if args.amplitudes is None and "amplitudes" not in config and "structure" not in config:
+        args.amplitudes = RTDS_AMPLITUDE
+    inputs = _inputs(args)
+    if "friction_width" not in inputs:
+        # the test runs in real time with fixed steps: the friction smoothed, at the
+        # relative width (exact Coulomb friction, the default elsewhere, needs events)
+        inputs["friction_width"] = RELATIVE_WIDTH
+    if len(inputs["amplitudes"]) != 1 or ("structure" in inputs
+                                          and "amplitudes_given" not in inputs):
+        raise CLIError(f"rtds takes one amplitude (--amplitude), got {inputs['amplitudes']}")
+    amplitude = inputs["amplitudes"][0]
+    if "structure" in inputs:
+        return _run_building_rtds(args, inputs, amplitude)
+    system, settings = _system(inputs), _settings(inputs)
+    frequencies_hz, omegas = _test_frequencies(args, inputs, _frequencies(inputs, system))
+    test = _test_options(args, system, amplitude)
+    delay, rate, ratio = test["delay_s"], test["sample_rate_Hz"], args.guessed_inertance_ratio
     output = _Output(args)
     output.say(
         f"substructuring test ({args.scheme}, delay {1e3 * delay:g} ms, b_g = {ratio:g} b, "
         f"prediction {args.prediction}) at {omegas.size} frequencies, A = {amplitude:g} N; "
         f"{_describe(system)}"
     )
-    result = simulate_substructuring(
-        system,
-        omegas,
-        amplitude,
-        scheme=args.scheme,
-        delay=delay,
-        guessed_inertance=test["guessed_inertance_kg"],
-        guessed_force=args.guessed_force,
-        prediction=prediction,
-        actuator_lag=lag,
-        sample_rate=rate,
-        periods=args.periods,
-        settings=settings,
-    )
+    result = _simulate(args, system, omegas, amplitude, test, settings)
     columns = _columns(result)
     records = [
         dict(zip(RTDS_COLUMNS, (float(f), amplitude,
@@ -220,10 +233,75 @@ def _run_rtds(args) -> int:
     return output.finish(data, title + "\n" + text)
 
 
-def _test_frequencies(args, inputs, system):
-    """The forcing frequencies in Hz and rad/s: --frequency-hz, or the band."""
+def _run_building_rtds(args, inputs: dict, amplitude: float) -> int:
+    """The test on a [structure]: x is the chosen response, y the stroke."""
+    system, quantity, _ = _building.building_inputs(inputs)
+    frequencies_hz, omegas = _test_frequencies(args, inputs, _building.band(inputs, system))
+    test = _test_options(args, system, amplitude)
+    unit = "m/s2" if system.load == "ground" else "N"
+    test["amplitude"] = test.pop("amplitude_N")  # in the JSON's "amplitude_unit"
+    output = _Output(args)
+    options = (f"({args.scheme}, delay {1e3 * test['delay_s']:g} ms, b_g = "
+               f"{args.guessed_inertance_ratio:g} (b + mt), prediction {args.prediction})")
+    case = f"A = {amplitude:g} {unit}; {_building.describe(system, quantity)}"
+    output.say(f"substructuring test {options} at {omegas.size} frequencies, {case}")
+    try:
+        result = _simulate(args, system, omegas, amplitude, test, _settings(inputs),
+                           quantity=quantity)
+    except ValueError as error:
+        raise CLIError(str(error)) from None
+    columns = {name: values for name, values in zip(
+        BUILDING_RTDS_COLUMNS[2:], _columns(result).values(), strict=True)}
+    records = [dict(zip(BUILDING_RTDS_COLUMNS, (float(f), amplitude, *(
+        columns[key][j] for key in BUILDING_RTDS_COLUMNS[2:])), strict=True))
+        for j, f in enumerate(frequencies_hz)]
+    save_records(output, "rtds.csv", BUILDING_RTDS_COLUMNS, records)
+    described = quantity.describe(system.floors)
+    panels = ((f"(a) {described}", f"peak [{quantity.unit}]", 1.0),
+              ("(b) TID stroke, r", "peak stroke [mm]", 1e3))
+    plot.save_figure(plot.plot_substructuring_response(
+        frequencies_hz, columns["response_whole"], columns["stroke_whole_m"],
+        [("test", columns["response_test"], columns["stroke_test_m"], columns["stable"])],
+        title=f"Virtual substructuring test, A = {amplitude:g} {unit}", panels=panels),
+        output.path("rtds.png"))
+    _building.save_config(inputs, output, "rtds")
+    data = _building.document("rtds", inputs, system, quantity, frequencies_hz, output,
+                               test=test, **columns)
+    write_json(output.path("rtds.json"), data)
+    rows = (shown("f [Hz]", "frequency_Hz", ".3f"),
+            shown(f"whole [{quantity.unit}]", "response_whole", ".4g"),
+            _if_stable(shown(f"test [{quantity.unit}]", "response_test", ".4g")),
+            _if_stable(shown("err [%]", "response_amplitude_error", ".2f", unit=0.01)),
+            shown("stroke whole [mm]", "stroke_whole_m", ".4f", unit=1e-3),
+            _if_stable(shown("stroke test [mm]", "stroke_test_m", ".4f", unit=1e-3)),
+            _if_stable(shown("err [%]", "stroke_amplitude_error", ".2f", unit=0.01)),
+            Shown("test", _outcome))
+    return output.finish(data, f"Substructuring test {options} against the whole building, "
+                         f"{case}\n" + table(rows, records))
+
+
+# a building's columns: the response (its unit in the JSON's "response") and the stroke
+BUILDING_RTDS_COLUMNS = (
+    "frequency_Hz",
+    "amplitude",
+    "response_whole",
+    "stroke_whole_m",
+    "response_test",
+    "stroke_test_m",
+    "response_amplitude_error",
+    "stroke_amplitude_error",
+    "response_phase_error_rad",
+    "stroke_phase_error_rad",
+    "stable",
+    "diverged",
+    "growth",
+)
+
+
+def _test_frequencies(args, inputs, band):
+    """The forcing frequencies in Hz and rad/s: --frequency-hz, or the `band`'s."""
     if args.frequency_hz is None:
-        return _frequencies(inputs, system)
+        return band
     if args.band_hz is not None:
         raise CLIError("give --frequency-hz or --band-hz, not both")
     frequencies_hz = np.asarray([_number("frequency_hz", f, "positive")
