@@ -311,6 +311,47 @@ def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction
         assert result.elasticities[0, result.names.index("amplitude")] == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("friction", [0.0, 135.0])
+def test_optimum_elasticities_are_differences_of_retunes(building, friction):
+    system = tj.BuildingTID(building, B, friction, 4e4, 500.0, load="ground")
+    result = tj.building_sensitivities(system, [1.0], optimum=True)
+    optimum = result.optimum
+    assert bool(optimum.converged[0]) and int(optimum.active[0]) == 2  # two equal peaks
+    M, K, C = _matrices(building)
+    step = 1e-2
+
+    def retuned(name, factor):
+        if name == "floor_mass_2":
+            mass = M.copy()
+            mass[1, 1] *= factor
+            changed = system.replace(structure=tj.Structure(mass, K, C))
+        elif name == "storey_stiffness_1":
+            stiffness = K.copy()
+            stiffness[0, 0] += (factor - 1) * (K[0, 0] + K[0, 1])
+            changed = system.replace(structure=tj.Structure(M, stiffness, C))
+        else:
+            changed = system.replace(**{name: friction * factor})
+        r = tj.retune_building(changed, [1.0], rtol=1e-10)
+        return np.log([r.peak[0], r.tid_stiffness[0], r.tid_damping[0]])
+
+    names = ["floor_mass_2", "storey_stiffness_1"] + (["friction_force"] if friction else [])
+    for name in names:
+        difference = (retuned(name, math.exp(step)) - retuned(name, math.exp(-step))) / (
+            2 * step)
+        j = result.names.index(name)
+        mine = [optimum.peak_elasticities[0, j], optimum.stiffness_elasticities[0, j],
+                optimum.damping_elasticities[0, j]]
+        np.testing.assert_allclose(mine, difference, atol=1e-3, err_msg=name)
+    # the optimum does not depend on the tuning it starts from; scaling the load and the
+    # friction together scales the response and leaves the optimal tuning
+    for name in ("tid_stiffness", "tid_damping"):
+        assert float(optimum.peak_elasticities[0, result.names.index(name)]) == 0.0
+    load = [result.names.index(name) for name in ("amplitude", "friction_force")]
+    assert float(np.sum(optimum.peak_elasticities[0, load])) == pytest.approx(1.0, abs=1e-6)
+    assert float(np.sum(optimum.stiffness_elasticities[0, load])) == pytest.approx(0.0,
+                                                                                  abs=1e-6)
+
+
 def test_robust_tuning_beats_each_amplitudes_own_in_the_worst_case(building):
     system = tj.BuildingTID(building, B, 0.05 * B * 9.81, 4e4, 500.0, load="ground")
     amplitudes = [0.5, 2.0]

@@ -2,6 +2,7 @@
 errors that name the key."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -177,6 +178,11 @@ def test_sensitivity_of_a_building_names_every_floor_and_storey(tmp_path):
         if record["value"]:
             assert record["derivative_per_unit"] == pytest.approx(
                 record["elasticity"] * record["peak"] / record["value"])
+    # and at the retuned optimum, which does not depend on the given tuning
+    optimum = data["optimum"][0]
+    assert optimum["converged"] and optimum["peak"] < records["amplitude"]["peak"]
+    assert records["tid_stiffness"]["optimum_elasticity"] == 0.0
+    assert all(math.isfinite(r["optimum_stiffness_elasticity"]) for r in records.values())
     for name in ("sensitivity.csv", "sensitivity.json", "sensitivity.png",
                  "sensitivity_config.toml"):
         assert (out / name).exists()

@@ -193,7 +193,7 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
                 grid[3][:count])
 
 
-def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:
+def tuned(system: BuildingTID, log_tuning) -> BuildingTID:
     k, c = jnp.exp(log_tuning)
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
 
@@ -238,7 +238,7 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
     log c) (`peak_derivatives`)."""
     log_tuning = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
     return peak_derivatives(system, quantity, amplitude, omega, state, settings, linear,
-                            lambda theta: (_tuned(system, log_tuning + theta), amplitude), 2)
+                            lambda theta: (tuned(system, log_tuning + theta), amplitude), 2)
 
 
 class BuildingRetune(eqx.Module):
@@ -286,13 +286,13 @@ class BandSearch:
         and the `Peak` of design `x`."""
         key = tuple(np.asarray(x[:2], float))
         if key not in self.seen:
-            tuned = _tuned(self.system, jnp.asarray(key))
-            band, values, gradients, ok = _evaluate(tuned, *self.args, self.start,
+            design = tuned(self.system, jnp.asarray(key))
+            band, values, gradients, ok = _evaluate(design, *self.args, self.start,
                                                     self.settings, self.linear)
             ok = bool(ok)
             if not ok and bool(jnp.all(jnp.isfinite(self.start[1]))):  # again, cold
                 band, values, gradients, ok = _evaluate(
-                    tuned, *self.args, no_start(tuned, self.args[2].shape[0]),
+                    design, *self.args, no_start(design, self.args[2].shape[0]),
                     self.settings, self.linear)
                 ok = bool(ok)
             if ok:

@@ -253,6 +253,9 @@ def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
               "parasitic_damping": (float(system.parasitic_damping), "N s/m"),
               "terminal_mass": (float(system.terminal_mass), "kg"),
               "amplitude": (None, amplitude_unit)}
+    if system.compliant:
+        values["series_stiffness"] = (float(system.series_stiffness), "N/m")
+        values["backlash"] = (float(system.backlash), "m")
     for i, mass in enumerate(np.diagonal(np.asarray(s.mass_matrix))):
         values[f"floor_mass_{i + 1}"] = (float(mass), "kg")
     for i, spring in enumerate(np.asarray(storey_stiffnesses(s.stiffness_matrix))):
@@ -260,10 +263,23 @@ def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
     return values
 
 
+def _optimum_fields(result, j: int) -> dict:
+    """A parameter's elasticities at the retuned optimum (NaN where not found)."""
+    o = result.optimum
+    if o is None:
+        return {}
+    return {"optimum_peak": float(o.peak[0]),
+            "optimum_elasticity": float(o.peak_elasticities[0, j]),
+            "optimum_stiffness_elasticity": float(o.stiffness_elasticities[0, j]),
+            "optimum_damping_elasticity": float(o.damping_elasticities[0, j]),
+            "optimum_converged": bool(o.converged[0])}
+
+
 def run_sensitivity(args, inputs: dict) -> int:
+    optimum = not args.no_optimum
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "sensitivities at {amplitudes} amplitude(s) over {frequencies} "
-        "frequencies, at the given tuning")
+        "frequencies, at the given tuning" + (" and at the optimum" if optimum else ""))
     unit = "m/s2" if system.load == "ground" else "N"
     parameters = _parameters(system, unit)
     with output.steps(amplitudes.size) as step:
@@ -271,7 +287,7 @@ def run_sensitivity(args, inputs: dict) -> int:
         for i, amplitude in enumerate(amplitudes):
             results.append(building_sensitivities(
                 system, [amplitude], quantity, omegas=omegas,
-                settings=SolverSettings(**inputs[SOLVER_TABLE])))
+                settings=SolverSettings(**inputs[SOLVER_TABLE]), optimum=optimum))
             step(f"amplitude {i + 1}/{amplitudes.size}")
     records = []
     for amplitude, result in zip(amplitudes, results, strict=True):
@@ -286,7 +302,7 @@ def run_sensitivity(args, inputs: dict) -> int:
                 "peak_frequency_hz": float(result.peak_omega[0]) / (2 * math.pi),
                 "elasticity": elasticity,
                 "derivative_per_unit": elasticity * peak / value if value else 0.0,
-                "converged": bool(result.converged[0])})
+                "converged": bool(result.converged[0]), **_optimum_fields(result, j)})
     save_records(output, "sensitivity.csv", list(records[0]), records)
     save_config(inputs, output, "sensitivity")
     elasticities = np.asarray([result.elasticities[0] for result in results])
@@ -294,14 +310,25 @@ def run_sensitivity(args, inputs: dict) -> int:
         amplitudes, results[0].names, elasticities, xlabel=f"amplitude ({unit})",
         title=f"elasticities of the peak {quantity.describe(system.floors)}"),
         output.path("sensitivity.png"))
+    optima = [{"amplitude": float(a), "k_N_per_m": float(r.optimum.tid_stiffness[0]),
+               "c_N_s_per_m": float(r.optimum.tid_damping[0]),
+               "peak": float(r.optimum.peak[0]), "active_peaks": int(r.optimum.active[0]),
+               "converged": bool(r.optimum.converged[0])}
+              for a, r in zip(amplitudes, results, strict=True) if r.optimum is not None]
     data = document("sensitivity", inputs, system, quantity, frequencies_hz, output,
-                     tid_stiffness_N_per_m=float(system.tid_stiffness),
-                     tid_damping_N_s_per_m=float(system.tid_damping), results=records)
+                    tid_stiffness_N_per_m=float(system.tid_stiffness),
+                    tid_damping_N_s_per_m=float(system.tid_damping), results=records,
+                    optimum=optima or None)
     write_json(output.path("sensitivity.json"), data)
     columns = [shown(f"A ({unit})", "amplitude", "g"), shown("parameter", "parameter", "s"),
                shown("value", "value", ".5g"), shown("unit", "unit", "s"),
                shown(f"peak ({quantity.unit})", "peak", ".4g"),
-               shown("elasticity", "elasticity", ".4f"), shown("converged", "converged", "")]
+               shown("elasticity", "elasticity", ".4f")]
+    if optimum:
+        columns += [shown("at optimum", "optimum_elasticity", ".4f"),
+                    shown("of k*", "optimum_stiffness_elasticity", ".4f"),
+                    shown("of c*", "optimum_damping_elasticity", ".4f")]
+    columns.append(shown("converged", "converged", ""))
     ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"])))
     title = (f"Elasticities of the peak (d ln peak / d ln p; damping matrix held), at "
              f"k = {float(system.tid_stiffness):.5g} N/m, c = "

@@ -68,8 +68,9 @@ def _add_sensitivity_parser(subparsers) -> None:
         "differentiation). Prints a table ranked by the host elasticity and saves "
         "sensitivity.csv, sensitivity.json, sensitivity_config.toml and, for several "
         "amplitudes, sensitivity.png to --out. With a [structure]: the elasticities of the "
-        "peak of the [response] quantity at the given tuning, in the TID's parameters, the "
-        "amplitude, every floor's mass and every storey's stiffness.",
+        "peak of the [response] quantity, in the TID's parameters, the amplitude, every "
+        "floor's mass and every storey's stiffness, at the given tuning and of the "
+        "retuned optimum's peak, k and c.",
     )
     _add_system_arguments(parser)
     parser.add_argument(
