@@ -106,10 +106,7 @@ def test_linear_steady_state_matches_the_dynamic_stiffness(building, layout, kin
 def test_one_storey_building_is_the_paper_system(system):
     omegas = np.linspace(0.85, 1.15, 7) * float(system.host_frequency)
     amplitudes = [100.0, 500.0, 3000.0]
-    host = tj.Structure([[float(system.host_mass)]], [[float(system.host_stiffness)]],
-                        [[float(system.host_damping)]])
-    building = tj.BuildingTID(host, system.inertance, system.friction_force,
-                              system.tid_stiffness, system.tid_damping)
+    building = tj.as_building(system)
     mine = tj.building_response(building, omegas, amplitudes)
     paper = tj.frequency_response(system, omegas, amplitudes)
     assert np.all(mine.converged) and np.all(paper.converged)

@@ -12,8 +12,8 @@ __version__ = "0.1.0"
 _API = {
     "_band": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_best_tunings": ("BestTunings", "best_tunings"),
-    "_building": ("BuildingTID", "Quantity", "building_breakaway", "first_mode_tunings",
-                  "linear_building_response"),
+    "_building": ("BuildingTID", "Quantity", "as_building", "building_breakaway",
+                  "first_mode_tunings", "linear_building_response"),
     "_building_design": ("BUILDING_BAND", "BuildingRetune", "building_peaks",
                          "retune_building"),
     "_building_orbit": ("BuildingResponse", "building_response"),
@@ -35,6 +35,7 @@ _API = {
     "_sensitivity": ("OptimumSensitivities", "SensitivitySettings", "Sensitivities",
                      "amplitude_sensitivities", "sensitivities"),
     "_settings": ("SolverSettings",),
+    "_stationary": ("StationaryLoad", "h2_tuning", "rms_response", "stationary_covariance"),
     "_structure": ("Structure",),
     "_substructuring": ("Substructuring", "SubstructuringStability",
                         "simulate_substructuring", "substructuring_stability"),

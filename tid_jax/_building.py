@@ -39,7 +39,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float
 from ._checks import check_grid
 from ._linear import den_hartog_tuning
 from ._structure import Structure
-from ._system import FRICTION_WIDTH_RATIO, check_values, is_compliant
+from ._system import FRICTION_WIDTH_RATIO, TIDSystem, check_values, is_compliant
 
 LOADS = ("force", "ground")
 QUANTITIES = ("displacement", "drift", "acceleration")
@@ -289,6 +289,17 @@ def _coupled(block, corner, coupling, device):
     matrix = jnp.zeros((n + extra, n + extra)).at[:n, :n].set(block)
     matrix = matrix.at[:n, n].set(coupling).at[n, :n].set(coupling)
     return matrix.at[n:, n:].add(jnp.diag(device)).at[n, n].add(corner[0])
+
+
+def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
+    """The single-storey host of `system` (a `TIDSystem`) as a one-storey `BuildingTID`
+    (its device, friction model and tuning), under a force or a ground acceleration."""
+    host = Structure([[system.host_mass]], [[system.host_stiffness]], [[system.host_damping]])
+    return BuildingTID(host, system.inertance, system.friction_force, system.tid_stiffness,
+                       system.tid_damping, system.friction_width, load=load,
+                       parasitic_damping=system.parasitic_damping,
+                       terminal_mass=system.terminal_mass,
+                       series_stiffness=system.series_stiffness, backlash=system.backlash)
 
 
 def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
