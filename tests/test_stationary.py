@@ -110,3 +110,48 @@ def test_white_noise_acceleration_is_refused():
     system = tj.BuildingTID(STRUCTURE, B, 0.0, 4e4, 500.0, load="ground")
     with pytest.raises(ValueError, match="infinite variance"):
         tj.rms_response(system, LOADS["white_noise"], tj.Quantity("acceleration", 3))
+
+
+def _stroke_velocity_rms(system, load, damping):
+    """The stroke's RMS velocity of the paper's host with `damping` added on the stroke:
+    quadrature of the reference receptance (`building_linear`) over the load's spectrum."""
+    M, K, C = ([[float(v)]] for v in (system.host_mass, system.host_stiffness,
+                                      system.host_damping))
+    natural = math.sqrt(float(system.host_stiffness / system.host_mass))
+
+    def density(w):
+        gain = building_linear.response_amplitude(
+            w, M, K, C, b=float(system.inertance), k=float(system.tid_stiffness),
+            c=float(system.tid_damping), spring_floor=1, inerter_floor=0, kind="stroke",
+            cp=float(system.parasitic_damping) + damping)
+        return (w * float(gain)) ** 2 * float(load.spectrum(w))
+
+    near = quad(density, 0.0, 6 * natural, points=[0.9 * natural, natural, 1.1 * natural],
+                limit=800, epsabs=0.0, epsrel=1e-11)[0]
+    far = quad(density, 6 * natural, np.inf, limit=200, epsabs=0.0, epsrel=1e-11)[0]
+    return math.sqrt(2 * (near + far))
+
+
+@pytest.mark.parametrize("psd", [100.0, 1000.0])
+def test_statistical_linearisation_is_the_fixed_point_of_the_receptance(system, psd):
+    # Caughey's c_eq = ff sqrt(2/pi) / sigma_v, sigma_v the stroke's RMS velocity with
+    # c_eq on the stroke: the fixed point found on the reference receptance by brentq
+    from scipy.optimize import brentq
+
+    load = tj.StationaryLoad("white_noise", psd)
+    result = tj.statistical_linearisation(tj.as_building(system), load)
+    assert not result.locked
+    kappa = float(system.friction_force) * math.sqrt(2 / math.pi)
+    sigma = float(result.velocity_rms)
+    gap = lambda s: math.log(_stroke_velocity_rms(system, load, kappa / math.exp(s))) - s
+    root = brentq(gap, math.log(sigma) - 0.5, math.log(sigma) + 0.5, xtol=1e-13)
+    assert sigma == pytest.approx(math.exp(root), rel=1e-7)
+    assert float(result.friction_damping) == pytest.approx(kappa / sigma, rel=1e-12)
+
+
+def test_statistical_linearisation_locks_under_weak_loads(system):
+    # under a weak load the spring and damper's force stays below what the linearised
+    # friction holds: no self-consistent slipping solution
+    weak = tj.statistical_linearisation(tj.as_building(system),
+                                        tj.StationaryLoad("white_noise", 1.0))
+    assert weak.locked and math.isnan(float(weak.rms))

@@ -19,6 +19,7 @@ and its stationary covariance P solves `A P + P A^T + 2 pi S0 B B^T = 0`.
 """
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -172,3 +173,63 @@ def h2_tuning(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Qu
         raise RuntimeError(f"the H2 tuning did not converge: {solution.result}")
     k, c = np.exp(np.asarray(solution.value))
     return float(k), float(c)
+
+
+class Linearisation(eqx.Module):
+    """The statistical linearisation of the inerter's dry friction under a stationary
+    load (SI): the friction replaced by the viscous damping `friction_damping`
+    c_eq = ff sqrt(2/pi) / sigma_v on its coordinate, sigma_v (`velocity_rms`) that
+    coordinate's RMS velocity with c_eq in place; `rms`, the quantity's RMS then.
+    `locked`: there is no self-consistent c_eq (the iteration locks the inerter: the
+    forces on it stay below what the friction holds in this model); its values NaN."""
+
+    rms: Float[Array, ""]
+    friction_damping: Float[Array, ""]
+    velocity_rms: Float[Array, ""]
+    locked: bool = eqx.field(static=True)
+
+
+def _velocity_rms(system: BuildingTID, load: StationaryLoad, damping):
+    """The RMS velocity of the friction's coordinate with `damping` added on it."""
+    changed = eqx.tree_at(lambda s: s.parasitic_damping, system,
+                          system.parasitic_damping + damping)
+    P = stationary_covariance(changed, load)
+    index = 2 * changed.coordinates - 1
+    return jnp.sqrt(P[index, index]), changed
+
+
+def statistical_linearisation(system: BuildingTID, load: StationaryLoad,
+                              quantity: Quantity = Quantity(), *,
+                              span: float = 30.0, points: int = 121) -> Linearisation:
+    """The self-consistent statistical linearisation of the friction (Caughey): the
+    fixed points of sigma_v = RMS velocity with c_eq = ff sqrt(2/pi) / sigma_v, over
+    `span` (natural log units) on each side of the frictionless sigma_v, scanned at
+    `points` and refined by bisection; the largest attracting one (where
+    ln RMS(sigma) - ln sigma falls through zero) is kept."""
+    kappa = system.friction_force * jnp.sqrt(2 / jnp.pi)
+    free, _ = _velocity_rms(system, load, 0.0)
+
+    def gap(log_sigma):  # ln RMS(sigma) - ln sigma: positive where sigma_v would grow
+        sigma = jnp.exp(log_sigma)
+        return jnp.log(_velocity_rms(system, load, kappa / sigma)[0]) - log_sigma
+
+    grid = jnp.log(free) + jnp.linspace(-span, span, points)
+    gaps = np.asarray(jax.vmap(gap)(grid))
+    falls = np.nonzero((gaps[:-1] > 0) & (gaps[1:] <= 0))[0]
+    if falls.size == 0:
+        nan = jnp.asarray(np.nan)
+        return Linearisation(rms=nan, friction_damping=nan, velocity_rms=nan, locked=True)
+    low, high = grid[falls[-1]], grid[falls[-1] + 1]
+
+    def bisect(_, bounds):
+        low, high = bounds
+        middle = 0.5 * (low + high)
+        up = gap(middle) > 0
+        return jnp.where(up, middle, low), jnp.where(up, high, middle)
+
+    low, high = jax.lax.fori_loop(0, 60, bisect, (low, high))
+    sigma = jnp.exp(0.5 * (low + high))
+    damping = kappa / sigma
+    _, changed = _velocity_rms(system, load, damping)
+    return Linearisation(rms=rms_response(changed, load, quantity), friction_damping=damping,
+                         velocity_rms=sigma, locked=False)
