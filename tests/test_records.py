@@ -97,3 +97,35 @@ def test_bad_at2_records_name_the_file_and_line(el_centro, tmp_path, change, lin
     path.write_text("\n".join(change(lines)) + "\n")
     with pytest.raises(ValueError, match=f"bad.AT2:{line if line else ''}"):
         tj.read_at2(path)
+
+
+def test_synthetic_records_reproduce_the_lyapunov_rms():
+    # Frictionless Monte Carlo: the time-averaged mean square of the roof displacement
+    # over artificial Kanai-Tajimi records (spectral representation) against the
+    # Lyapunov variance, within three standard errors of the mean over the records.
+    first = float(STRUCTURE.modes()[0][0])
+    load = tj.StationaryLoad("kanai_tajimi", 0.01, ground_frequency=2 * first,
+                             ground_damping=0.4)
+    system = tj.BuildingTID(STRUCTURE, B, 0.0, 41668.57, 524.636, load="ground")
+    exact = float(tj.rms_response(system, load))
+    squares = []
+    for seed in range(24):
+        motion = tj.synthetic_motion(load, 80.0, 0.01, seed)
+        history = tj.linear_history(system, motion)
+        steady = np.asarray(history.quantity)[2000:]  # after 20 s of transient
+        squares.append(np.mean(steady**2))
+    mean, error = np.mean(squares), np.std(squares, ddof=1) / np.sqrt(len(squares))
+    assert error < 0.03 * mean
+    assert abs(mean - exact**2) < 3 * error
+    # the record's own variance is the spectrum's integral
+    motion = tj.synthetic_motion(load, 80.0, 0.01, 0)
+    wg, zg = 2 * first, 0.4
+    assert np.var(np.asarray(motion.acceleration)) == pytest.approx(
+        0.01 * np.pi * wg * (1 + 4 * zg**2) / (2 * zg), rel=0.1)
+
+
+def test_jennings_envelope():
+    e = tj.jennings_envelope([0.0, 1.0, 2.0, 5.0, 10.0, 12.0], rise=2.0, end=10.0, decay=0.5)
+    np.testing.assert_allclose(e, [0.0, 0.25, 1.0, 1.0, 1.0, np.exp(-1.0)])
+    with pytest.raises(ValueError, match="rise"):
+        tj.jennings_envelope([0.0], rise=3.0, end=2.0, decay=0.5)

@@ -181,3 +181,40 @@ def linear_history(system: BuildingTID, motion: GroundMotion,
     return History(time=jnp.arange(a.shape[0]) * motion.time_step, quantity=values,
                    stroke=states[:, system.floors], peak=jnp.max(jnp.abs(values)),
                    rms=jnp.sqrt(jnp.mean(values**2)))
+
+
+def jennings_envelope(times, rise: float, end: float, decay: float):
+    """Jennings, Housner and Tsai's envelope of strong motion: `(t / rise)^2` up to
+    `rise` (s), 1 up to `end` (s), then `exp(-decay (t - end))` (decay in 1/s)."""
+    t = np.asarray(times, float)
+    if not (0 < rise <= end and decay > 0):
+        raise ValueError(f"the envelope needs 0 < rise <= end and decay > 0, got rise={rise!r}, "
+                         f"end={end!r}, decay={decay!r}")
+    return np.where(t < rise, (t / rise) ** 2,
+                    np.where(t <= end, 1.0, np.exp(-decay * (t - end))))
+
+
+def synthetic_motion(load, duration: float, time_step: float, seed: int = 0, *,
+                     envelope=None, frequencies: int = 2048,
+                     cutoff: float | None = None) -> GroundMotion:
+    """An artificial ground acceleration (m/s2) with the two-sided spectrum of `load` (a
+    `StationaryLoad`) by spectral representation (Shinozuka):
+    `sum_k 2 sqrt(S(w_k) dw) cos(w_k t + phi_k)` over `frequencies` evenly spaced w_k up
+    to `cutoff` (rad/s; default the Nyquist frequency pi / time_step), the phases
+    uniform from `seed`; times `envelope(t)` (e.g. `jennings_envelope`) if given."""
+    for name, value in (("duration", duration), ("time_step", time_step)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
+    top = math.pi / time_step if cutoff is None else float(cutoff)
+    step = top / frequencies
+    omegas = (np.arange(frequencies) + 0.5) * step
+    phases = np.random.default_rng(seed).uniform(0.0, 2 * np.pi, frequencies)
+    times = np.arange(int(round(duration / time_step)) + 1) * time_step
+    amplitudes = 2 * np.sqrt(np.asarray(load.spectrum(omegas)) * step)
+    values = np.zeros_like(times)
+    for block in range(0, frequencies, 256):  # (memory: times x 256 at a time)
+        part = slice(block, block + 256)
+        values += np.cos(np.outer(times, omegas[part]) + phases[part]) @ amplitudes[part]
+    if envelope is not None:
+        values = values * np.asarray(envelope(times))
+    return GroundMotion(jnp.asarray(values), float(time_step), f"{load.kind} seed {seed}")
