@@ -371,6 +371,17 @@ def friction_influence(system: BuildingTID, omega) -> tuple[Array, Array]:
     return both[:, 0], both[:, 1]
 
 
+def state_space(system: BuildingTID) -> tuple[Array, Array]:
+    """`(A, g)` of the frictionless system in first-order form, `z' = A z + g a(t)` with
+    `z = (u, u')` (SI; friction and backlash left out)."""
+    mass, damping, stiffness = system.generalised_matrices()
+    m = mass.shape[0]
+    inverse = jnp.linalg.inv(mass)
+    A = jnp.zeros((2 * m, 2 * m)).at[:m, m:].set(jnp.eye(m))
+    A = A.at[m:, :m].set(-inverse @ stiffness).at[m:, m:].set(-inverse @ damping)
+    return A, jnp.concatenate([jnp.zeros(m), inverse @ system.load_vector()])
+
+
 def quantity_amplitude(system: BuildingTID, quantity: Quantity, omegas,
                        amplitudes: Complex[Array, "... m"]) -> Complex[Array, "..."]:
     """The quantity's complex amplitude from the floors' `amplitudes` (the first n

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, G, Quantity, selection
+from ._building import BuildingTID, G, Quantity, selection, state_space
 
 _AT2_STEP = re.compile(r"NPTS\s*=\s*(\d+)\s*,?\s*DT\s*=\s*([0-9.eE+-]+)", re.IGNORECASE)
 
@@ -159,12 +159,8 @@ def linear_history(system: BuildingTID, motion: GroundMotion,
     the stroke of `system` (a ground load) under `motion`, from rest."""
     if system.load != "ground":
         raise ValueError("a recorded ground motion needs a system with load='ground'")
-    mass, damping, stiffness = system.generalised_matrices()
-    m = mass.shape[0]
-    inverse = jnp.linalg.inv(mass)
-    A = jnp.zeros((2 * m, 2 * m)).at[:m, m:].set(jnp.eye(m))
-    A = A.at[m:, :m].set(-inverse @ stiffness).at[m:, m:].set(-inverse @ damping)
-    g = jnp.concatenate([jnp.zeros(m), inverse @ system.load_vector()])
+    m = system.coordinates
+    A, g = state_space(system)
     phi, gamma0, gamma1 = _propagators(A, g, motion.time_step)
     a = motion.acceleration
 

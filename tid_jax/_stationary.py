@@ -25,7 +25,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, Quantity, selection
+from ._building import BuildingTID, Quantity, selection, state_space
 
 KINDS = ("white_noise", "kanai_tajimi", "clough_penzien")
 
@@ -101,18 +101,12 @@ class StationaryLoad(eqx.Module):
 
 def _state_space(system: BuildingTID, load: StationaryLoad):
     """`(A, B)` of the joint state `q = (u, u', s)` driven by the unit white noise w."""
-    mass, damping, stiffness = system.generalised_matrices()
-    m = mass.shape[0]
-    inverse = jnp.linalg.inv(mass)
-    g = inverse @ system.load_vector()
+    structure, g = state_space(system)
     F, f, h, d = load.filter()
-    k = F.shape[0]
-    A = jnp.zeros((2 * m + k, 2 * m + k))
-    A = A.at[:m, m:2 * m].set(jnp.eye(m))
-    A = A.at[m:2 * m, :m].set(-inverse @ stiffness).at[m:2 * m, m:2 * m].set(-inverse @ damping)
-    A = A.at[m:2 * m, 2 * m:].set(jnp.outer(g, h)).at[2 * m:, 2 * m:].set(F)
-    B = jnp.concatenate([jnp.zeros(m), g * d, f])
-    return A, B
+    n, k = structure.shape[0], F.shape[0]
+    A = jnp.zeros((n + k, n + k)).at[:n, :n].set(structure)
+    A = A.at[:n, n:].set(jnp.outer(g, h)).at[n:, n:].set(F)
+    return A, jnp.concatenate([g * d, f])
 
 
 def lyapunov(A: Float[Array, "n n"], Q: Float[Array, "n n"]) -> Float[Array, "n n"]:
