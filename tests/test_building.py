@@ -374,3 +374,22 @@ def test_robust_tuning_beats_each_amplitudes_own_in_the_worst_case(building):
 def _scaled_matrices(structure, scale):
     M, K, C = _matrices(structure)
     return M, scale * K, C
+
+
+def test_floquet_multipliers_of_a_frictionless_building_are_its_exponentials(building):
+    # Without friction the period map is linear: its multipliers are exp(lambda T), lambda
+    # the eigenvalues of the first-order system (its matrices from the reference).
+    system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground", terminal_mass=20.0)
+    M, K, C = _matrices(building)
+    Mg, Cg, Kg = building_linear.generalised_matrices(M, K, C, b=B, k=4e4, c=500.0,
+                                                      spring_floor=1, inerter_floor=0,
+                                                      mt=20.0)
+    inverse = np.linalg.inv(Mg)
+    m = Mg.shape[0]
+    first_order = np.block([[np.zeros((m, m)), np.eye(m)], [-inverse @ Kg, -inverse @ Cg]])
+    decay = np.max(np.linalg.eigvals(first_order).real)
+    omegas = building.modes()[0][0] * np.array([0.8, 1.0, 1.3])
+    response = tj.building_response(system, omegas, [1.0])
+    np.testing.assert_allclose(response.floquet_max[0], np.exp(decay * 2 * np.pi / omegas),
+                               rtol=1e-6)
+    assert np.all(response.stable)
