@@ -142,7 +142,7 @@ class History(eqx.Module):
     rms: Float[Array, ""]
 
 
-def _propagators(A, g, dt):
+def propagators(A, g, dt):
     """`(Phi, Gamma0, Gamma1)`: over a step dt, `z(dt) = Phi z(0) + Gamma0 a(0) +
     Gamma1 (a(dt) - a(0)) / dt` for `z' = A z + g a(t)` with a(t) linear in the step."""
     n = A.shape[0]
@@ -161,7 +161,7 @@ def linear_history(system: BuildingTID, motion: GroundMotion,
         raise ValueError("a recorded ground motion needs a system with load='ground'")
     m = system.coordinates
     A, g = state_space(system)
-    phi, gamma0, gamma1 = _propagators(A, g, motion.time_step)
+    phi, gamma0, gamma1 = propagators(A, g, motion.time_step)
     a = motion.acceleration
 
     def step(z, pair):

@@ -99,7 +99,7 @@ class StationaryLoad(eqx.Module):
         return self.psd * ground * high
 
 
-def _state_space(system: BuildingTID, load: StationaryLoad):
+def joint_state_space(system: BuildingTID, load: StationaryLoad):
     """`(A, B)` of the joint state `q = (u, u', s)` driven by the unit white noise w."""
     structure, g = state_space(system)
     F, f, h, d = load.filter()
@@ -122,7 +122,7 @@ def lyapunov(A: Float[Array, "n n"], Q: Float[Array, "n n"]) -> Float[Array, "n 
 def stationary_covariance(system: BuildingTID, load: StationaryLoad) -> Float[Array, "n n"]:
     """The stationary covariance of the joint state `(u, u', s)` of the frictionless
     system (its friction and backlash left out) under `load`."""
-    A, B = _state_space(system, load)
+    A, B = joint_state_space(system, load)
     return lyapunov(A, 2 * jnp.pi * load.psd * jnp.outer(B, B))
 
 
@@ -134,7 +134,7 @@ def rms_response(system: BuildingTID, load: StationaryLoad,
     it, infinite in variance, needs a filtered ground motion)."""
     quantity.floor_of(system.floors)
     w, wd, kappa, _ = selection(system, quantity)
-    A, B = _state_space(system, load)
+    A, B = joint_state_space(system, load)
     P = lyapunov(A, 2 * jnp.pi * load.psd * jnp.outer(B, B))
     m = system.coordinates
     row = jnp.concatenate([jnp.asarray(w), jnp.zeros(A.shape[0] - m)])

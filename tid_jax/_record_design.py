@@ -1,0 +1,131 @@
+"""Design of the TID with its friction over a suite of recorded ground motions: the
+(k, c) that minimise the mean over the records of the response's peak.
+
+Each record is stepped with the friction (`friction_history`'s scheme: substeps of at
+most h, the record a straight line between its samples); the records are padded to the
+longest and stepped together, and the peaks and RMS are read at the records' own
+samples. The mean peak is continuous but not smooth in (k, c) (a peak moves from one
+instant to another), so optimistix's Nelder-Mead minimises it over (ln k, ln c).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float
+
+from ._building import BuildingTID, Quantity
+from ._monte_carlo import CHUNK, check_system, first_period, record_stepper, run, substeps
+from ._records import GroundMotion
+
+
+class RecordDesign(eqx.Module):
+    """The design over a suite of records: `names`; the (k, c) that minimise the mean
+    peak, `tid_stiffness` and `tid_damping` (N/m, N s/m), and whether Nelder-Mead
+    `converged`; per record the quantity's `peak_before` and `rms_before` (SI) with the
+    given tuning, and `peak_after`, `rms_after` with the design."""
+
+    names: tuple[str, ...] = eqx.field(static=True)
+    tid_stiffness: Float[Array, ""]
+    tid_damping: Float[Array, ""]
+    converged: Bool[Array, ""]
+    peak_before: Float[Array, " records"]
+    rms_before: Float[Array, " records"]
+    peak_after: Float[Array, " records"]
+    rms_after: Float[Array, " records"]
+
+
+class _Suite(eqx.Module):
+    """The records as padded substep inputs `(records, steps, 2)`, the weights of the
+    substeps that end on a record's sample, the substep of each record (s) and the
+    number of samples each weighs."""
+
+    inputs: Float[Array, "records steps 2"]
+    weights: Float[Array, "records steps"]
+    time_steps: Float[Array, " records"]
+    counts: Float[Array, " records"]
+    chunks: int = eqx.field(static=True)
+
+
+def _suite(motions, time_step: float) -> _Suite:
+    parts = [substeps(motion, time_step) for motion in motions]
+    longest = max(inputs.shape[0] for _, inputs in parts)
+    chunks = -(-longest // CHUNK)
+    inputs = np.zeros((len(parts), chunks * CHUNK, 2))
+    weights = np.zeros((len(parts), chunks * CHUNK))
+    for r, (count, values) in enumerate(parts):
+        inputs[r, :values.shape[0]] = values
+        weights[r, count - 1:values.shape[0]:count] = 1.0
+    steps = [motion.time_step / count for motion, (count, _) in zip(motions, parts)]
+    return _Suite(inputs=jnp.asarray(inputs), weights=jnp.asarray(weights),
+                  time_steps=jnp.asarray(steps), counts=jnp.asarray(weights.sum(axis=1)),
+                  chunks=chunks)
+
+
+def suite_statistics(system: BuildingTID, quantity: Quantity, suite: _Suite):
+    """The peak and the RMS of `quantity` over each record's samples (from rest; the
+    first sample, at rest, left out)."""
+
+    def one(inputs, weights, time_step):
+        stepper = record_stepper(system, quantity, time_step)
+
+        def chunk_inputs(c):
+            start = c * CHUNK
+            return (jax.lax.dynamic_slice_in_dim(inputs, start, CHUNK)[:, None],
+                    jax.lax.dynamic_slice_in_dim(weights, start, CHUNK))
+
+        squares, peaks, _ = run(stepper, jnp.zeros((1, stepper.phi.shape[0])), chunk_inputs,
+                                suite.chunks)
+        return peaks[0, 0], squares[0, 0]
+
+    peaks, squares = jax.vmap(one)(suite.inputs, suite.weights, suite.time_steps)
+    return peaks, jnp.sqrt(squares / suite.counts)
+
+
+def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:
+    k, c = jnp.exp(log_tuning)
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
+
+
+def _objective(log_tuning, args):
+    system, quantity, suite = args
+    peaks, _ = suite_statistics(_tuned(system, log_tuning), quantity, suite)
+    return jnp.log(jnp.mean(peaks))
+
+
+@eqx.filter_jit
+def _design(system, quantity, suite, rtol, max_steps):
+    start = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    solution = optx.minimise(_objective, optx.NelderMead(rtol=rtol, atol=rtol), start,
+                             args=(system, quantity, suite), throw=False,
+                             max_steps=max_steps)
+    before = suite_statistics(system, quantity, suite)
+    after = suite_statistics(_tuned(system, solution.value), quantity, suite)
+    return solution.value, solution.result == optx.RESULTS.successful, before, after
+
+
+def design_for_records(system: BuildingTID, motions, quantity: Quantity = Quantity(), *,
+                       time_step: float | None = None, rtol: float = 1e-4,
+                       max_steps: int = 400) -> RecordDesign:
+    """The TID's (k, c) minimising the mean peak of `quantity` over the ground motions
+    `motions` (a list of `GroundMotion`, each as given: scale them first), with the
+    system's friction (exact, or smoothed with a given `friction_width`), from the
+    system's own tuning; substeps of at most `time_step` (s; default the first mode's
+    period / 200)."""
+    check_system(system)
+    quantity.floor_of(system.floors)
+    if system.load != "ground":
+        raise ValueError("recorded ground motions need a system with load='ground'")
+    motions = list(motions)
+    if not motions or not all(isinstance(m, GroundMotion) for m in motions):
+        raise ValueError("motions must be a non-empty list of tid_jax.GroundMotion")
+    if system.friction_width is None:
+        raise ValueError("under records give friction_width: 0 (exact) or a velocity (m/s)")
+    h = first_period(system) / 200 if time_step is None else time_step
+    design, converged, before, after = _design(system, quantity, _suite(motions, h), rtol,
+                                               max_steps)
+    k, c = jnp.exp(design)
+    return RecordDesign(names=tuple(m.name for m in motions), tid_stiffness=k, tid_damping=c,
+                        converged=converged, peak_before=before[0], rms_before=before[1],
+                        peak_after=after[0], rms_after=after[1])
