@@ -12,7 +12,8 @@ force):
   The step is first order in h for the friction and exact for the rest;
 - smoothed friction (`friction_width` > 0, or None: `FRICTION_WIDTH_RATIO` times the
   frictionless RMS velocity of the friction's coordinate): `F = -ff tanh(v / width)`,
-  solved by bisection, its derivatives by the implicit function theorem.
+  solved by bisection and two Newton steps (its first and second derivatives are those
+  of the implicit root).
 
 Both maps are continuous and piecewise smooth in the design, so that derivatives along
 the paths (common random numbers) are those of the estimate.
@@ -131,9 +132,11 @@ def _friction(trial, gain, ff, width, exact):
     high = jax.lax.stop_gradient(jnp.maximum(trial, 0.0))
     low, high = jax.lax.fori_loop(0, _BISECTIONS, bisect, (low, high))
     v = jax.lax.stop_gradient(0.5 * (low + high))
-    # one Newton step from the bracketed root: its value, and the implicit derivatives
-    slope = 1 + gain * ff / width * (1 - jnp.tanh(v / width) ** 2)
-    v = v - residual(v) / slope
+    # two Newton steps from the bracketed root: the first gives the implicit first
+    # derivatives, the second the second derivatives too
+    for _ in range(2):
+        slope = 1 + gain * ff / width * (1 - jnp.tanh(v / width) ** 2)
+        v = v - residual(v) / slope
     return -ff * jnp.tanh(v / width)
 
 
@@ -177,7 +180,7 @@ def _width(system: BuildingTID, load: StationaryLoad | None):
         return system.friction_width
     if load is None:
         raise ValueError("under a record give friction_width: 0 (exact) or a velocity (m/s)")
-    P = stationary_covariance(system.replace(friction_force=0.0), load)
+    P = stationary_covariance(system, load)  # (the friction left out)
     index = 2 * system.coordinates - 1
     return FRICTION_WIDTH_RATIO * jnp.sqrt(P[index, index])
 
@@ -286,21 +289,31 @@ def plan(system: BuildingTID, settings: MonteCarloSettings, stationary: bool = T
     return _Plan(time_step=h, steps=steps, first=first, chunks=-(-steps // CHUNK))
 
 
-def stationary_inputs(plan: _Plan, key, samples: int, envelope=None):
+def stationary_inputs(plan: _Plan, key, samples: int, scale=None):
     """The chunk function of `run` for `samples` realisations: unit normal numbers from
-    `key` (one fold per chunk: the same numbers whatever the design), times the
-    `envelope` at each step's start, and the weights of the counted steps."""
+    `key` (one fold per chunk: the same numbers whatever the design), times `scale` at
+    each step (an envelope: `(chunks, CHUNK)`, or None), and the counted steps' weights."""
     noise = jax.random.split(key)[1]
     index = jnp.arange(plan.chunks * CHUNK).reshape(plan.chunks, CHUNK)
     weights = ((index >= plan.first) & (index < plan.steps)).astype(float)
-    scale = jnp.ones_like(weights) if envelope is None else jnp.asarray(
-        envelope(np.asarray(index) * plan.time_step), float)
+    scale = jnp.ones_like(weights) if scale is None else scale
 
     def inputs(c):
         normal = jax.random.normal(jax.random.fold_in(noise, c), (CHUNK, samples, 1))
         return normal * scale[c][:, None, None], weights[c]
 
     return inputs
+
+
+def envelope_scale(plan: _Plan, envelope):
+    """`envelope` at each step's start, `(chunks, CHUNK)`, or None."""
+    if envelope is None:
+        return None
+    times = np.arange(plan.chunks * CHUNK) * plan.time_step
+    values = np.asarray(envelope(times), float).reshape(plan.chunks, CHUNK)
+    if not np.all(np.isfinite(values)):
+        raise ValueError("the envelope must be finite at every time")
+    return jnp.asarray(values)
 
 
 def stationary_start(system: BuildingTID, load: StationaryLoad, key, samples: int):
@@ -340,18 +353,18 @@ def monte_carlo(system: BuildingTID, load: StationaryLoad, quantity: Quantity = 
                          chunks=run_plan.chunks)
     key = jax.random.key(settings.seed)
     squares, peaks = _stationary_sums(system, load, quantity, run_plan, key,
-                                      settings.samples, envelope)
+                                      settings.samples, envelope_scale(run_plan, envelope))
     return statistics(squares, peaks, run_plan.steps - run_plan.first, run_plan.time_step)
 
 
 @eqx.filter_jit
-def _stationary_sums(system, load, quantity, run_plan, key, samples, envelope):
+def _stationary_sums(system, load, quantity, run_plan, key, samples, scale):
     stepper = stationary_stepper(system, load, quantity, run_plan.time_step)
-    if envelope is None:
+    if scale is None:
         z0 = stationary_start(system, load, key, samples)
     else:
         z0 = jnp.zeros((samples, stepper.phi.shape[0]))
-    inputs = stationary_inputs(run_plan, key, samples, envelope)
+    inputs = stationary_inputs(run_plan, key, samples, scale)
     squares, peaks, _ = run(stepper, z0, inputs, run_plan.chunks)
     return squares, peaks
 

@@ -102,8 +102,8 @@ class RandomDesign(eqx.Module):
     """k and c retuned per intensity. Per level of `psd_levels` (S0): the Monte Carlo
     design `tid_stiffness`, `tid_damping` (N/m, N s/m) and `converged`; the RMS of the
     quantity (SI) with the given tuning, `rms_before`, and the design's, `rms_after`, with
-    their standard errors (`_se`), from a Monte Carlo run independent of the design's
-    (seed + 1); the linearisation's design `linearised_stiffness`,
+    their standard errors (`_se`), from Monte Carlo runs independent of the design's
+    (seed + 1) on the same steps and noise for every tuning; the linearisation's design `linearised_stiffness`,
     `linearised_damping` (NaN where it found none) and its RMS by that same run,
     `rms_linearised` and `rms_linearised_se`. Without friction everything is exact
     (Lyapunov, `h2_tuning`) and the standard errors are 0."""
@@ -143,7 +143,10 @@ def _level(system, load, quantity, settings, rtol, max_steps):
                                   max_steps)
     linear_ok = bool(linear_ok) and bool(jnp.isfinite(_linearised_log_rms(linear, (
         system, load, quantity))))
-    judge = eqx.tree_at(lambda s: s.seed, settings, settings.seed + 1)
+    # every tuning judged on the same steps and noise, independent of the design's
+    judge = MonteCarloSettings(samples=settings.samples, duration=settings.duration,
+                               transient=run_plan.first * run_plan.time_step,
+                               time_step=run_plan.time_step, seed=settings.seed + 1)
     row = dict(tid_stiffness=float(jnp.exp(design[0])), tid_damping=float(jnp.exp(design[1])),
                converged=bool(converged))
     for name, tuning in (("before", None), ("after", design), ("linearised", linear)):
@@ -203,23 +206,25 @@ def random_sensitivities(system: BuildingTID, load: StationaryLoad,
     check_load(system, load, quantity)
     run_plan = plan(system, settings)
     key = jax.random.key(settings.seed)
-
-    def objective(variables):
-        scaled, scaled_load = _scaled(system, load, variables[2:])
-        if exact:
-            return 2 * jnp.log(rms_response(_tuned(scaled, variables[:2]), scaled_load,
-                                            quantity))
-        return log_mean_square(variables[:2], scaled, scaled_load, quantity, run_plan, key,
-                               settings.samples)
-
     start = jnp.concatenate([jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping])),
                              jnp.zeros(3)])
-    gradient, hessian = _derivatives(objective, start)
+    gradient, hessian = _derivatives(start, system, load, quantity, run_plan, key,
+                                     settings.samples, exact)
     tuning = -jnp.linalg.solve(hessian[:2, :2], hessian[:2, 2:])
     return RandomSensitivities(parameters=SENSITIVITY_PARAMETERS, rms=0.5 * gradient[2:],
                                tid_stiffness=tuning[0], tid_damping=tuning[1])
 
 
+def _sensitivity_objective(variables, system, load, quantity, run_plan, key, samples, exact):
+    """ln mean square at (ln k, ln c, ln of the scales of b, ff and S0)."""
+    scaled, scaled_load = _scaled(system, load, variables[2:])
+    if exact:
+        return 2 * jnp.log(rms_response(_tuned(scaled, variables[:2]), scaled_load, quantity))
+    return log_mean_square(variables[:2], scaled, scaled_load, quantity, run_plan, key,
+                           samples)
+
+
 @eqx.filter_jit
-def _derivatives(objective, start):
-    return jax.grad(objective)(start), jax.hessian(objective)(start)
+def _derivatives(start, *args):
+    gradient = jax.grad(_sensitivity_objective)
+    return gradient(start, *args), jax.jacfwd(gradient)(start, *args)

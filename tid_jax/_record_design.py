@@ -64,8 +64,8 @@ def _suite(motions, time_step: float) -> _Suite:
 
 
 def suite_statistics(system: BuildingTID, quantity: Quantity, suite: _Suite):
-    """The peak and the RMS of `quantity` over each record's samples (from rest; the
-    first sample, at rest, left out)."""
+    """The peak and the RMS of `quantity` over each record's samples, from rest (as
+    `friction_history`)."""
 
     def one(inputs, weights, time_step):
         stepper = record_stepper(system, quantity, time_step)
@@ -77,10 +77,11 @@ def suite_statistics(system: BuildingTID, quantity: Quantity, suite: _Suite):
 
         squares, peaks, _ = run(stepper, jnp.zeros((1, stepper.phi.shape[0])), chunk_inputs,
                                 suite.chunks)
-        return peaks[0, 0], squares[0, 0]
+        start = stepper.out_inputs[0, 0] * inputs[0, 0]  # at rest: the ground's own part
+        return jnp.maximum(peaks[0, 0], jnp.abs(start)), squares[0, 0] + start**2
 
     peaks, squares = jax.vmap(one)(suite.inputs, suite.weights, suite.time_steps)
-    return peaks, jnp.sqrt(squares / suite.counts)
+    return peaks, jnp.sqrt(squares / (suite.counts + 1))
 
 
 def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:

@@ -132,22 +132,12 @@ def plot_retune_responses(
         if i >= n:
             ax.set_visible(False)
             continue
-        ax.plot(
-            frequencies_hz,
-            x_before[i],
-            color="tab:red",
-            linestyle="-.",
-            label="before (initial tuning)",
-        )
+        ax.plot(frequencies_hz, x_before[i], color="tab:red", linestyle="-.",
+                label="before (initial tuning)")
         ax.plot(frequencies_hz, x_after[i], color="tab:blue", linewidth=2.0, label="retuned")
         if linear is not None:
-            ax.plot(
-                *linear,
-                color="black",
-                linestyle="--",
-                linewidth=1.0,
-                label="linear TID (no friction)",
-            )
+            ax.plot(*linear, color="black", linestyle="--", linewidth=1.0,
+                    label="linear TID (no friction)")
         _mark_host_frequency(ax, host_frequency_hz)
         ax.set_title(
             f"A = {amplitudes[i]:g} N: k = {k_ratio[i]:.3f} k_DH, c = {c_ratio[i]:.2f} c_DH",
@@ -168,26 +158,13 @@ def plot_retune_responses(
 def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None, converged=None):
     amplitudes = np.asarray(amplitudes)
     failed = np.zeros(amplitudes.shape, bool) if converged is None else ~np.asarray(converged)
-    paper_style = dict(
-        color="tab:orange",
-        markersize=8,
-        fillstyle="none",
-        markeredgewidth=2,
-        linestyle="none",
-        label="paper, section 4.2",
-    )
+    paper_style = dict(color="tab:orange", markersize=8, fillstyle="none", markeredgewidth=2,
+                       linestyle="none", label="paper, section 4.2")
     for ax, ratio in ((ax_k, np.asarray(k_ratio)), (ax_c, np.asarray(c_ratio))):
         ax.plot(amplitudes, ratio, "o-", color="tab:blue", label="retuned (this package)")
         if failed.any():
-            ax.plot(
-                amplitudes[failed],
-                ratio[failed],
-                "x",
-                color="tab:red",
-                markersize=10,
-                markeredgewidth=2,
-                label="status not ok (see table)",
-            )
+            ax.plot(amplitudes[failed], ratio[failed], "x", color="tab:red", markersize=10,
+                    markeredgewidth=2, label="status not ok (see table)")
         if paper is not None:
             ax.plot(paper[0], paper[1 if ax is ax_k else 2], "s", **paper_style)
     for ax, label in ((ax_k, "stiffness  k / k_DH"), (ax_c, "damping  c / c_DH")):
@@ -217,25 +194,12 @@ def _draw_peaks(ax_x, ax_y, curves, stroke_limit):
         ax_x.plot(amplitudes, x_norm, label=label, **style)
         ax_y.plot(amplitudes, 100 * np.asarray(y_peak), label=label, **style)
     if stroke_limit is not None:
-        ax_y.axhline(
-            100 * stroke_limit,
-            color="tab:red",
-            linewidth=1.5,
-            label=f"stroke limit +-{100 * stroke_limit:g} cm",
-        )
-    ax_x.set(
-        xscale="log",
-        xlabel="forcing amplitude A [N]",
-        ylabel="peak host displacement  x / (A/K)",
-        title="(a) host structure",
-    )
-    ax_y.set(
-        xscale="log",
-        yscale="log",
-        xlabel="forcing amplitude A [N]",
-        ylabel="peak inerter stroke  |y| [cm]",
-        title="(b) inerter stroke",
-    )
+        ax_y.axhline(100 * stroke_limit, color="tab:red", linewidth=1.5,
+                     label=f"stroke limit +-{100 * stroke_limit:g} cm")
+    ax_x.set(xscale="log", xlabel="forcing amplitude A [N]",
+             ylabel="peak host displacement  x / (A/K)", title="(a) host structure")
+    ax_y.set(xscale="log", yscale="log", xlabel="forcing amplitude A [N]",
+             ylabel="peak inerter stroke  |y| [cm]", title="(b) inerter stroke")
     ax_x.set_ylim(bottom=0)
     _plain_log_axis(ax_y.yaxis)
     for ax in (ax_x, ax_y):
@@ -279,33 +243,15 @@ def plot_device_designs(devices, *, title=None):
     return fig
 
 
-def plot_retune_summary(
-    amplitudes,
-    k_ratio,
-    c_ratio,
-    x_before,
-    x_after,
-    y_before,
-    y_after,
-    *,
-    stroke_limit=None,
-    converged=None,
-    title=None,
-):
+def plot_retune_summary(amplitudes, k_ratio, c_ratio, x_before, x_after, y_before, y_after, *,
+                        stroke_limit=None, converged=None, title=None):
     """Retuning at a glance: k / k_DH and c / c_DH (top) and the peak host displacement over
     A / K and inerter stroke (cm) before and after retuning (bottom) against amplitude (N)."""
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), layout="constrained")
     _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio, None, converged)
-    curves = (
-        (
-            "before (initial tuning)",
-            amplitudes,
-            x_before,
-            y_before,
-            dict(color="tab:red", linestyle="-.", marker="s"),
-        ),
-        ("retuned", amplitudes, x_after, y_after, dict(color="tab:blue", marker="o")),
-    )
+    curves = (("before (initial tuning)", amplitudes, x_before, y_before,
+               dict(color="tab:red", linestyle="-.", marker="s")),
+              ("retuned", amplitudes, x_after, y_after, dict(color="tab:blue", marker="o")))
     _draw_peaks(axes[1, 0], axes[1, 1], curves, stroke_limit)
     axes[1, 0].set_title("(c) host structure")
     axes[1, 1].set_title("(d) inerter stroke")
@@ -330,34 +276,17 @@ def plot_substructuring_response(frequencies_hz, whole_x, whole_y, tests, *, tit
     markers = ("o", "s", "^", "D", "v")
     for ax, whole, index, (name, ylabel, factor) in zip(
             axes, (whole_x, whole_y), (1, 2), panels, strict=True):
-        ax.plot(
-            frequencies_hz,
-            factor * np.asarray(whole),
-            color="black",
-            linestyle="--",
-            linewidth=1.5,
-            label="whole system",
-        )
+        ax.plot(frequencies_hz, factor * np.asarray(whole), color="black", linestyle="--",
+                linewidth=1.5, label="whole system")
         for number, test in enumerate(tests):
             label, stable = test[0], np.asarray(test[3], dtype=bool)
             values = factor * np.asarray(test[index], dtype=float)
-            ax.plot(
-                frequencies_hz[stable],
-                values[stable],
-                linestyle="none",
-                marker=markers[number % len(markers)],
-                markersize=4,
-                label=label,
-            )
+            ax.plot(frequencies_hz[stable], values[stable], linestyle="none",
+                    marker=markers[number % len(markers)], markersize=4, label=label)
             if not np.all(stable):
-                ax.plot(
-                    frequencies_hz[~stable],
-                    np.zeros(int((~stable).sum())),
-                    linestyle="none",
-                    marker="x",
-                    color="tab:red",
-                    label=f"{label}: unstable",
-                )
+                ax.plot(frequencies_hz[~stable], np.zeros(int((~stable).sum())),
+                        linestyle="none", marker="x", color="tab:red",
+                        label=f"{label}: unstable")
         ax.set(xlabel="forcing frequency [Hz]", ylabel=ylabel, title=name)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
@@ -381,14 +310,8 @@ def plot_substructuring_stability(curves, *, max_delay=None, title=None):
         (line,) = ax.plot(ratios, 1e3 * np.maximum(largest, 0), marker=marker, label=label)
         none = largest < 0
         if np.any(none):
-            ax.plot(
-                ratios[none],
-                np.zeros(int(none.sum())),
-                linestyle="none",
-                marker=marker,
-                markerfacecolor="white",
-                color=line.get_color(),
-            )
+            ax.plot(ratios[none], np.zeros(int(none.sum())), linestyle="none", marker=marker,
+                    markerfacecolor="white", color=line.get_color())
     if max_delay is not None:
         ax.axhline(1e3 * max_delay, color="0.5", linestyle=":", label="largest delay tried")
     ax.axvline(0.5, color="0.7", linewidth=1)
@@ -562,4 +485,88 @@ def plot_building_elasticities(amplitudes, names, elasticities, *, xlabel, title
         ax.axvline(0.0, color="0.5", linewidth=0.6)
     ax.set_title(title or "elasticities of the peak")
     ax.grid(alpha=0.3)
+    return fig
+
+
+# The given tuning, then the retuned or designed one, then references.
+TUNING_STYLES = (dict(color="tab:red", linestyle="-."), dict(color="tab:blue"),
+                 dict(color="tab:green", linestyle=":"), dict(color="black", linestyle="--"))
+
+
+def plot_random_design(levels, rms, ratios, *, xlabel, ylabel, title=None):
+    """The TID retuned per intensity S0 of a random load (log axes): (a) the RMS response
+    of each tuning, `rms` mapping a label to `(values, standard_errors)` over `levels`,
+    with error bars of 2 SE (NaN left out); (b) retuned k and c over the given ones,
+    `ratios` mapping a label to values."""
+    fig, (ax_r, ax_t) = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
+    for (label, (values, errors)), style in zip(rms.items(), TUNING_STYLES, strict=False):
+        ax_r.errorbar(levels, values, yerr=2 * np.asarray(errors, float), marker="o",
+                      markersize=4, capsize=3, label=label, **style)
+    for (label, values), marker in zip(ratios.items(), "os^D", strict=False):
+        ax_t.plot(levels, values, marker=marker, markersize=4, label=label)
+    ax_t.axhline(1.0, color="black", linewidth=0.8)
+    ax_r.set(xscale="log", yscale="log", xlabel=xlabel, ylabel=ylabel,
+             title="(a) RMS response (error bars: 2 standard errors)")
+    ax_t.set(xscale="log", yscale="log", xlabel=xlabel, ylabel="over the given tuning",
+             title="(b) retuned stiffness k and damping c")
+    for ax in (ax_r, ax_t):
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def plot_histories(panels, *, shade=None, title=None):
+    """Time histories, a panel per `(name, ylabel, time, curves)` (time in s), `curves`
+    mapping a label to values over `time`, in `TUNING_STYLES`; `shade = (start, end, label)`
+    marks a stretch of time."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 0.8 + 2.4 * len(panels)),
+                             squeeze=False, layout="constrained")
+    for ax, (name, ylabel, time, curves) in zip(axes[:, 0], panels, strict=True):
+        for (label, values), style in zip(curves.items(), TUNING_STYLES, strict=False):
+            ax.plot(time, values, linewidth=0.7, label=label, **style)
+        if shade is not None:
+            ax.axvspan(shade[0], shade[1], color="0.9", label=shade[2])
+        ax.set(ylabel=ylabel, title=name, xlim=(time[0], time[-1]))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def plot_spectra(curves, *, ylabel, xmax=None, title=None):
+    """Spectral densities against frequency (Hz, up to `xmax`) on a log axis: `curves`
+    maps a label to `(frequencies_hz, density)`, in `TUNING_STYLES`."""
+    fig, ax = plt.subplots(figsize=(8, 4.6), layout="constrained")
+    for (label, (frequencies, density)), style in zip(curves.items(), TUNING_STYLES,
+                                                      strict=False):
+        ax.plot(frequencies, density, linewidth=1.2, label=label, **style)
+    shown = [d[(f > 0) & (f <= (xmax or np.inf)) & (d > 0)] for f, d in curves.values()]
+    ax.set(yscale="log", xlabel="frequency [Hz]", ylabel=ylabel, xlim=(0, xmax),
+           ylim=(0.5 * min(np.min(d, initial=np.inf) for d in shown), None))
+    ax.set_title(title or "spectral density of the response", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_record_peaks(names, peaks, *, ylabel, title=None):
+    """Bars of each record's peak response, a bar per tuning: `peaks` maps a label to
+    values over the records `names`."""
+    fig, ax = plt.subplots(figsize=(max(6.0, 2.0 + 1.1 * len(names)), 4.6),
+                           layout="constrained")
+    width, places = 0.8 / len(peaks), np.arange(len(names))
+    for i, ((label, values), style) in enumerate(zip(peaks.items(), TUNING_STYLES,
+                                                     strict=False)):
+        ax.bar(places + (i - (len(peaks) - 1) / 2) * width, values, width, label=label,
+               color=style["color"])
+    ax.set_xticks(places, names, fontsize=7, rotation=20 if len(names) > 3 else 0)
+    ax.set(ylabel=ylabel)
+    ax.set_title(title or "peak response per record", fontsize=10)
+    ax.grid(alpha=0.3, axis="y")
+    ax.margins(y=0.15)
+    ax.legend(fontsize=8)
     return fig

@@ -9,24 +9,27 @@ Model: generalised coordinates ``u`` (length ``m``) with::
 of the last coordinate ``f = m - 1``, which carries the friction force ``F``.
 Friction law: exact Coulomb friction with stick, static = kinetic = ``ff >= 0``.  While
 sliding ``F = -ff sign(u_f')``.  While stuck (``u_f' = 0``, ``u_f = r`` held) the reduced
-``(m-1)``-DOF system is integrated and ``F = -phi`` is what holds the coordinate, with
+``(m-1)``-DOF system is integrated and ``F = -phi`` holds the coordinate, with
 ``phi = g_f a - Mg[f, x] x'' - Cg[f, x] x' - Kg[f, :] u`` the net force on the ``f`` row
 without friction and ``f`` inertia (``x''`` from the stuck dynamics); sticking lasts while
-``|phi| <= ff`` and then the coordinate slips with ``sign(phi)``.  When ``u_f'`` returns to
+``|phi| <= ff``, then the coordinate slips with ``sign(phi)``.  When ``u_f'`` returns to
 zero it sticks if ``|phi| <= ff`` there, else it slides the other way (ties within a
 relative ``1e-10`` are broken by ``dphi/dt``).  ``ff = 0``: the linear system.
 The system starts at rest at ``t = 0`` (stuck if ``ff > 0`` and ``|phi(0)| <= ff``).
 
 Method: each phase (slip ``+1``, slip ``-1``, stick) is integrated with
-``scipy.integrate.solve_ivp`` (DOP853) with terminal events (``u_f' = 0`` while slipping,
-only in the stopping direction; ``phi = +ff`` upwards or ``phi = -ff`` downwards while
-stuck); the mode is switched here and the integration restarted at each event, with
-``u_f'`` set to exactly zero, so that an event never refires at its restart point.  The
-states at the requested times come from the integrators' dense output (``t_eval``).
+``scipy.integrate.solve_ivp`` (DOP853 by default, RK45 on request) with terminal events
+(``u_f' = 0`` while slipping, only in the stopping direction; ``phi = +ff`` upwards or
+``phi = -ff`` downwards while stuck); the mode is switched here and the integration
+restarted at each event with ``u_f'`` set to exactly zero, so that an event does not
+refire at its restart point.  With ``max_step = dt`` no step straddles a point ``j dt``
+(the solver's steps are cut there), so the kinks of a load that is linear between
+samples at ``t = j dt`` are stepped on exactly.  The states at the requested times come
+from the solvers' dense output (``t_eval``).
 
 Loads: :func:`white_noise` is band-limited white noise by spectral representation,
 tabulated exactly by FFT on a grid of step ``pi / (8 cutoff)`` and interpolated linearly.
-:func:`statistics` gives Monte Carlo RMS and mean peak of a displacement combination.
+:func:`statistics`: Monte Carlo RMS and mean peak of a combination of displacements.
 
 Pure numpy / scipy; nothing here imports ``tid_jax``.
 """
@@ -36,11 +39,34 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import DOP853, RK45, solve_ivp
 
 __all__ = ["simulate", "simulate_detailed", "statistics", "white_noise"]
 
 STICK = 0
+
+
+def _aligned(base):
+    """``base`` (an RK solver class) whose steps never straddle a point ``j * grid``."""
+
+    class Aligned(base):
+        def __init__(self, fun, t0, y0, t_bound, grid=math.inf, **kw):
+            super().__init__(fun, t0, y0, t_bound, **kw)
+            self._final, self._grid = t_bound, grid
+
+        def _step_impl(self):
+            if math.isfinite(self._grid):  # stop this step at the next grid point
+                nxt = (math.floor(self.t / self._grid + 1e-9) + 1) * self._grid
+                self.t_bound = min(self._final, nxt)
+            try:
+                return super()._step_impl()
+            finally:
+                self.t_bound = self._final
+
+    return Aligned
+
+
+_METHODS = {"DOP853": _aligned(DOP853), "RK45": _aligned(RK45)}
 
 
 class _System:
@@ -137,6 +163,8 @@ class _System:
 def _phase(sys, mode, t, t1, z, t_eval, kw):
     """One phase from (t, z); returns (t_end, z_end, next mode or None, states at t_eval)."""
     n, m = sys.n, sys.m
+    opts = dict(method=_METHODS[kw["method"]], t_eval=t_eval, rtol=kw["rtol"],
+                max_step=kw["max_step"], grid=kw["max_step"])
     atol = kw["atol"]
     if mode == STICK:
         r = z[n]
@@ -151,25 +179,23 @@ def _phase(sys, mode, t, t1, z, t_eval, kw):
         down.terminal, down.direction = True, -1.0
         if np.ndim(atol):
             atol = sys.reduce(np.asarray(atol, float)) if n else 1.0
-        sol = solve_ivp(sys.stuck_rhs(r), (t, t1), sys.reduce(z), method="DOP853",
-                        t_eval=t_eval, events=[up, down], rtol=kw["rtol"], atol=atol,
-                        max_step=kw["max_step"])
-        states = sys.expand(sol.y, r) if sol.y.size else np.zeros((0, 2 * m))
+        y0 = sys.reduce(z)
+        sol = solve_ivp(sys.stuck_rhs(r), (t, t1), y0, events=[up, down], atol=atol, **opts)
+        states = sys.expand(np.reshape(sol.y, (len(y0), -1)), r)
         if sol.status == 1:
             hit = 0 if len(sol.t_events[0]) else 1
             t_end = sol.t_events[hit][0]
             return t_end, sys.expand(sol.y_events[hit][0], r)[0], (+1, -1)[hit], states
     else:
-        f = mode if mode is not None else 0.0
+        s = 0.0 if mode is None else float(mode)
 
         def stop(tt, zz):
             return zz[2 * m - 1]
 
-        stop.terminal, stop.direction = True, -float(f)
-        sol = solve_ivp(sys.slip_rhs(f), (t, t1), z, method="DOP853", t_eval=t_eval,
-                        events=[stop] if mode is not None else None, rtol=kw["rtol"],
-                        atol=atol, max_step=kw["max_step"])
-        states = sol.y.T
+        stop.terminal, stop.direction = True, -s
+        sol = solve_ivp(sys.slip_rhs(s), (t, t1), z, events=None if mode is None else [stop],
+                        atol=atol, **opts)
+        states = np.reshape(sol.y, (2 * m, -1)).T
         if sol.status == 1:
             t_end, z_end = sol.t_events[0][0], sol.y_events[0][0].copy()
             z_end[2 * m - 1] = 0.0
@@ -180,20 +206,23 @@ def _phase(sys, mode, t, t1, z, t_eval, kw):
 
 
 def simulate_detailed(mass, damping, stiffness, load_vector, friction_force, load, times, *,
-                      rtol=1e-9, atol=1e-12, max_step=None, max_stalls=50):
+                      rtol=1e-9, atol=1e-12, max_step=None, method="DOP853", max_stalls=50):
     """:func:`simulate` plus a dict: ``transitions`` (mode changes, slip reversals
     included), ``stick_time`` [s], ``phases`` (integrated phases), ``events`` (list of
     (time, new mode), mode +1 / -1 slip, 0 stick)."""
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {sorted(_METHODS)}")
     sys = _System(mass, damping, stiffness, load_vector, friction_force, load)
     times = np.asarray(times, float)
     if times.ndim != 1 or len(times) == 0 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
         raise ValueError("times must be an increasing 1-D array starting at 0")
-    kw = dict(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else max_step)
+    kw = dict(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else max_step,
+              method=method)
     out = np.empty((len(times), 2 * sys.m))
     t, t1, z, i = 0.0, times[-1], np.zeros(2 * sys.m), 0
     mode = sys.decide(0.0, z) if sys.ff > 0 else None
     events, stick_time, phases, stalls = [], 0.0, 0, 0
-    while True:
+    while t1 > 0.0:
         t_end, z_end, nxt, states = _phase(sys, mode, t, t1, z, times[i:], kw)
         phases += 1
         out[i:i + len(states)] = states
@@ -208,6 +237,8 @@ def simulate_detailed(mass, damping, stiffness, load_vector, friction_force, loa
         if nxt != mode:
             events.append((float(t_end), int(nxt)))
         t, z, mode = t_end, z_end, nxt
+    if t1 == 0.0:
+        out[:], i = 0.0, 1
     if i != len(times):
         raise RuntimeError("not all output times were reached")
     info = dict(transitions=len(events), stick_time=stick_time, phases=phases, events=events)
@@ -215,26 +246,35 @@ def simulate_detailed(mass, damping, stiffness, load_vector, friction_force, loa
 
 
 def simulate(mass, damping, stiffness, load_vector, friction_force, load, times, *,
-             rtol=1e-9, atol=1e-12, max_step=None) -> np.ndarray:
+             rtol=1e-9, atol=1e-12, max_step=None, method="DOP853") -> np.ndarray:
     """States ``(len(times), 2m)``, columns ``(u, u')``, from rest at ``t = 0``.
 
     ``load``: callable ``t -> a(t)``; ``times``: increasing, starting at 0 [s];
     ``friction_force`` ff [N] on the last coordinate (0: frictionless).  ``rtol``,
-    ``atol``, ``max_step`` go to ``solve_ivp`` (pass the sample spacing of a piecewise
-    linear load as ``max_step``).
+    ``atol`` (scalar or length ``2m``), ``max_step`` and ``method`` (``"DOP853"`` or
+    ``"RK45"``) go to ``solve_ivp``; ``max_step`` also cuts the steps at its multiples
+    (pass the sample spacing of a piecewise linear load).
     """
     return simulate_detailed(mass, damping, stiffness, load_vector, friction_force, load,
-                             times, rtol=rtol, atol=atol, max_step=max_step)[0]
+                             times, rtol=rtol, atol=atol, max_step=max_step, method=method)[0]
 
 
 class _Tabulated:
-    """Linear interpolation of samples ``values`` at ``times = step * j`` (callable)."""
+    """Linear interpolation of samples ``values`` at ``times = step * j`` (callable);
+    constant beyond the ends, as ``np.interp``."""
 
     def __init__(self, step, values):
-        self.step, self.values = float(step), values
+        self.step, self.values = float(step), np.asarray(values, float)
         self.times = self.step * np.arange(len(values))
+        self._v = self.values.tolist()
+        self._d = np.diff(self.values).tolist()
 
     def __call__(self, t):
+        if isinstance(t, (float, int)):  # fast scalar path (inside the integrator)
+            x = t / self.step
+            j = int(x) if x >= 0.0 else -1
+            if 0 <= j < len(self._d):
+                return self._v[j] + self._d[j] * (x - j)
         return np.interp(t, self.times, self.values)
 
 
@@ -271,7 +311,8 @@ def statistics(mass, damping, stiffness, load_vector, friction_force, output_row
     ``[0, duration]``, ``y`` sampled every ``output_step`` over ``[transient, duration]``.
     Returns ``rms`` (sqrt of the mean of the per-realisation mean squares), ``rms_se``
     (its standard error by the delta method), ``peak`` (mean of max |y|), ``peak_se``,
-    ``mean_squares`` and ``peaks``.
+    ``mean_squares`` and ``peaks``.  Integration: RK45 with steps cut at the noise's
+    grid points (there the steps, not the tolerances, limit the accuracy).
     """
     rng = np.random.default_rng(seed)
     row = np.asarray(output_row, float).reshape(-1)
@@ -282,10 +323,11 @@ def statistics(mass, damping, stiffness, load_vector, friction_force, output_row
     for s in range(samples):
         load = white_noise(psd, cutoff, duration, rng)
         states = simulate(mass, damping, stiffness, load_vector, friction_force, load, times,
-                          rtol=rtol, atol=atol)
+                          rtol=rtol, atol=atol, max_step=load.step, method="RK45")
         y = states[keep, :m] @ row
         ms[s], pk[s] = np.mean(y**2), np.max(np.abs(y))
     rms = math.sqrt(np.mean(ms))
-    se = lambda v: float(np.std(v, ddof=1) / math.sqrt(len(v))) if len(v) > 1 else math.nan
-    return dict(rms=rms, rms_se=se(ms) / (2.0 * rms), peak=float(np.mean(pk)), peak_se=se(pk),
+    se_ms, se_pk = (float(np.std(v, ddof=1) / math.sqrt(samples)) if samples > 1 else math.nan
+                    for v in (ms, pk))
+    return dict(rms=rms, rms_se=se_ms / (2.0 * rms), peak=float(np.mean(pk)), peak_se=se_pk,
                 mean_squares=ms, peaks=pk)

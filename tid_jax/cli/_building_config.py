@@ -1,16 +1,28 @@
 """The tables of a building's config ([structure], [tid], [load], [response]) and its
-amplitudes, checked before anything is computed."""
+amplitudes, checked before anything is computed. [load] also says which load: harmonic
+(`frf`, `retune`, ...), or a stationary random load (`random`) with its intensities and
+filter."""
 
 import math
 
 from .._building import G
 
 BUILDING_TABLES = ("structure", "tid", "load", "response")
+HARMONIC = "harmonic"
+RANDOM_KINDS = ("white_noise", "kanai_tajimi", "clough_penzien")
+LOAD_KINDS = (HARMONIC, *RANDOM_KINDS)
+# [load]'s keys of a stationary random load: the intensities S0 and the filter's parameters
+# (rad/s and damping ratios), as `StationaryLoad` names them.
+RANDOM_KEYS = ("psd_levels", "ground_frequency", "ground_damping", "filter_frequency",
+               "filter_damping")
+# The commands whose load is not harmonic: `random` (kind one of RANDOM_KINDS) and
+# `records` (the recorded ground motions; kind and RANDOM_KEYS do not apply).
+NOT_HARMONIC = ("random", "records")
 _KEYS = {
     "structure": ("storey_masses", "storey_stiffnesses", "damping_ratio", "rayleigh",
                   "mass_matrix", "stiffness_matrix", "damping_matrix"),
     "tid": ("spring_floor", "inerter_floor"),
-    "load": ("on", "force_pattern"),
+    "load": ("on", "force_pattern", "kind", *RANDOM_KEYS),
     "response": ("kind", "floor"),
 }
 
@@ -25,7 +37,25 @@ def check_tables(config: dict, path: str) -> None:
         if unknown:
             raise ValueError(f"config {path}: unknown key {unknown[0]!r} in [{name}]; allowed "
                            f"keys are {', '.join(_KEYS[name])}")
+    kind = config.get("load", {}).get("kind", HARMONIC)
+    if kind not in LOAD_KINDS:
+        raise ValueError(f"config {path}: [load] kind must be one of {', '.join(LOAD_KINDS)}, "
+                         f"got {kind!r}")
 
+
+def check_harmonic(load: dict, command: str) -> None:
+    """A harmonic command (all but `NOT_HARMONIC`) takes no random load: `ValueError`
+    naming [load]'s kind or key otherwise."""
+    if command in NOT_HARMONIC:
+        return
+    kind = load.get("kind", HARMONIC)
+    if kind != HARMONIC:
+        raise ValueError(f"[load] kind = {kind!r} is a stationary random load, for "
+                         f"'tid-jax random'; 'tid-jax {command}' takes kind = {HARMONIC!r}")
+    given = [key for key in RANDOM_KEYS if key in load]
+    if given:
+        raise ValueError(f"[load] {given[0]} applies to a random load ('tid-jax random'), not "
+                         f"to 'tid-jax {command}' (kind = {HARMONIC!r})")
 
 
 def amplitude_value(value) -> float:

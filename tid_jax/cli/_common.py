@@ -39,7 +39,7 @@ from .._system import (
     PAPER_STROKE,
     TIDSystem,
 )
-from ._building_config import BUILDING_TABLES, amplitude_value, check_tables
+from ._building_config import BUILDING_TABLES, amplitude_value, check_harmonic, check_tables
 from ._pool import import_library, requested_workers
 
 PROG = "tid-jax"
@@ -146,7 +146,7 @@ def _read_config(path: str) -> dict:
                 f"config {path}: unknown key {unknown[0]!r} in [{table}]; "
                 f"allowed keys are {', '.join(allowed)}"
             )
-    if "structure" in config:
+    if any(name in config for name in BUILDING_TABLES):
         try:
             check_tables(config, path)
         except ValueError as error:
@@ -198,6 +198,12 @@ def _inputs(args) -> dict:
                                                  else [amplitudes])]
             except ValueError as error:
                 raise CLIError(str(error)) from None
+    else:  # the single-storey host: the load and the response of `random` and `records`
+        inputs.update({name: config[name] for name in ("load", "response") if name in config})
+    try:
+        check_harmonic(inputs.get("load", {}), getattr(args, "command", None))
+    except ValueError as error:
+        raise CLIError(str(error)) from None
     for key, _, _, allowed in PHYSICAL_INPUTS:
         if key in inputs and not (key == "friction_width" and inputs[key] == RELATIVE_WIDTH):
             inputs[key] = _number(key, inputs[key], allowed)

@@ -22,6 +22,8 @@ from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser, lane
 from ._pool import COMMANDS_WITH_LANES
 from .frf import _add_frf_parser, _run_frf
 from .identify import _add_identify_parser, _run_identify
+from .random import _add_random_parser, _run_random
+from .records import _add_records_parser, _run_records
 from .retune import _add_retune_parser, _run_retune
 from .robust import _add_robust_parser, _run_robust
 from .rtds import _add_rtds_parser, _run_rtds
@@ -34,6 +36,8 @@ _COMMANDS = {
     "sensitivity": (_add_sensitivity_parser, _run_sensitivity),
     "robust": (_add_robust_parser, _run_robust),
     "identify": (_add_identify_parser, _run_identify),
+    "random": (_add_random_parser, _run_random),
+    "records": (_add_records_parser, _run_records),
 }
 
 
