@@ -149,23 +149,31 @@ def rms_response(system: BuildingTID, load: StationaryLoad,
     return jnp.sqrt(row @ P @ row)
 
 
+def _log_rms(log_tuning, args):
+    system, load, quantity = args
+    k, c = jnp.exp(log_tuning)
+    tuned = eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
+    return jnp.log(rms_response(tuned, load, quantity))
+
+
+@eqx.filter_jit
+def _h2_minimise(system, load, quantity, rtol):
+    start = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    solution = optx.minimise(_log_rms, optx.BFGS(rtol=rtol, atol=rtol), start,
+                             args=(system, load, quantity), throw=False, max_steps=256)
+    return solution.value, solution.result == optx.RESULTS.successful
+
+
 def h2_tuning(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Quantity(), *,
               rtol: float = 1e-10) -> tuple[float, float]:
     """The TID's (k, c) that minimise the frictionless RMS of `quantity` under the
     stationary `load` (`rms_response`): BFGS (optimistix) on (log k, log c) from the
     system's own tuning, the gradients by differentiating the Lyapunov solve."""
-
-    def objective(log_tuning, _):
-        k, c = jnp.exp(log_tuning)
-        tuned = eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-        return jnp.log(rms_response(tuned, load, quantity))
-
-    start = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
-    solution = optx.minimise(objective, optx.BFGS(rtol=rtol, atol=rtol), start,
-                             throw=False, max_steps=256)
-    if solution.result != optx.RESULTS.successful:
-        raise RuntimeError(f"the H2 tuning did not converge: {solution.result}")
-    k, c = np.exp(np.asarray(solution.value))
+    quantity.floor_of(system.floors)
+    value, successful = _h2_minimise(system, load, quantity, rtol)
+    if not bool(successful):
+        raise RuntimeError("the H2 tuning did not converge")
+    k, c = np.exp(np.asarray(value))
     return float(k), float(c)
 
 
