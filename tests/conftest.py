@@ -1,3 +1,4 @@
+import gc
 import os
 import shutil
 import tempfile
@@ -33,6 +34,16 @@ os.environ.setdefault("TID_JAX_WORKERS", "1")
 def pytest_sessionfinish(session):
     if _session_cache is not None:
         shutil.rmtree(_session_cache, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _programs_per_file():
+    """Each test file's compiled programs are dropped after it (those worth keeping stay in
+    the session's compilation cache on disk): a test worker runs dozens of files and would
+    otherwise hold every program it compiled, several GB by the end of the suite."""
+    yield
+    jax.clear_caches()
+    gc.collect()
 
 
 @pytest.fixture(scope="module")

@@ -302,6 +302,12 @@ def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
                        series_stiffness=system.series_stiffness, backlash=system.backlash)
 
 
+def log_tuned(system: BuildingTID, log_tuning) -> BuildingTID:
+    """The system with the TID's `(k, c) = exp(log_tuning)`: the designs' variables."""
+    k, c = jnp.exp(log_tuning)
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
+
+
 def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
     """Single-mode tunings `(k, c)` on the first mode (`BuildingTID.first_mode`):
     "den_hartog" (eq. (11)) and "h_infinity", the exact H-infinity optimum of an undamped

@@ -19,6 +19,7 @@ from ._building import (
     Quantity,
     first_mode_tunings,
     linear_amplitudes,
+    log_tuned,
     quantity_amplitude,
     uncontrolled_amplitude,
 )
@@ -193,11 +194,6 @@ def peak_over_frequency(system: BuildingTID, quantity: Quantity, amplitude, omeg
                 grid[3][:count])
 
 
-def tuned(system: BuildingTID, log_tuning) -> BuildingTID:
-    k, c = jnp.exp(log_tuning)
-    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-
-
 def peak_derivatives(system: BuildingTID, quantity: Quantity, amplitude, omega, state,
                      settings: SolverSettings, linear: bool, change, count: int):
     """The derivatives of the steady-state peak of `quantity` at `omega` (SI) along each
@@ -238,7 +234,7 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
     log c) (`peak_derivatives`)."""
     log_tuning = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
     return peak_derivatives(system, quantity, amplitude, omega, state, settings, linear,
-                            lambda theta: (tuned(system, log_tuning + theta), amplitude), 2)
+                            lambda theta: (log_tuned(system, log_tuning + theta), amplitude), 2)
 
 
 class BuildingRetune(eqx.Module):
@@ -286,7 +282,7 @@ class BandSearch:
         and the `Peak` of design `x`."""
         key = tuple(np.asarray(x[:2], float))
         if key not in self.seen:
-            design = tuned(self.system, jnp.asarray(key))
+            design = log_tuned(self.system, jnp.asarray(key))
             band, values, gradients, ok = _evaluate(design, *self.args, self.start,
                                                     self.settings, self.linear)
             ok = bool(ok)

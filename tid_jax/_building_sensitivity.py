@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._building import BuildingTID, Quantity
+from ._building import BuildingTID, Quantity, log_tuned
 from ._building_design import (
     frictionless,
     no_start,
@@ -17,7 +17,6 @@ from ._building_design import (
     peak_over_frequency,
     retune_building,
     search_grid,
-    tuned,
 )
 from ._building_orbit import building_settings
 from ._checks import check_grid
@@ -121,7 +120,7 @@ def _optimum_row(system, quantity, amplitude, omegas, settings, linear, tuning):
     differentiation of these conditions needs the second derivatives in u and the mixed
     ones: central differences (`_STEP`) of the exact first derivatives."""
     log_tuning = jnp.log(jnp.asarray(tuning, float))
-    evaluate = lambda design, start: _candidates(tuned(system, design), quantity, amplitude,
+    evaluate = lambda design, start: _candidates(log_tuned(system, design), quantity, amplitude,
                                                  omegas, start, settings, linear)
     band, gradients, ok = evaluate(log_tuning, no_start(system, omegas.shape[0]))
     start = (band.grid_states, band.grid_monodromies)

@@ -276,11 +276,12 @@ class _Plan(eqx.Module):
 
 
 def plan(system: BuildingTID, settings: MonteCarloSettings, stationary: bool = True) -> _Plan:
-    """The time step, the steps, the first counted step and the chunks of a run."""
+    """The time step, the steps, the first counted step and the chunks of a run: after the
+    transient where `stationary`, from the start (a run from rest under an envelope)."""
     period = first_period(system)
     h = settings.time_step if settings.time_step is not None else period / 200
     transient = settings.transient if settings.transient is not None else 20 * period
-    if settings.transient is None and transient >= 0.5 * settings.duration:
+    if stationary and settings.transient is None and transient >= 0.5 * settings.duration:
         raise ValueError(f"duration ({settings.duration} s) must be at least twice the "
                          f"default transient, 20 periods of the first mode ({transient:.3g} "
                          "s): give a longer duration or a transient")
@@ -348,9 +349,6 @@ def monte_carlo(system: BuildingTID, load: StationaryLoad, quantity: Quantity = 
     `jennings_envelope`) the white noise is modulated from rest and every step counts."""
     check_load(system, load, quantity)
     run_plan = plan(system, settings, stationary=envelope is None)
-    if envelope is not None:
-        run_plan = _Plan(time_step=run_plan.time_step, steps=run_plan.steps, first=0,
-                         chunks=run_plan.chunks)
     key = jax.random.key(settings.seed)
     squares, peaks = _stationary_sums(system, load, quantity, run_plan, key,
                                       settings.samples, envelope_scale(run_plan, envelope))

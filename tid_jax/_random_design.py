@@ -17,7 +17,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
-from ._building import BuildingTID, Quantity
+from ._building import BuildingTID, Quantity, log_tuned
 from ._monte_carlo import (
     MonteCarloSettings,
     check_load,
@@ -34,11 +34,6 @@ _MAX_LOG_STEP = 0.5  # the longest BFGS step in (ln k, ln c)
 SENSITIVITY_PARAMETERS = ("inertance", "friction_force", "psd")
 
 
-def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:
-    k, c = jnp.exp(log_tuning)
-    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-
-
 def _scaled(system: BuildingTID, load: StationaryLoad, log_scales):
     """The system and load with b, ff and S0 times `exp(log_scales)`."""
     b, ff, s0 = jnp.exp(log_scales)
@@ -50,7 +45,7 @@ def _scaled(system: BuildingTID, load: StationaryLoad, log_scales):
 def log_mean_square(log_tuning, system, load, quantity, run_plan, key, samples):
     """ln of the Monte Carlo mean square of `quantity` at (ln k, ln c), the noise from
     `key` (common random numbers)."""
-    tuned = _tuned(system, log_tuning)
+    tuned = log_tuned(system, log_tuning)
     stepper = stationary_stepper(tuned, load, quantity, run_plan.time_step)
     z0 = stationary_start(tuned, load, key, samples)
     squares, _, _ = run(stepper, z0, stationary_inputs(run_plan, key, samples),
@@ -79,7 +74,7 @@ def _linearised_log_rms(log_tuning, args):
     (ln k, ln c): Newton on ln sigma_v from the frictionless sigma_v, its derivatives
     implicit; infinite where Newton fails (no self-consistent solution found)."""
     system, load, quantity = args
-    tuned = _tuned(system, log_tuning)
+    tuned = log_tuned(system, log_tuning)
     index = 2 * tuned.coordinates - 1
     kappa = tuned.friction_force * jnp.sqrt(2 / jnp.pi)
 
@@ -103,8 +98,9 @@ class RandomDesign(eqx.Module):
     design `tid_stiffness`, `tid_damping` (N/m, N s/m) and `converged`; the RMS of the
     quantity (SI) with the given tuning, `rms_before`, and the design's, `rms_after`, with
     their standard errors (`_se`), from Monte Carlo runs independent of the design's
-    (seed + 1) on the same steps and noise for every tuning; the linearisation's design `linearised_stiffness`,
-    `linearised_damping` (NaN where it found none) and its RMS by that same run,
+    (seed + 1) on the same steps and noise for every tuning; the linearisation's design
+    `linearised_stiffness`, `linearised_damping` (NaN where it found none) and its RMS by
+    that same run,
     `rms_linearised` and `rms_linearised_se`. Without friction everything is exact
     (Lyapunov, `h2_tuning`) and the standard errors are 0."""
 
@@ -127,7 +123,7 @@ def _level(system, load, quantity, settings, rtol, max_steps):
     if float(system.friction_force) == 0:
         k, c = h2_tuning(system, load, quantity)
         before = float(rms_response(system, load, quantity))
-        after = float(rms_response(_tuned(system, jnp.log(jnp.array([k, c]))), load,
+        after = float(rms_response(log_tuned(system, jnp.log(jnp.array([k, c]))), load,
                                    quantity))
         return dict(tid_stiffness=k, tid_damping=c, converged=True, rms_before=before,
                     rms_before_se=0.0, rms_after=after, rms_after_se=0.0,
@@ -153,7 +149,7 @@ def _level(system, load, quantity, settings, rtol, max_steps):
         if name == "linearised" and not linear_ok:
             row.update(rms_linearised=np.nan, rms_linearised_se=np.nan)
             continue
-        tuned = system if tuning is None else _tuned(system, tuning)
+        tuned = system if tuning is None else log_tuned(system, tuning)
         result = monte_carlo(tuned, load, quantity, settings=judge)
         row[f"rms_{name}"], row[f"rms_{name}_se"] = float(result.rms), float(result.rms_se)
     k_lin, c_lin = np.exp(np.asarray(linear)) if linear_ok else (np.nan, np.nan)
@@ -219,7 +215,7 @@ def _sensitivity_objective(variables, system, load, quantity, run_plan, key, sam
     """ln mean square at (ln k, ln c, ln of the scales of b, ff and S0)."""
     scaled, scaled_load = _scaled(system, load, variables[2:])
     if exact:
-        return 2 * jnp.log(rms_response(_tuned(scaled, variables[:2]), scaled_load, quantity))
+        return 2 * jnp.log(rms_response(log_tuned(scaled, variables[:2]), scaled_load, quantity))
     return log_mean_square(variables[:2], scaled, scaled_load, quantity, run_plan, key,
                            samples)
 

@@ -15,7 +15,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from ._building import BuildingTID, Quantity
+from ._building import BuildingTID, Quantity, log_tuned
 from ._monte_carlo import CHUNK, check_system, first_period, record_stepper, run, substeps
 from ._records import GroundMotion
 
@@ -84,14 +84,9 @@ def suite_statistics(system: BuildingTID, quantity: Quantity, suite: _Suite):
     return peaks, jnp.sqrt(squares / (suite.counts + 1))
 
 
-def _tuned(system: BuildingTID, log_tuning) -> BuildingTID:
-    k, c = jnp.exp(log_tuning)
-    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-
-
 def _objective(log_tuning, args):
     system, quantity, suite = args
-    peaks, _ = suite_statistics(_tuned(system, log_tuning), quantity, suite)
+    peaks, _ = suite_statistics(log_tuned(system, log_tuning), quantity, suite)
     return jnp.log(jnp.mean(peaks))
 
 
@@ -102,7 +97,7 @@ def _design(system, quantity, suite, rtol, max_steps):
                              args=(system, quantity, suite), throw=False,
                              max_steps=max_steps)
     before = suite_statistics(system, quantity, suite)
-    after = suite_statistics(_tuned(system, solution.value), quantity, suite)
+    after = suite_statistics(log_tuned(system, solution.value), quantity, suite)
     return solution.value, solution.result == optx.RESULTS.successful, before, after
 
 

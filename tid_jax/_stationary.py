@@ -25,7 +25,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, Quantity, selection, state_space
+from ._building import BuildingTID, Quantity, log_tuned, selection, state_space
 
 KINDS = ("white_noise", "kanai_tajimi", "clough_penzien")
 
@@ -151,9 +151,7 @@ def rms_response(system: BuildingTID, load: StationaryLoad,
 
 def _log_rms(log_tuning, args):
     system, load, quantity = args
-    k, c = jnp.exp(log_tuning)
-    tuned = eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
-    return jnp.log(rms_response(tuned, load, quantity))
+    return jnp.log(rms_response(log_tuned(system, log_tuning), load, quantity))
 
 
 @eqx.filter_jit
