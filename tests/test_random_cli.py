@@ -196,8 +196,9 @@ def _slice(path, samples: int = 1500):
 def records_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("records")
     files = [_el_centro(), _slice(folder / "slice.csv")]
-    status, stdout, stderr = run(["records", *files, "--pga", "0.2", "--out",
-                                  folder / "out", "--json"])
+    # (unlimited, the design's stroke peak is 34 mm: the limit is active)
+    status, stdout, stderr = run(["records", *files, "--pga", "0.2", "--stroke-limit", "0.025",
+                                  "--out", folder / "out", "--json"])
     assert status == 0, stderr
     return json.loads(stdout), stderr, folder / "out", files
 
@@ -215,7 +216,7 @@ def test_records_json_is_the_library_s(records_run):
         assert r["pga"] == pytest.approx(0.2 * 9.80665, rel=1e-12)
         assert r["stroke_peak"] == pytest.approx(float(np.max(np.abs(history.stroke))),
                                                  rel=1e-10)
-    design = tj.design_for_records(system, motions, tj.Quantity())
+    design = tj.design_for_records(system, motions, tj.Quantity(), stroke_limit=0.025)
     assert data["tid_stiffness"] == pytest.approx(float(design.tid_stiffness), rel=1e-10)
     assert data["tid_damping"] == pytest.approx(float(design.tid_damping), rel=1e-10)
     assert data["converged"] is bool(design.converged)
@@ -225,6 +226,8 @@ def test_records_json_is_the_library_s(records_run):
     assert data["mean_peak_after"] < data["mean_peak"]
     assert data["given_tuning"]["tid_damping"] == pytest.approx(float(system.tid_damping))
     assert data["friction_width"] == 0.0 and data["pga_g"] == 0.2
+    assert data["stroke_limit"] == 0.025 and data["within_stroke_limit"] is True
+    assert 0.0245 < max(r["stroke_peak_after"] for r in results) <= 0.025
 
 
 def test_records_write_their_files(records_run):

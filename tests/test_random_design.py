@@ -188,6 +188,46 @@ def test_frictionless_record_design_is_scipy_s_on_the_linear_history():
     np.testing.assert_allclose(result.rms_before, [h.rms for h in before], rtol=1e-9)
 
 
+def test_stroke_limited_record_design_is_scipy_s_constrained_minimum():
+    # The frictionless design above moves the stroke peak from 24 to 29 mm; at 24.3 mm
+    # the limit is active. scipy's SLSQP on the linear history (an independent model and
+    # optimiser) finds the constrained minimum; ours aims 0.1% inside the limit.
+    kt = tj.StationaryLoad("kanai_tajimi", 0.05, ground_frequency=15.0, ground_damping=0.6)
+    motions = [tj.synthetic_motion(kt, 6.0, 0.01, seed=s).scaled_to(0.2) for s in (1, 2)]
+    system = _paper(0.0, on="ground")
+    limit = 0.0243
+    result = tj.design_for_records(system, motions, stroke_limit=limit)
+    assert bool(result.converged) and bool(result.within_stroke_limit)
+    seen = {}
+
+    def evaluate(x):
+        if tuple(x) not in seen:
+            k, c = np.exp(x)
+            histories = [tj.linear_history(system.replace(tid_stiffness=k, tid_damping=c), m)
+                         for m in motions]
+            seen[tuple(x)] = (float(np.mean([h.peak for h in histories])),
+                              max(float(np.max(np.abs(h.stroke))) for h in histories))
+        return seen[tuple(x)]
+
+    found = minimize(lambda x: evaluate(x)[0], np.asarray(_log_tuning(system)), method="SLSQP",
+                     constraints=[{"type": "ineq", "fun": lambda x: 1 - evaluate(x)[1] / limit}],
+                     options=dict(ftol=1e-12))
+    assert found.success and evaluate(found.x)[1] <= limit * (1 + 1e-9)
+    ours = np.log([float(result.tid_stiffness), float(result.tid_damping)])
+    peak, stroke = evaluate(ours)
+    assert stroke <= limit and peak <= found.fun * (1 + 1e-3)
+    np.testing.assert_allclose(ours, found.x, atol=2e-2)
+    np.testing.assert_allclose(result.stroke_peak_after, [
+        float(np.max(np.abs(tj.linear_history(system.replace(
+            tid_stiffness=float(result.tid_stiffness), tid_damping=float(result.tid_damping)),
+            m).stroke))) for m in motions], rtol=1e-6)
+    free = tj.design_for_records(system, motions)
+    assert float(np.max(free.stroke_peak_after)) > limit  # the limit is active
+    assert float(np.mean(free.peak_after)) < peak
+    with pytest.raises(ValueError, match="stroke_limit"):
+        tj.design_for_records(system, motions, stroke_limit=-0.01)
+
+
 def test_record_design_with_friction_lowers_the_mean_peak():
     kt = tj.StationaryLoad("kanai_tajimi", 0.05, ground_frequency=15.0, ground_damping=0.6)
     motions = [tj.synthetic_motion(kt, 6.0, 0.01, seed=s).scaled_to(0.05) for s in (1, 2)]

@@ -41,7 +41,8 @@ def _add_records_parser(subparsers) -> None:
         help="peaks and RMS under recorded ground motions, and the TID designed over them",
         description="The response with the inerter's friction (from rest) under each "
         "recorded ground motion, scaled to --pga, with the given tuning and with the TID's "
-        "k and c designed over the suite (the least mean peak, Nelder-Mead). The system is "
+        "k and c designed over the suite (the least mean peak, Nelder-Mead, every "
+        "record's stroke peak within --stroke-limit, default 0.07 m). The system is "
         "under ground acceleration: the paper's host by default, or a [structure] in "
         "--config ([load] on = 'ground'). The friction is exact Coulomb friction unless "
         "--friction-width gives a width (m/s). Prints a table and saves records.csv, "
@@ -112,11 +113,15 @@ def _run_records(args) -> int:
             before.append(friction_history(system, motion, quantity, time_step=time_step))
             step(f"record {i + 1}/{len(motions)} {motion.name}: peak "
                  f"{float(before[-1].peak):.4g} {quantity.unit} with the given tuning")
-        design = design_for_records(system, motions, quantity, time_step=time_step)
+        limit = inputs["stroke_limit"]
+        design = design_for_records(system, motions, quantity, stroke_limit=limit,
+                                    time_step=time_step)
         designed = tuned(system, design.tid_stiffness, design.tid_damping)
         step(f"designed over the suite: k = {float(design.tid_stiffness):.5g} N/m, c = "
              f"{float(design.tid_damping):.4g} N s/m"
-             + ("" if bool(design.converged) else " (Nelder-Mead not converged)"))
+             + ("" if bool(design.converged) else " (Nelder-Mead not converged)")
+             + ("" if bool(design.within_stroke_limit)
+                else f" (a stroke peak over the limit, {1e3 * limit:g} mm)"))
         after = []
         for i, motion in enumerate(motions):
             after.append(friction_history(designed, motion, quantity, time_step=time_step))
@@ -137,6 +142,7 @@ def _run_records(args) -> int:
                     friction_note=note, units=args.units, pga_g=pga, time_step=time_step,
                     tid_stiffness=float(design.tid_stiffness),
                     tid_damping=float(design.tid_damping), converged=bool(design.converged),
+                    stroke_limit=limit, within_stroke_limit=bool(design.within_stroke_limit),
                     mean_peak=float(np.mean([r["peak"] for r in records])),
                     mean_peak_after=float(np.mean([r["peak_after"] for r in records])),
                     results=records)
@@ -174,7 +180,9 @@ def _table(records, case, data) -> str:
     title = (f"Under {len(records)} record(s): given k = {given['tid_stiffness']:.5g} N/m, "
              f"c = {given['tid_damping']:.4g} N s/m; designed over the suite k = "
              f"{data['tid_stiffness']:.5g} N/m, c = {data['tid_damping']:.4g} N s/m"
-             f"{'' if data['converged'] else ' (not converged)'}, mean peak "
+             f"{'' if data['converged'] else ' (not converged)'}"
+             f"{'' if data['within_stroke_limit'] else ' (stroke over the limit)'} with "
+             f"strokes within {1e3 * data['stroke_limit']:g} mm, mean peak "
              f"{data['mean_peak']:.4g} -> {data['mean_peak_after']:.4g} {unit}; "
              f"{case.description}")
     return title + "\n" + table(columns, records)
