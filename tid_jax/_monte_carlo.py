@@ -36,7 +36,7 @@ from jaxtyping import Array, Float
 
 from ._building import BuildingTID, Quantity, selection, state_space
 from ._records import GroundMotion, History, propagators
-from ._stationary import StationaryLoad, joint_state_space, stationary_covariance
+from ._stationary import StationaryLoad, joint_state_space, quantity_row, stationary_covariance
 from ._system import FRICTION_WIDTH_RATIO
 
 CHUNK = 256  # steps between checkpoints of the reverse-mode derivative
@@ -208,14 +208,8 @@ def stationary_stepper(system: BuildingTID, load: StationaryLoad, quantity: Quan
     phi, noise, _ = propagators(A, B, time_step)
     _, held, _ = propagators(A, friction, time_step)
     scale = jnp.sqrt(2 * jnp.pi * load.psd / time_step)
-    out, out_friction, wd, kappa = _rows(system, quantity, A, friction, size)
-    if quantity.kind == "acceleration":
-        if load.kind == "white_noise" and (kappa != 0 or np.any(wd)):
-            raise ValueError("an acceleration under white noise has infinite variance: "
-                             "give a filtered load (kanai_tajimi or clough_penzien)")
-        _, _, h, _ = load.filter()
-        m = system.coordinates
-        out = out.at[0, 2 * m:].add(kappa * h)
+    out, out_friction, _, _ = _rows(system, quantity, A, friction, size)
+    out = out.at[0].set(quantity_row(system, load, quantity, A))
     return Stepper(phi=phi, inputs=(noise * scale)[:, None], friction=held, out=out,
                    out_friction=out_friction, out_inputs=jnp.zeros((2, 1)),
                    friction_force=system.friction_force, width=_width(system, load),

@@ -133,20 +133,26 @@ def rms_response(system: BuildingTID, load: StationaryLoad,
     absolute acceleration from the state's derivative; the white-noise load's own part of
     it, infinite in variance, needs a filtered ground motion)."""
     quantity.floor_of(system.floors)
-    w, wd, kappa, _ = selection(system, quantity)
     A, B = joint_state_space(system, load)
     P = lyapunov(A, 2 * jnp.pi * load.psd * jnp.outer(B, B))
-    m = system.coordinates
-    row = jnp.concatenate([jnp.asarray(w), jnp.zeros(A.shape[0] - m)])
-    if quantity.kind == "acceleration":
-        if load.kind == "white_noise" and (kappa != 0 or np.any(wd)):
-            raise ValueError("an acceleration under white noise has infinite variance: "
-                             "give a filtered load (kanai_tajimi or clough_penzien)")
-        # u'' = (A q)[m:2m]; the ground's a = h . s (no d w for the filters)
-        _, _, h, _ = load.filter()
-        row = jnp.asarray(wd) @ A[m:2 * m] + kappa * jnp.concatenate(
-            [jnp.zeros(2 * m), h])
+    row = quantity_row(system, load, quantity, A)
     return jnp.sqrt(row @ P @ row)
+
+
+def quantity_row(system: BuildingTID, load: StationaryLoad, quantity: Quantity,
+                 A: Float[Array, "n n"]) -> Float[Array, " n"]:
+    """The row c with `quantity = c q` over the joint state q of `joint_state_space` (its
+    matrix `A`), the friction left out."""
+    w, wd, kappa, _ = selection(system, quantity)
+    m = system.coordinates
+    if quantity.kind != "acceleration":
+        return jnp.concatenate([jnp.asarray(w), jnp.zeros(A.shape[0] - m)])
+    if load.kind == "white_noise" and (kappa != 0 or np.any(wd)):
+        raise ValueError("an acceleration under white noise has infinite variance: "
+                         "give a filtered load (kanai_tajimi or clough_penzien)")
+    # u'' = (A q)[m:2m]; the ground's a = h . s (no d w for the filters)
+    _, _, h, _ = load.filter()
+    return jnp.asarray(wd) @ A[m:2 * m] + kappa * jnp.concatenate([jnp.zeros(2 * m), h])
 
 
 def _log_rms(log_tuning, args):
