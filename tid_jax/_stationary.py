@@ -131,8 +131,13 @@ def rms_response(system: BuildingTID, load: StationaryLoad,
     """The RMS of `quantity` (SI) of the frictionless system under the stationary
     `load`: the square root of `c P c^T` for the quantity's row c of the joint state (an
     absolute acceleration from the state's derivative; the white-noise load's own part of
-    it, infinite in variance, needs a filtered ground motion)."""
+    it, infinite in variance, needs a filtered ground motion). One compiled program."""
     quantity.floor_of(system.floors)
+    return _rms(system, load, quantity)
+
+
+@eqx.filter_jit
+def _rms(system: BuildingTID, load: StationaryLoad, quantity: Quantity) -> Float[Array, ""]:
     A, B = joint_state_space(system, load)
     P = lyapunov(A, 2 * jnp.pi * load.psd * jnp.outer(B, B))
     row = quantity_row(system, load, quantity, A)
