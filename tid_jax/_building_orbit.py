@@ -105,21 +105,29 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
     of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
     held, each one period without tangents, until the residual is within `tol` or
     after `settings.max_newton_steps` of them; then, where not done, all that again
-    (`_ROUNDS` in all). Given a `monodromy` (of a nearby orbit: a warm start), up to
-    `_WARM_CHORDS` chord steps with it come first, and the Newton steps start again from
-    `z0` only where they did not converge."""
+    (`_ROUNDS` in all), each round integrating 100 times more accurately than the one
+    before (`SolverSettings.more_accurate`: Newton's iterations stall where the
+    integration error of the period map exceeds `tol`, as about backlash's steep force).
+    Given a `monodromy` (of a nearby orbit: a warm start), up to `_WARM_CHORDS` chord
+    steps with it come first, and the Newton steps start again from `z0` only where they
+    did not converge."""
     basis = jnp.eye(z0.shape[0], dtype=z0.dtype)
-    record = lambda z: _record(z, pl, fl, settings)
 
-    def newton(state):
-        z_end, monodromy, kept = jax.vmap(
-            lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
-            out_axes=(None, 1, None))(basis)
-        lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
-        return _step(state, z_end, kept, monodromy, lu)
+    def iterations(accuracy: SolverSettings):
+        """The Newton and the chord step with the period map integrated at `accuracy`."""
+        record = lambda z: _record(z, pl, fl, accuracy)
 
-    def chord(state):
-        return _step(state, *record(state.z), state.monodromy, state.lu)
+        def newton(state):
+            z_end, monodromy, kept = jax.vmap(
+                lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
+                out_axes=(None, 1, None))(basis)
+            lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
+            return _step(state, z_end, kept, monodromy, lu)
+
+        def chord(state):
+            return _step(state, *record(state.z), state.monodromy, state.lu)
+
+        return newton, chord
 
     def _step(state, z_end, kept, monodromy, lu):
         residual = z_end - state.z
@@ -144,13 +152,15 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
         warm = _Newton(z0, monodromy, jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy)),
                        start.residual, start.steps, empty, start.checked)
         usable = jnp.all(jnp.isfinite(monodromy))
-        warm = jax.lax.while_loop(until(jnp.where(usable, _WARM_CHORDS, 0)), chord, warm)
+        warm = jax.lax.while_loop(until(jnp.where(usable, _WARM_CHORDS, 0)),
+                                  iterations(settings)[1], warm)
         cold = eqx.tree_at(lambda n: n.steps, start, warm.steps)
         start = jax.tree.map(lambda a, b: jnp.where(warm.residual <= tol, a, b), warm, cold)
     # (loops, not a switch in one: in a batch a switch would run both branches) Where the
     # chord steps stall (a period map with corners, as of backlash), Newton's again.
     state = start
-    for _ in range(_ROUNDS):
+    for round_ in range(_ROUNDS):
+        newton, chord = iterations(settings.more_accurate(100.0**round_))
         state = jax.lax.while_loop(until(state.steps + newton_steps), newton, state)
         state = jax.lax.while_loop(until(state.steps + settings.max_newton_steps), chord,
                                    state)
