@@ -518,14 +518,18 @@ def plot_random_design(levels, rms, ratios, *, xlabel, ylabel, title=None):
 
 
 def plot_histories(panels, *, shade=None, title=None):
-    """Time histories, a panel per `(name, ylabel, time, curves)` (time in s), `curves`
-    mapping a label to values over `time`, in `TUNING_STYLES`; `shade = (start, end, label)`
-    marks a stretch of time."""
+    """Time histories, a panel per `(name, ylabel, time, curves)` or `(name, ylabel, time,
+    curves, limit)` (time in s), `curves` mapping a label to values over `time`, in
+    `TUNING_STYLES`, and `limit` (if given) drawn at plus and minus its value;
+    `shade = (start, end, label)` marks a stretch of time."""
     fig, axes = plt.subplots(len(panels), 1, figsize=(10, 0.8 + 2.4 * len(panels)),
                              squeeze=False, layout="constrained")
-    for ax, (name, ylabel, time, curves) in zip(axes[:, 0], panels, strict=True):
+    for ax, (name, ylabel, time, curves, *limit) in zip(axes[:, 0], panels, strict=True):
         for (label, values), style in zip(curves.items(), TUNING_STYLES, strict=False):
             ax.plot(time, values, linewidth=0.7, label=label, **style)
+        for sign in (1, -1) if limit and limit[0] is not None else ():
+            ax.axhline(sign * limit[0], color="0.3", linestyle=":", linewidth=1.0,
+                       label="limit" if sign > 0 else None)
         if shade is not None:
             ax.axvspan(shade[0], shade[1], color="0.9", label=shade[2])
         ax.set(ylabel=ylabel, title=name, xlim=(time[0], time[-1]))

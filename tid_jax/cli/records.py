@@ -136,7 +136,7 @@ def _run_records(args) -> int:
                                                             strict=True))]
     save_records(output, "records.csv", RECORDS_COLUMNS, records)
     _building.save_config(inputs, output, "records")
-    _save_plots(output, case, motions, before, after, records)
+    _save_plots(output, case, motions, before, after, records, limit)
     json_path = output.path("records.json")
     data = document("records", inputs, case, output, load={"on": "ground"},
                     friction_note=note, units=args.units, pga_g=pga, time_step=time_step,
@@ -150,13 +150,19 @@ def _run_records(args) -> int:
     return output.finish(data, _table(records, case, data))
 
 
-def _save_plots(output, case, motions, before, after, records) -> None:
+def _save_plots(output, case, motions, before, after, records, limit) -> None:
     described = case.quantity.describe(case.system.floors)
     unit = case.quantity.unit
-    panels = [(f"{motion.name} (PGA {motion.peak / G:.3g} g)", f"[{unit}]",
-               np.asarray(given.time), {"given tuning": np.asarray(given.quantity),
-                                        "designed over the suite": np.asarray(mine.quantity)})
-              for motion, given, mine in zip(motions, before, after, strict=True)]
+    panels = []
+    for motion, given, mine in zip(motions, before, after, strict=True):
+        name = f"{motion.name} (PGA {motion.peak / G:.3g} g)"
+        time = np.asarray(given.time)
+        panels += [(name, f"{described} [{unit}]", time,
+                    {"given tuning": np.asarray(given.quantity),
+                     "designed over the suite": np.asarray(mine.quantity)}),
+                   (f"{name}: TID stroke", "stroke [mm]", time,
+                    {"given tuning": 1e3 * np.asarray(given.stroke),
+                     "designed over the suite": 1e3 * np.asarray(mine.stroke)}, 1e3 * limit)]
     plot.save_figure(plot.plot_histories(
         panels, title=wrapped(f"Under the records: {case.description}")),
         output.path("records_histories.png"))
