@@ -308,6 +308,11 @@ def log_tuned(system: BuildingTID, log_tuning) -> BuildingTID:
     return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), system, (k, c))
 
 
+def log_tuning_of(system: BuildingTID) -> Float[Array, " 2"]:
+    """`(ln k, ln c)` of the system's TID (the inverse of `log_tuned`)."""
+    return jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+
+
 def first_mode_tunings(system: BuildingTID) -> dict[str, tuple[float, float]]:
     """Single-mode tunings `(k, c)` on the first mode (`BuildingTID.first_mode`):
     "den_hartog" (eq. (11)) and "h_infinity", the exact H-infinity optimum of an undamped

@@ -20,6 +20,7 @@ from ._building import (
     first_mode_tunings,
     linear_amplitudes,
     log_tuned,
+    log_tuning_of,
     quantity_amplitude,
     uncontrolled_amplitude,
 )
@@ -232,7 +233,7 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
                   settings: SolverSettings, linear: bool):
     """The derivatives of the steady-state peak at `omega` with respect to (log k,
     log c) (`peak_derivatives`)."""
-    log_tuning = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    log_tuning = log_tuning_of(system)
     return peak_derivatives(system, quantity, amplitude, omega, state, settings, linear,
                             lambda theta: (log_tuned(system, log_tuning + theta), amplitude), 2)
 

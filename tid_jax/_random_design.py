@@ -17,7 +17,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
-from ._building import BuildingTID, Quantity, log_tuned
+from ._building import BuildingTID, Quantity, log_tuned, log_tuning_of
 from ._monte_carlo import (
     MonteCarloSettings,
     check_load,
@@ -202,8 +202,7 @@ def random_sensitivities(system: BuildingTID, load: StationaryLoad,
     check_load(system, load, quantity)
     run_plan = plan(system, settings)
     key = jax.random.key(settings.seed)
-    start = jnp.concatenate([jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping])),
-                             jnp.zeros(3)])
+    start = jnp.concatenate([log_tuning_of(system), jnp.zeros(3)])
     gradient, hessian = _derivatives(start, system, load, quantity, run_plan, key,
                                      settings.samples, exact)
     tuning = -jnp.linalg.solve(hessian[:2, :2], hessian[:2, 2:])

@@ -19,7 +19,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from ._building import BuildingTID, Quantity, log_tuned
+from ._building import BuildingTID, Quantity, log_tuned, log_tuning_of
 from ._monte_carlo import CHUNK, check_system, first_period, record_stepper, run, substeps
 from ._records import GroundMotion
 from ._system import check_values
@@ -110,7 +110,7 @@ def _objective(log_tuning, args):
 
 @eqx.filter_jit
 def _design(system, quantity, suite, log_limit, rtol, max_steps):
-    start = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    start = log_tuning_of(system)
     solution = optx.minimise(_objective, optx.NelderMead(rtol=rtol, atol=rtol), start,
                              args=(system, quantity, suite, log_limit), throw=False,
                              max_steps=max_steps)

@@ -25,7 +25,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, Quantity, log_tuned, selection, state_space
+from ._building import BuildingTID, Quantity, log_tuned, log_tuning_of, selection, state_space
 
 KINDS = ("white_noise", "kanai_tajimi", "clough_penzien")
 
@@ -167,7 +167,7 @@ def _log_rms(log_tuning, args):
 
 @eqx.filter_jit
 def _h2_minimise(system, load, quantity, rtol):
-    start = jnp.log(jnp.stack([system.tid_stiffness, system.tid_damping]))
+    start = log_tuning_of(system)
     solution = optx.minimise(_log_rms, optx.BFGS(rtol=rtol, atol=rtol), start,
                              args=(system, load, quantity), throw=False, max_steps=256)
     return solution.value, solution.result == optx.RESULTS.successful
