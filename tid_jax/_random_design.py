@@ -100,9 +100,8 @@ class RandomDesign(eqx.Module):
     their standard errors (`_se`), from Monte Carlo runs independent of the design's
     (seed + 1) on the same steps and noise for every tuning; the linearisation's design
     `linearised_stiffness`, `linearised_damping` (NaN where it found none) and its RMS by
-    that same run,
-    `rms_linearised` and `rms_linearised_se`. Without friction everything is exact
-    (Lyapunov, `h2_tuning`) and the standard errors are 0."""
+    that same run, `rms_linearised` and `rms_linearised_se`. Without friction everything
+    is exact (Lyapunov, `h2_tuning`) and the standard errors are 0."""
 
     psd_levels: Float[Array, " levels"]
     tid_stiffness: Float[Array, " levels"]
