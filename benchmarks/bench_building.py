@@ -151,7 +151,7 @@ def numpy_model(stiffnesses, system):
 # --- tid_jax timing ---------------------------------------------------------------------
 
 def tid_run(system, omegas):
-    r = tj.building_response(system, omegas, [AMPLITUDE], ROOF)
+    r = tj.frequency_response(system, omegas, [AMPLITUDE], quantity=ROOF)
     return np.asarray(r.response_max)[0], np.asarray(r.converged)[0]
 
 
@@ -357,7 +357,7 @@ def time_retune(amplitudes):
     exact, _ = tid_systems(storey_stiffnesses(RETUNE_STOREYS))
 
     def run():
-        return tj.retune_building(exact, amplitudes)
+        return tj.retune(exact, amplitudes)
 
     start = time.perf_counter()
     run()

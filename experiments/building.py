@@ -66,8 +66,7 @@ def main() -> None:
           f"ff = {float(system.friction_force):.4g} N; largest first-mode drift: "
           f"storey {storey}", flush=True)
 
-    result = tj.retune_building(system, amplitudes,
-                                progress=lambda i, n: print(f"retuned {i}/{n}", flush=True))
+    result = tj.retune(system, amplitudes, progress=lambda line: print(line, flush=True))
     tunings = tj.first_mode_tunings(system)
     designs = {"first-mode Den Hartog": [tunings["den_hartog"]] * amplitudes.size,
                "first-mode H-infinity": [tunings["h_infinity"]] * amplitudes.size,
@@ -79,8 +78,8 @@ def main() -> None:
     drifts = {}
     for name, tuning in designs.items():
         drifts[name] = np.asarray([
-            float(tj.building_peaks(system.replace(tid_stiffness=k, tid_damping=c), [a],
-                                    drift).value[0])
+            float(tj.peaks(system.replace(tid_stiffness=k, tid_damping=c), None, [a],
+                           quantity=drift).value[0])
             for a, (k, c) in zip(amplitudes, tuning, strict=True)])
         print(f"drifts: {name}", flush=True)
 

@@ -88,7 +88,7 @@ def main() -> None:
         peaks = {
             name: float(tj.peak_response(system.replace(tid_stiffness=k_ratio * k_dh,
                                                         tid_damping=c_ratio * c_dh),
-                                         amplitude, omegas))
+                                         omegas, amplitude))
             / (amplitude / float(smooth.host_stiffness))
             for name, system in tuned.items()
         }

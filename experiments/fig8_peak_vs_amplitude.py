@@ -70,11 +70,11 @@ def main() -> None:
         k, c = tuning[a]
         return system.replace(tid_stiffness=k, tid_damping=c)
 
-    den_hartog = tj.peaks(system, amplitudes, omegas)
-    each = [tj.peaks(tuned_for(a), a, omegas) for a in amplitudes]
+    den_hartog = tj.peaks(system, omegas, amplitudes)
+    each = [tj.peaks(tuned_for(a), omegas, a) for a in amplitudes]
     retuned_x = np.array([float(p.x_peak[0]) for p in each])
     retuned_y = np.array([float(p.y_peak[0]) for p in each])
-    fixed = tj.peaks(tuned_for(RETUNED_FOR), amplitudes, omegas)
+    fixed = tj.peaks(tuned_for(RETUNED_FOR), omegas, amplitudes)
     designs = (
         (
             "linear TID (no friction), Den Hartog",

@@ -95,7 +95,7 @@ def main() -> None:
     fine = np.linspace(float(omegas[0]), float(omegas[-1]), 4 * (args.n_frequencies - 1) + 1)
     fine_stroke = {
         name: float(np.max(tj.peaks(system.replace(tid_stiffness=k, tid_damping=c),
-                                    amplitudes, fine).y_peak))
+                                    fine, amplitudes).y_peak))
         for name, (k, c) in tunings.items()
     }
     say("designs evaluated")

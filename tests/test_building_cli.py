@@ -83,8 +83,8 @@ def test_frf_of_a_building_with_a_compliant_device_is_the_library_s(tmp_path):
         terminal_mass=20.0, series_stiffness=2e6, backlash=1e-4)
     k, c = tj.first_mode_tunings(system)["den_hartog"]  # the command's default tuning
     system = system.replace(tid_stiffness=k, tid_damping=c)
-    mine = tj.building_response(system, 2 * np.pi * np.asarray(data["frequencies_hz"]),
-                                data["amplitudes"], tj.Quantity("drift", 1))
+    mine = tj.frequency_response(system, 2 * np.pi * np.asarray(data["frequencies_hz"]),
+                                 data["amplitudes"], quantity=tj.Quantity("drift", 1))
     ok = np.asarray(data["converged"])
     assert ok.sum() >= 8 and np.array_equal(ok, mine.converged)
     np.testing.assert_allclose(np.asarray(data["response_max"], float)[ok],
@@ -170,7 +170,8 @@ def test_sensitivity_of_a_building_names_every_floor_and_storey(tmp_path):
                                     damping_ratio=0.02),
         275.0, 135.0, data["tid_stiffness_N_per_m"], data["tid_damping_N_s_per_m"],
         load="ground")
-    mine = tj.building_sensitivities(system, [2.0], tj.Quantity("drift", 1))
+    mine = tj.amplitude_sensitivities(system, [2.0], quantity=tj.Quantity("drift", 1),
+                                      optimum=False)
     for j, name in enumerate(mine.names):
         assert records[name]["elasticity"] == pytest.approx(
             float(jnp.asarray(mine.elasticities)[0, j]), rel=1e-6, abs=1e-9)

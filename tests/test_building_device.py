@@ -35,12 +35,12 @@ def test_linear_steady_state_matches_the_dynamic_stiffness(building, layout):
                      pattern=pattern, cp=DEVICE["parasitic_damping"],
                      mt=DEVICE["terminal_mass"], ks=DEVICE["series_stiffness"])
     for kind in ("displacement", "drift", "acceleration"):
-        mine = tj.linear_building_response(system, omegas, tj.Quantity(kind, 2))
+        mine = np.abs(tj.linear_receptance(system, omegas, quantity=tj.Quantity(kind, 2)).host)
         theirs = building_linear.response_amplitude(omegas, M, K, C, kind=kind, floor=2,
                                                     **reference)
         np.testing.assert_allclose(mine, theirs, rtol=1e-10)
     # the shooting solver without friction finds the same steady states, stroke too
-    orbits = tj.building_response(system, omegas[::4], [3.0])
+    orbits = tj.frequency_response(system, omegas[::4], [3.0])
     stroke = building_linear.response_amplitude(omegas[::4], M, K, C, kind="stroke",
                                                 **reference)
     top = building_linear.response_amplitude(omegas[::4], M, K, C, kind="displacement",
@@ -57,7 +57,7 @@ def test_exact_coulomb_matches_the_event_driven_reference(building):
     quantity = tj.Quantity("drift", 2)
     ratios = np.linspace(0.8, 1.2, 5)
     amplitudes = [0.04, 0.1, 0.5]
-    mine = tj.building_response(system, first * ratios, amplitudes, quantity)
+    mine = tj.frequency_response(system, first * ratios, amplitudes, quantity=quantity)
     assert np.all(mine.converged)
     for a, amplitude in enumerate(amplitudes):
         for r, ratio in enumerate(ratios):
@@ -86,8 +86,8 @@ def test_one_storey_compliant_building_matches_the_physical_reference(system, ba
                               system.tid_stiffness, system.tid_damping, width, **device)
     omegas = np.array([0.9, 1.0, 1.05]) * float(system.host_frequency)
     amplitude = 300.0
-    response = tj.building_response(building, omegas, [amplitude],
-                                    settings=tj.SolverSettings(samples=1024))
+    response = tj.frequency_response(building, omegas, [amplitude],
+                                     settings=tj.SolverSettings(samples=1024))
     assert np.all(response.converged)
     fields = {name: value for name, value in system.to_dict().items()}
     fields.update(device, friction_width=width, amplitude=amplitude)
@@ -115,9 +115,9 @@ def test_bad_devices_name_the_input(building, changes, message):
 def test_breakaway_amplitude_is_where_the_stuck_mechanism_slips(building):
     system = tj.BuildingTID(building, B, 50.0, K_TID, C_TID, load="ground", **DEVICE)
     omega = 0.7 * building.modes()[0][0]
-    breakaway = float(tj.building_breakaway(system, [omega])[0])
-    below = tj.building_response(system, [omega], [0.95 * breakaway])
-    above = tj.building_response(system, [omega], [1.05 * breakaway])
+    breakaway = float(tj.breakaway_amplitude(system, [omega]).amplitude[0])
+    below = tj.frequency_response(system, [omega], [0.95 * breakaway])
+    above = tj.frequency_response(system, [omega], [1.05 * breakaway])
     assert int(below.transitions[0, 0]) == 0 and int(above.transitions[0, 0]) > 0
     # held, the mechanism leaves the terminal on the series spring: it still moves
     assert float(below.stroke_max[0, 0]) > 0
@@ -132,15 +132,15 @@ def test_elasticities_in_the_device_terms_are_differences(building, friction_wid
     # iterations find no steady state of the forcing's period, even after 200 periods)
     omegas = building.modes()[0][0] * np.linspace(0.85, 1.15, 31)
     amplitude = 0.3
-    sens = tj.building_sensitivities(system, [amplitude], omegas=omegas)
+    sens = tj.amplitude_sensitivities(system, [amplitude], omegas=omegas, optimum=False)
     assert bool(sens.converged[0])
     names = list(sens.names)
     assert names[6:9] == ["series_stiffness", "backlash", "amplitude"]
     step = 1e-4
     for name in ("series_stiffness", "terminal_mass") + (("backlash",) if backlash else ()):
         value = float(getattr(system, name))
-        peaks = [float(tj.building_peaks(system.replace(**{name: value * np.exp(h)}),
-                                         [amplitude], omegas=omegas).value[0])
+        peaks = [float(tj.peaks(system.replace(**{name: value * np.exp(h)}), omegas,
+                                [amplitude]).value[0])
                  for h in (step, -step)]
         difference = (peaks[0] - peaks[1]) / (2 * step) / float(sens.peak[0])
         assert float(sens.elasticities[0, names.index(name)]) == pytest.approx(

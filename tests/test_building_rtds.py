@@ -37,7 +37,7 @@ def _relative(a, b):
 def test_ideal_actuator_reproduces_the_whole_building(layout):
     system = _system(layout)
     amplitude = AMPLITUDES[layout]
-    whole = tj.building_response(system, OMEGAS, [amplitude], DRIFT)
+    whole = tj.frequency_response(system, OMEGAS, [amplitude], quantity=DRIFT)
     guess = 0.8 * (B + float(system.terminal_mass))
     worst = {}
     for rate in (2000.0, 8000.0):
@@ -94,7 +94,7 @@ def test_conventional_scheme_is_unstable_for_every_delay():
 
 def test_compliant_device_is_compared_with_the_whole_compliant_building():
     system = _system("ground", terminal_mass=20.0, series_stiffness=2e6)
-    whole = tj.building_response(system, OMEGAS, [1.0])
+    whole = tj.frequency_response(system, OMEGAS, [1.0])
     # (the paper's harmonic guess -b_g w^2 r*: an acceleration guess b_g r*'' of the
     # terminal, which moves on the series spring, would destabilise the loop)
     test = tj.simulate_substructuring(system, OMEGAS, 1.0, delay=0.0, prediction=None,
@@ -105,7 +105,7 @@ def test_compliant_device_is_compared_with_the_whole_compliant_building():
     # (the zero-order hold's first-order error at 8 kHz, as on the single-storey host)
     assert np.max(_relative(test.x_max, whole.response_max[0])) < 3e-3
     assert np.max(_relative(test.y_max, whole.stroke_max[0])) < 3e-3
-    rigid = tj.building_response(_system("ground", terminal_mass=20.0), OMEGAS, [1.0])
+    rigid = tj.frequency_response(_system("ground", terminal_mass=20.0), OMEGAS, [1.0])
     assert np.max(_relative(whole.response_max, rigid.response_max)) > 0.01  # it shows
 
 

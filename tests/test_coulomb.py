@@ -165,7 +165,7 @@ def test_gradients_match_finite_differences():
 
     def peak(values):
         system = PAPER.replace(**dict(zip(names, values[:3], strict=True)))
-        return tj.peak_response(system, values[3], omegas)
+        return tj.peak_response(system, omegas, values[3])
 
     # The differences take their peaks from the same compiled program as the gradient,
     # compiled with the XLA options of the package's own programs of exact friction.

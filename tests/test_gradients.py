@@ -35,7 +35,8 @@ def test_gradients_match_finite_differences(model):
     # linearisation, as `jax.grad` takes it) and the peaks, from one compiled program.
     def derivatives(values):
         value, tangent = jax.linearize(
-            lambda v: tj.peak_response(*_tuned(system, v), band, response=("host", "inerter")),
+            lambda v: tj.peak_response(_tuned(system, v)[0], band, _tuned(system, v)[1],
+                                      response=("host", "inerter")),
             values)
         jacobian = jax.vmap(tangent, out_axes=-1)(jnp.eye(values.shape[0]))
         (gradient,) = jax.linear_transpose(tangent, values)(jnp.array([1.0, 0.0]))

@@ -233,7 +233,7 @@ def test_a_point_that_no_attempt_integrates_is_flagged_and_its_peaks_are_nan(sys
     assert not bool(result.converged) and np.isinf(float(result.residual))
     assert np.isnan(float(result.x_max)) and np.isnan(float(result.y_max))
     band = np.linspace(0.9, 1.1, 5) * host
-    peaks = tj.peaks(stiff, [STUCK], band, settings=settings)
+    peaks = tj.peaks(stiff, band, [STUCK], settings=settings)
     assert not bool(peaks.converged[0])
     assert np.isnan(float(peaks.x_peak[0])) and np.isnan(float(peaks.y_peak[0]))
 
@@ -350,8 +350,8 @@ def test_peak_over_a_band_with_an_unconverged_orbit_is_nan_not_a_number():
     paper = tj.paper_system()
     band = PEAK_BAND * float(paper.host_frequency)
     once = tj.SolverSettings(max_newton_steps=1)
-    assert np.isnan(float(tj.peak_response(paper, 100.0, band, settings=once)))
-    assert np.isfinite(float(tj.peak_response(paper, 100.0, band)))
+    assert np.isnan(float(tj.peak_response(paper, band, 100.0, settings=once)))
+    assert np.isfinite(float(tj.peak_response(paper, band, 100.0)))
 
 
 def test_an_orbit_whose_integration_ran_out_of_steps_is_not_converged(system):
@@ -391,11 +391,11 @@ def test_the_peaks_programs_serve_any_number_of_lanes():
     paper = tj.paper_system()
     band = np.linspace(0.8, 1.25, 13) * float(paper.host_frequency)
     amplitudes = np.linspace(150.0, 3000.0, 18)
-    together = tj.peaks(paper, amplitudes, band)
+    together = tj.peaks(paper, band, amplitudes)
     assert bool(np.all(together.converged))
     lanes = (0, 9, 17)
     alone, events = _compiling(
-        lambda: [tj.peaks(paper, amplitudes[i : i + 1], band) for i in lanes])
+        lambda: [tj.peaks(paper, band, amplitudes[i : i + 1]) for i in lanes])
     assert events == []
     for i, one in zip(lanes, alone, strict=True):
         for field in ("x_peak", "y_peak", "omega_x", "omega_y", "at_edge"):
@@ -411,17 +411,17 @@ def test_peak_response_is_compiled_once_for_every_amplitude_and_tolerance():
     # beforehand.
     paper = tj.paper_system()
     band = PEAK_BAND * float(paper.host_frequency)
-    peaks = [float(tj.peak_response(paper, 100.0, band))]
+    peaks = [float(tj.peak_response(paper, band, 100.0))]
     tight = tj.SolverSettings(exact_periodicity_tol=1e-13, max_newton_steps=20)
     stiffer = paper.replace(tid_stiffness=np.float64(1.01) * float(paper.tid_stiffness),
                             inertance=np.int64(75))
     fitted = tj.SolverSettings().for_system(paper)
 
     def later():
-        return ([float(tj.peak_response(paper, amplitude, band)) for amplitude in (150.0, 200.0)],
-                float(tj.peak_response(paper, 200.0, band, settings=tight)),
-                float(tj.peak_response(stiffer, 200.0, band)),
-                float(tj.peak_response(paper, 200.0, band, settings=fitted)))
+        return ([float(tj.peak_response(paper, band, amplitude)) for amplitude in (150.0, 200.0)],
+                float(tj.peak_response(paper, band, 200.0, settings=tight)),
+                float(tj.peak_response(stiffer, band, 200.0)),
+                float(tj.peak_response(paper, band, 200.0, settings=fitted)))
 
     (more, tightly, stiffer_peak, fitted_peak), events = _compiling(later)
     assert events == []

@@ -28,7 +28,7 @@ def _perturbed(system, amplitude, name, value):
 
 
 def _peaks(system, amplitude, band):
-    result = tj.peaks(system, [amplitude], band)
+    result = tj.peaks(system, band, [amplitude])
     return np.array([float(result.x_peak[0]), float(result.y_peak[0])])
 
 

@@ -12,8 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ._building import BuildingTID, Quantity
+from ._building_design import BAND_POINTS, Peak, building_peaks, first_mode_band
 from ._cache import compiled
-from ._checks import check_grid, check_system
+from ._checks import check_grid, check_single_storey_quantity, check_system
 from ._peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -49,18 +51,24 @@ DEFAULT_FREQUENCIES = 61
 LANE_CHUNK = 16
 
 
-def default_omegas(system: TIDSystem, n: int = DEFAULT_FREQUENCIES) -> Float[Array, " freqs"]:
-    """The default frequency band: 0.65-1.4 times the host frequency.
+def default_omegas(system: TIDSystem | BuildingTID,
+                   n: int | None = None) -> Float[Array, " freqs"]:
+    """The default frequency band: 0.65-1.4 times the host frequency of a `TIDSystem`
+    (`n` default `DEFAULT_FREQUENCIES`), or `BUILDING_BAND` times a `BuildingTID`'s first
+    natural frequency (`n` default `BAND_POINTS`).
 
     **Arguments:**
 
-    - `system`: a `TIDSystem` (its host frequency sqrt(K / M)).
+    - `system`: a `TIDSystem` or a `BuildingTID`.
     - `n`: the number of frequencies, an integer >= 5.
 
     **Returns:** `n` evenly spaced circular frequencies, rad/s.
     """
-    if not (isinstance(n, int) and n >= 5):
+    if n is not None and not (isinstance(n, int) and n >= 5):
         raise ValueError(f"n must be an integer >= 5, got {n!r}")
+    if isinstance(system, BuildingTID):
+        return jnp.asarray(first_mode_band(system, BAND_POINTS if n is None else n))
+    n = DEFAULT_FREQUENCIES if n is None else n
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 
@@ -239,33 +247,46 @@ def _band(system, omegas):
         return default_omegas(system)
     array = check_grid("omegas", omegas)
     if array.ndim != 1 or array.size < 5:
-        raise ValueError(f"omegas must be a 1-d grid of at least 5 frequencies, got {array!r}")
+        raise ValueError("omegas must be a band: a 1-d grid of at least 5 frequencies, rad/s "
+                         f"(the order is system, omegas, amplitudes), got {array!r}")
     if np.any(np.diff(array) <= 0):
         raise ValueError("omegas must be strictly increasing")
     return jnp.asarray(array, dtype=jnp.result_type(float))
 
 
 def peaks(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
+    omegas: ArrayLike | None,
     amplitudes: ArrayLike,
-    omegas: ArrayLike | None = None,
     *,
-    settings: SolverSettings = SolverSettings(),
-) -> Peaks:
-    """Peak host and inerter displacement over a frequency band for each amplitude: of
-    the host, the maximum in continuous frequency (each of the highest local maxima on
-    the grid located by Newton steps on the slope of the response, see `_peaks`); of the
-    inerter, the grid's refined by a parabola. All amplitudes in one batch.
+    quantity: Quantity | None = None,
+    settings: SolverSettings | None = None,
+) -> Peaks | Peak:
+    """Peak responses over a frequency band for each amplitude. Of a `TIDSystem`: the
+    host's and the inerter's displacement; the host's the maximum in continuous frequency
+    (each of the highest local maxima on the grid located by Newton steps on the slope of
+    the response, see `_peaks`), the inerter's the grid's refined by a parabola. Of a
+    `BuildingTID`: its `quantity`'s, each of the two highest peaks on the grid refined by
+    the vertices of parabolas through steady states. All amplitudes in one batch.
 
     **Arguments:**
 
-    - `system`: the `TIDSystem`.
-    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
-    - `omegas`: the band's grid, rad/s, increasing (default `default_omegas(system)`).
+    - `system`: a `TIDSystem` or a `BuildingTID`.
+    - `omegas`: the band's grid, rad/s, increasing; None: `default_omegas(system)`.
+    - `amplitudes`: load amplitudes A of `A sin(omega t)`, N (a building's ground
+      acceleration: m/s2), scalar or 1-d.
+    - `quantity`: a building's measured response (`Quantity`; default the top floor's
+      displacement).
     - `settings`: `SolverSettings` of the steady states.
 
-    **Returns:** `Peaks`, one entry per amplitude.
+    **Returns:** `Peaks` (a `TIDSystem`) or `Peak` (a `BuildingTID`), one entry per
+    amplitude.
     """
+    if isinstance(system, BuildingTID):
+        return building_peaks(system, amplitudes, Quantity() if quantity is None else quantity,
+                              omegas, settings)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
     check_system(system)
     band = _band(system, omegas)
     amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
@@ -275,8 +296,8 @@ def peaks(
 
 def peak_response(
     system: TIDSystem,
+    omegas: ArrayLike | None,
     amplitude: ArrayLike,
-    omegas: ArrayLike | None = None,
     *,
     response: str | Sequence[str] = "host",
     settings: SolverSettings = SolverSettings(),
@@ -291,8 +312,8 @@ def peak_response(
     **Arguments:**
 
     - `system`: the `TIDSystem`.
+    - `omegas`: the band's grid, rad/s, increasing; None: `default_omegas(system)`.
     - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (scalar; may be traced).
-    - `omegas`: the band's grid, rad/s, increasing (default `default_omegas(system)`).
     - `response`: `"host"` or `"inerter"`, or a tuple (or list) of them: their peaks from
       one sweep of the band (the steady states and their derivatives shared).
     - `settings`: `SolverSettings` of the steady states.
@@ -300,17 +321,20 @@ def peak_response(
     **Returns:** the peak, m (for a tuple of responses, an array of their peaks in its
     order); NaN where a steady state in the band did not converge.
     """
+    if isinstance(system, BuildingTID):
+        raise ValueError("peak_response takes a TIDSystem; a building's peaks come from "
+                         "tid_jax.peaks(system, omegas, amplitudes)")
     check_system(system)
     responses = (response,) if isinstance(response, str) else (
         tuple(response) if isinstance(response, tuple | list) else ())
     if not (responses and all(name in ("host", "inerter") for name in responses)):
         raise ValueError(
             f"response must be 'host' or 'inerter', or a tuple of them, got {response!r}")
+    band = _band(system, omegas)
     if not isinstance(amplitude, jax.core.Tracer):
         check_grid("amplitude", amplitude)
         if np.ndim(amplitude) != 0:
             raise ValueError(f"amplitude must be a scalar, got shape {np.shape(amplitude)}")
-    band = _band(system, omegas)
     # An array, traced by the compiled program: a Python number would be one of its
     # static arguments, compiled anew for every amplitude.
     amplitude = jnp.asarray(amplitude, band.dtype)

@@ -59,17 +59,17 @@ class _Stalled(Exception):
     pass
 
 
-def default_omegas(system: BuildingTID, points: int = BAND_POINTS) -> np.ndarray:
+def first_mode_band(system: BuildingTID, points: int = BAND_POINTS) -> np.ndarray:
     """`points` frequencies (rad/s) over `BUILDING_BAND` of the first mode."""
     return np.linspace(*BUILDING_BAND, points) * system.structure.modes()[0][0]
 
 
 def search_grid(system: BuildingTID, omegas) -> np.ndarray:
-    """The grid the peaks are looked for on: `omegas` (default `default_omegas`), or
+    """The grid the peaks are looked for on: `omegas` (default `first_mode_band`), or
     `BAND_POINTS` frequencies evenly over their range where they are fewer (a coarser
     grid can merge the two peaks)."""
     if omegas is None:
-        return default_omegas(system)
+        return first_mode_band(system)
     omegas = np.asarray(check_grid("omegas", omegas), float)
     if omegas.size < BAND_POINTS:
         return np.linspace(omegas.min(), omegas.max(), BAND_POINTS)
@@ -416,7 +416,7 @@ def frictionless(system: BuildingTID) -> bool:
 
 def building_peaks(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(),
                    omegas=None, settings: SolverSettings | None = None) -> Peak:
-    """The peak of `quantity` over the band of `omegas` (default `default_omegas`; at
+    """The peak of `quantity` over the band of `omegas` (default `first_mode_band`; at
     least `BAND_POINTS` frequencies over their range) at each amplitude, with the
     system's own tuning."""
     amplitudes = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(float)
@@ -431,7 +431,7 @@ def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quanti
                     rtol: float = 1e-6, max_steps: int = 100,
                     progress: Callable[[int, int], None] | None = None) -> BuildingRetune:
     """The TID's (k, c) that minimise the peak of `quantity` over the band of `omegas`
-    (default `default_omegas`; at least `BAND_POINTS` frequencies over their range) at
+    (default `first_mode_band`; at least `BAND_POINTS` frequencies over their range) at
     each of `amplitudes`: the whole structure and the
     friction seen by each steady state, the two highest peaks over frequency and their
     exact derivatives (`peak_gradient`) given to SLSQP (scipy) in the epigraph form

@@ -53,7 +53,7 @@ def robust_building(system: BuildingTID, amplitudes, quantity: Quantity | None =
     stiffness matrix times the scale: `(0.95, 1.0, 1.05)` for +-5%): the minimiser of the
     worst, over the scenarios, of the peak of `quantity` over the band divided by the
     best peak a tuning of the scenario's own achieves (`retune_building`). The band is
-    `omegas`, or per scenario its default (`default_omegas`, with its own first mode).
+    `omegas`, or per scenario its default (`first_mode_band`, with its own first mode).
     The same search as the retune's (`minimax`) over every scenario's two highest
     peaks, from the best scenario-own tuning that does best in the worst case.
     `progress(message)` is told of each step."""

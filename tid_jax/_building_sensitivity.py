@@ -207,7 +207,7 @@ def building_sensitivities(system: BuildingTID, amplitudes, quantity: Quantity |
                            *, omegas=None, settings: SolverSettings | None = None,
                            optimum: bool = False) -> BuildingSensitivities:
     """The elasticities of the peak of `quantity` (default: the top floor's displacement)
-    over the band of `omegas` (default `default_omegas`; at least `BAND_POINTS`
+    over the band of `omegas` (default `first_mode_band`; at least `BAND_POINTS`
     frequencies) at each of `amplitudes`, with the system's own tuning, in every
     parameter of `parameter_names`. A parameter that is zero has elasticity zero. With
     `optimum`, also those of the retuned optimum (`BuildingOptimum`)."""

@@ -27,7 +27,18 @@ def check_precision() -> None:
 def check_system(system) -> None:
     check_precision()
     if not isinstance(system, TIDSystem):
-        raise ValueError(f"system must be a TIDSystem, got {type(system).__name__}")
+        raise ValueError("system must be a TIDSystem or a BuildingTID, got "
+                         f"{type(system).__name__}")
+
+
+def check_single_storey_quantity(quantity) -> None:
+    """`ValueError` unless `quantity` (a `Quantity` or None) is what a `TIDSystem`
+    measures: its host's displacement (the one floor's)."""
+    if quantity is None or (getattr(quantity, "kind", None) == "displacement"
+                            and getattr(quantity, "floor", None) in (None, 1)):
+        return
+    raise ValueError("a TIDSystem's response is its host's displacement: for another "
+                     "quantity pass tid_jax.as_building(system)")
 
 
 def check_steady_state_device(system: TIDSystem, purpose: str) -> None:

@@ -102,7 +102,7 @@ class LinearReceptance(eqx.Module):
         return iter((self.host, self.inerter))
 
 
-def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
+def host_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
     """Receptances X/Fe (host, eq. (3) with host damping) and Y/Fe (inerter terminal) of the
     linear TID, with the real device's parasitic damping, terminal mass and series
     stiffness; friction and backlash (nonlinear) are left out.
@@ -125,7 +125,7 @@ def linear_receptance(system: TIDSystem, omega: ArrayLike) -> LinearReceptance:
 
 @eqx.filter_jit
 def _linear_receptance(system: TIDSystem, w) -> LinearReceptance:
-    """`linear_receptance`, one compiled program (not an array operation each)."""
+    """`host_receptance`, one compiled program (not an array operation each)."""
     mechanism = 1j * w * system.parasitic_damping - system.inertance * w**2
     return _receptance(system, w, mechanism / (1 + mechanism / system.series_stiffness))
 
@@ -205,7 +205,7 @@ COMPLIANT_BREAKAWAY_GRID = 4001
 
 @eqx.filter_jit
 def _compliant_breakaway(system: TIDSystem, w) -> Breakaway:
-    """`breakaway_amplitude` of a compliant device: the mechanism stuck, the terminal
+    """`host_breakaway` of a compliant device: the mechanism stuck, the terminal
     (mass mt) held by the series spring ks alone (its free play left out), and the force
     ks Y on the mechanism within ff; the minimum on a fine grid over the band."""
     def amplitude(w):
@@ -219,7 +219,7 @@ def _compliant_breakaway(system: TIDSystem, w) -> Breakaway:
                      omega_minimum=fine[best])
 
 
-def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
+def host_breakaway(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
     """The forcing amplitudes up to which the steady state with the inerter stuck exists,
     at each frequency, and their smallest over the band (see `Breakaway`).
 
@@ -240,7 +240,7 @@ def breakaway_amplitude(system: TIDSystem, omegas: ArrayLike) -> Breakaway:
 
 @eqx.filter_jit
 def _rigid_breakaway(system: TIDSystem, w) -> Breakaway:
-    """`breakaway_amplitude` of a rigid device: the minimum over the band in closed
+    """`host_breakaway` of a rigid device: the minimum over the band in closed
     form."""
     mass, k, c = system.host_mass, system.tid_stiffness, system.tid_damping
     stiffness = system.host_stiffness + k

@@ -6,8 +6,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
+from ._building import BuildingTID, Quantity
+from ._building_orbit import BuildingResponse, building_response
 from ._cache import compiled
-from ._checks import check_grid, check_steady_state_device, check_system
+from ._checks import (
+    check_grid,
+    check_single_storey_quantity,
+    check_steady_state_device,
+    check_system,
+)
 from ._dynamics import parameters
 from ._eigen import eigenvalues
 from ._period import initial_state, transient
@@ -331,26 +338,39 @@ def scaled_states(response: FrequencyResponse, host_stiffness,
 
 
 def frequency_response(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     omegas: ArrayLike,
     amplitudes: ArrayLike,
     *,
-    settings: SolverSettings = SolverSettings(),
-) -> FrequencyResponse:
+    quantity: Quantity | None = None,
+    settings: SolverSettings | None = None,
+) -> FrequencyResponse | BuildingResponse:
     """Steady-state response at every (amplitude, frequency) pair, found by shooting on the
     forcing period (all points solved in one batched call); with smoothed friction, or
     exact Coulomb friction where `system.friction_width` is 0.
 
     **Arguments:**
 
-    - `system`: the `TIDSystem`.
+    - `system`: the `TIDSystem` (the paper's single-storey host) or a `BuildingTID` (a TID
+      in a `Structure` of any number of floors).
     - `omegas`: forcing circular frequencies, rad/s (scalar or 1-d).
-    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
+    - `amplitudes`: load amplitudes A of `A sin(omega t)`: N for a force, m/s2 for a
+      building's ground acceleration (scalar or 1-d).
+    - `quantity`: a building's measured response (`Quantity`; default the top floor's
+      displacement). A `TIDSystem`'s response is its host's and its terminal's
+      displacement (`as_building` measures any other quantity).
     - `settings`: `SolverSettings` of the shooting solver.
 
-    **Returns:** a `FrequencyResponse`; arrays are `(n_amplitudes, n_frequencies)`, with the
-    axis of a scalar input dropped. Points that fail to converge are flagged in `converged`.
+    **Returns:** for a `TIDSystem` a `FrequencyResponse`, arrays `(n_amplitudes,
+    n_frequencies)` with the axis of a scalar input dropped; for a `BuildingTID` a
+    `BuildingResponse`, arrays amplitudes x frequencies. Points that fail to converge are
+    flagged in `converged`.
     """
+    if isinstance(system, BuildingTID):
+        return building_response(system, omegas, amplitudes,
+                                 Quantity() if quantity is None else quantity, settings)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
     check_system(system)
     check_steady_state_device(system, "frequency_response")
     omega_array = check_grid("omegas", omegas)

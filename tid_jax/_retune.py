@@ -14,16 +14,19 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import Peaks, _band, response_peaks
+from ._building import BuildingTID, Quantity
+from ._building_design import BuildingRetune, retune_building
 from ._checks import (
     check_grid,
     check_optimiser_options,
+    check_single_storey_quantity,
     check_steady_state_device,
     check_system,
     is_positive,
 )
 from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._dynamics import PARAMETERS
-from ._linear import breakaway_amplitude, den_hartog_tuning
+from ._linear import den_hartog_tuning, host_breakaway
 from ._outcomes import outcome_code, outcome_message
 from ._parallel import process_count, serial
 from ._period import initial_state
@@ -169,17 +172,18 @@ def _rows(response: FrequencyResponse, rows) -> FrequencyResponse:
 
 
 def retune(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike,
     *,
     omegas: ArrayLike | None = None,
-    settings: SolverSettings = SolverSettings(),
-    max_steps: int = 60,
-    tol: float = 1e-4,
+    quantity: Quantity | None = None,
+    settings: SolverSettings | None = None,
+    max_steps: int | None = None,
+    tol: float | None = None,
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> RetuneResult:
+) -> RetuneResult | BuildingRetune:
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
     `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
 
@@ -206,20 +210,27 @@ def retune(
     design's orbits) on a grid `retune_settings.check_refinement` times finer; a design
     whose peak there is above the initial tuning's is replaced by the initial tuning (status
     `initial_kept`), as is the design at an amplitude below the initial tuning's breakaway
-    amplitude (`breakaway_amplitude`; status `stuck`, not optimised at all, 0 iterations):
+    amplitude (`host_breakaway`; status `stuck`, not optimised at all, 0 iterations):
     there the inerter never slips, and the smoothed model's optimum would be an ever stiffer
     spring and damper to ground.
 
+    A `BuildingTID` is retuned for the whole structure by `retune_building` (SLSQP on the
+    two highest peaks of its `quantity`, default the top floor's displacement, and their
+    exact derivatives; `max_steps` default 100, `tol` on the log peak default 1e-6), one
+    amplitude after another, and returns a `BuildingRetune`.
+
     **Arguments:**
 
-    - `system`: the `TIDSystem`; its `tid_stiffness` and `tid_damping` are the initial
-      tuning.
-    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (scalar or 1-d).
+    - `system`: the `TIDSystem` (or `BuildingTID`); its `tid_stiffness` and
+      `tid_damping` are the initial tuning.
+    - `amplitudes`: forcing amplitudes A of `A sin(omega t)`, N (a building's ground
+      acceleration: m/s2), scalar or 1-d.
     - `omegas`: the design grid of the band, rad/s, increasing (default
       `default_omegas(system)`: 61 frequencies over 0.65-1.4 times the host frequency).
     - `settings`: `SolverSettings` of the steady states.
-    - `max_steps`: BFGS iterations allowed per stage.
-    - `tol`: tolerance of the last stage, on the scaled design variables and the log peak
+    - `quantity`: a building's measured response (`Quantity`).
+    - `max_steps`: BFGS iterations allowed per stage (default 60).
+    - `tol`: (default 1e-4) tolerance of the last stage, on the scaled design variables and the log peak
       (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
       the stages before use `retune_settings.continuation_tol`. A stage also ends,
       converged, when its line search finds no decrease in
@@ -233,8 +244,16 @@ def retune(
     - `map_lanes`: how the independent amplitudes are mapped (default: one after another
       in this process; a `ProcessMap` spreads them over processes).
 
-    **Returns:** a `RetuneResult`.
+    **Returns:** a `RetuneResult` (a `BuildingRetune` for a `BuildingTID`).
     """
+    if isinstance(system, BuildingTID):
+        return _retune_building(system, amplitudes, omegas=omegas, quantity=quantity,
+                                settings=settings, max_steps=max_steps, tol=tol,
+                                progress=progress, map_lanes=map_lanes)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
+    max_steps = 60 if max_steps is None else max_steps
+    tol = 1e-4 if tol is None else tol
     check_system(system)
     check_steady_state_device(system, "retune")
     band = _band(system, omegas)
@@ -245,6 +264,20 @@ def retune(
                              max_steps=max_steps, tol=tol, retune_settings=retune_settings,
                              progress=progress, map_lanes=map_lanes)
     return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
+
+
+def _retune_building(system: BuildingTID, amplitudes, *, omegas, quantity, settings,
+                     max_steps, tol, progress, map_lanes) -> BuildingRetune:
+    """`retune` of a building (`retune_building`), its `progress` a one-line message per
+    amplitude."""
+    if map_lanes is not serial:
+        raise ValueError("a BuildingTID's retune runs in this process: leave map_lanes out")
+    report = None if progress is None else (
+        lambda done, total: progress(f"amplitude {done} of {total} retuned"))
+    return retune_building(system, amplitudes, Quantity() if quantity is None else quantity,
+                           omegas=omegas, settings=settings,
+                           rtol=1e-6 if tol is None else tol,
+                           max_steps=100 if max_steps is None else max_steps, progress=report)
 
 
 def check_retune_options(max_steps, tol, retune_settings) -> None:
@@ -442,10 +475,10 @@ def _set_lanes(values, lanes, new):
 
 def _below_breakaway(systems: TIDSystem, amplitudes, bands):
     """Whether each lane's amplitude is below its system's smallest breakaway amplitude
-    over its band (`breakaway_amplitude`): the inerter then never slips."""
+    over its band (`host_breakaway`): the inerter then never slips."""
     systems, bands = _on_host((systems, bands))
     minimum = [
-        float(breakaway_amplitude(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
+        float(host_breakaway(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
         for i in range(amplitudes.shape[0])
     ]
     return np.asarray(amplitudes) < np.asarray(minimum)

@@ -11,7 +11,15 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
 from ._best_tunings import BestTunings, best_tunings, check_best
-from ._checks import check_distinct, check_steady_state_device, check_system, is_positive
+from ._building import BuildingTID, Quantity
+from ._building_robust import BuildingRobust, robust_building
+from ._checks import (
+    check_distinct,
+    check_single_storey_quantity,
+    check_steady_state_device,
+    check_system,
+    is_positive,
+)
 from ._design_evaluation import (
     Context,
     Evaluation,
@@ -411,21 +419,22 @@ def _robust_start(system, best: BestTunings, target, settings,
 
 
 def robust_tune(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike = PAPER_AMPLITUDES,
     *,
     host_frequency_scales: ArrayLike = (1.0,),
     stroke_limit: float | None = PAPER_STROKE,
     best: BestTunings | None = None,
     omegas: ArrayLike | None = None,
-    settings: SolverSettings = SolverSettings(),
-    max_steps: int = 40,
-    tol: float = 1e-9,
+    quantity: Quantity | None = None,
+    settings: SolverSettings | None = None,
+    max_steps: int | None = None,
+    tol: float | None = None,
     retune_settings: RetuneSettings = RetuneSettings(),
     robust_settings: RobustSettings = RobustSettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> RobustDesign:
+) -> RobustDesign | BuildingRobust:
     """One TID stiffness k and damping c for every scenario (forcing amplitude and host
     frequency scale): the minimiser of the worst case, over the scenarios, of the peak
     host displacement over the band divided by the best achievable in that scenario,
@@ -444,9 +453,15 @@ def robust_tune(
     `robust_settings.check_refinement` times finer; if it is over the limit there, the
     target is lowered by the excess and the design polished again.
 
+    A `BuildingTID` is designed for the whole structure by `robust_building` (the
+    retune's SLSQP on every scenario's two highest peaks of its `quantity`, default the
+    top floor's displacement; `max_steps` default 100, `tol` on the log peak default
+    1e-6), its stiffness matrix times s**2 for each scale s; a `BuildingRobust`.
+
     **Arguments:**
 
-    - `system`: the `TIDSystem` (rigid device); its tuning is one starting point.
+    - `system`: the `TIDSystem` (rigid device) or `BuildingTID`; its tuning is one
+      starting point.
     - `amplitudes`: forcing amplitudes, N (default the paper's, 100-3000 N).
     - `host_frequency_scales`: host frequency scales s (the host stiffness times s**2),
       e.g. (0.95, 1, 1.05) for +-5% host frequency.
@@ -456,16 +471,30 @@ def robust_tune(
       by `best_tunings` with `retune_settings`).
     - `omegas`: the band, rad/s, for the nominal system (default
       `default_omegas(system)`), scaled with the host frequency.
+    - `quantity`: a building's measured response (`Quantity`).
     - `settings`: `SolverSettings` of every steady state.
-    - `max_steps`: optimiser steps per stage.
-    - `tol`: the Newton decrement aimed at.
+    - `max_steps`: optimiser steps per stage (default 40).
+    - `tol`: the Newton decrement aimed at (default 1e-9).
     - `retune_settings`: `RetuneSettings` of the best tunings.
     - `robust_settings`: `RobustSettings` of this optimiser.
     - `progress`: if given, called with one-line messages.
     - `map_lanes`: how independent lanes are mapped (see `retune`).
 
-    **Returns:** a `RobustDesign`.
+    **Returns:** a `RobustDesign` (a `BuildingRobust` for a `BuildingTID`).
     """
+    if isinstance(system, BuildingTID):
+        if best is not None or map_lanes is not serial:
+            raise ValueError("a BuildingTID's robust design takes neither best nor map_lanes")
+        return robust_building(
+            system, amplitudes, quantity,
+            stiffness_scales=np.square(np.asarray(host_frequency_scales, float)),
+            stroke_limit=stroke_limit, omegas=omegas, settings=settings,
+            rtol=1e-6 if tol is None else tol, max_steps=100 if max_steps is None else max_steps,
+            progress=progress)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
+    max_steps = 40 if max_steps is None else max_steps
+    tol = 1e-9 if tol is None else tol
     check_system(system)
     check_steady_state_device(system, "robust_tune")
     amps = check_distinct("amplitudes", amplitudes)

@@ -13,7 +13,7 @@ from jaxtyping import Array, Bool, Float
 
 from ._cache import compiled
 from ._dynamics import dead_zone, smooth_sign
-from ._linear import linear_receptance
+from ._linear import host_receptance
 from ._peaks import parabola_top
 from ._system import TIDSystem
 
@@ -96,7 +96,7 @@ class HostModel(eqx.Module):
     def linear(self, plan: Plan, point: Point, times):
         """The frictionless whole system's steady state at `times`: the numerical
         substructure's states (rows) and the interface's y, y', y'' (rows)."""
-        receptance = linear_receptance(self.system, point.omega)
+        receptance = host_receptance(self.system, point.omega)
         jw = 1j * point.omega
         phase = point.amplitude * jnp.exp(jw * times)
         host, inerter = receptance.host * phase, receptance.inerter * phase

@@ -10,9 +10,12 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
 from ._best_tunings import BestTunings, best_tunings, check_best
+from ._building import BuildingTID, Quantity
+from ._building_sensitivity import BuildingSensitivities, building_sensitivities
 from ._checks import (
     check_amplitude,
     check_distinct,
+    check_single_storey_quantity,
     check_steady_state_device,
     check_system,
     is_positive,
@@ -340,18 +343,19 @@ def _best_index(best: "BestTunings", system, band, amplitude) -> tuple[int, int]
 
 
 def sensitivities(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     amplitude: ArrayLike,
     *,
     omegas: ArrayLike | None = None,
+    quantity: Quantity | None = None,
     optimum: bool = True,
     best: "BestTunings | None" = None,
-    settings: SolverSettings = SolverSettings(),
+    settings: SolverSettings | None = None,
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     sensitivity_settings: SensitivitySettings = SensitivitySettings(),
-) -> Sensitivities:
+) -> Sensitivities | BuildingSensitivities:
     """Sensitivities of the peak steady-state host displacement and inerter stroke over the
     band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
     (N) to every physical parameter and the amplitude: derivatives and elasticities, by
@@ -372,11 +376,16 @@ def sensitivities(
     rigid device has neither to vary). At zero backlash its derivative is the one-sided
     one (the free play opening) and its elasticity 0.
 
+    A `BuildingTID` gives the elasticities of its `quantity`'s peak (default the top
+    floor's displacement) in its device's and its floors' parameters
+    (`building_sensitivities`): a `BuildingSensitivities`.
+
     **Arguments:**
 
-    - `system`: the `TIDSystem` at its given tuning.
-    - `amplitude`: forcing amplitude A, N.
+    - `system`: the `TIDSystem` (or `BuildingTID`) at its given tuning.
+    - `amplitude`: forcing amplitude A, N (a building's ground acceleration: m/s2).
     - `omegas`: the band, rad/s (default `default_omegas(system)`).
+    - `quantity`: a building's measured response (`Quantity`).
     - `optimum`: also the sensitivities at the retuned optimum.
     - `best`: a `BestTunings` of this system and band holding `amplitude` (default: found
       afresh when `optimum` is True).
@@ -388,6 +397,10 @@ def sensitivities(
 
     **Returns:** a `Sensitivities` (parameters in the order `parameters_of(system)`).
     """
+    if isinstance(system, BuildingTID):
+        return building_sensitivities(system, [check_amplitude(amplitude)], quantity,
+                                      omegas=omegas, settings=settings, optimum=optimum)
+    check_single_storey_quantity(quantity)
     amplitude = check_amplitude(amplitude)
     return amplitude_sensitivities(
         system, [amplitude], omegas=omegas, optimum=optimum, best=best, settings=settings,
@@ -396,20 +409,21 @@ def sensitivities(
 
 
 def amplitude_sensitivities(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike,
     *,
     omegas: ArrayLike | None = None,
+    quantity: Quantity | None = None,
     optimum: bool = True,
     best: "BestTunings | None" = None,
-    settings: SolverSettings = SolverSettings(),
+    settings: SolverSettings | None = None,
     max_steps: int = 60,
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     sensitivity_settings: SensitivitySettings = SensitivitySettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> list[Sensitivities]:
+) -> list[Sensitivities] | BuildingSensitivities:
     """`sensitivities` at each of the forcing `amplitudes` (N, distinct), the steady
     states of every amplitude solved in the same batches (and, with `optimum=True` and no
     `best`, the optimum of every amplitude found by one `best_tunings`). `progress`, if
@@ -417,8 +431,14 @@ def amplitude_sensitivities(
     runs, the given tuning's derivatives, the optima's); `map_lanes` maps the independent
     lanes (see `retune`). The other arguments are those of `sensitivities`.
 
-    **Returns:** a list of `Sensitivities`, one per amplitude, in their order.
+    **Returns:** a list of `Sensitivities`, one per amplitude, in their order (a
+    `BuildingSensitivities` of every amplitude for a `BuildingTID`).
     """
+    if isinstance(system, BuildingTID):
+        return building_sensitivities(system, amplitudes, quantity, omegas=omegas,
+                                      settings=settings, optimum=optimum)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
     check_system(system)
     check_steady_state_device(system, "sensitivities")
     amplitudes = check_distinct("amplitudes", amplitudes)

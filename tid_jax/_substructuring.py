@@ -22,7 +22,7 @@ from ._building_orbit import building_settings
 from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
 from ._cache import compiled
 from ._checks import check_concrete_system, choice, integer, real_array, real_scalar
-from ._linear import linear_receptance
+from ._linear import host_receptance
 from ._response import point_response
 from ._rtds_loop import (
     MAX_PREDICTION_ORDER,
@@ -235,7 +235,7 @@ def _duration(arrays, rate, periods, prediction, prediction_horizon):
 
 def _host_scale(system: TIDSystem, omegas) -> np.ndarray:
     """The larger of the frictionless |X|, |Y| per unit force and 1 / K."""
-    receptance = linear_receptance(system, omegas)
+    receptance = host_receptance(system, omegas)
     linear = np.maximum(np.abs(np.asarray(receptance.host)), np.abs(np.asarray(receptance.inerter)))
     return np.maximum(linear, 1 / float(system.host_stiffness))
 

@@ -22,7 +22,7 @@ from .._checks import check_steady_state_device
 from .._io import check_writable_dir, json_text
 from .._linear import (
     den_hartog_tuning,
-    linear_receptance,
+    host_receptance,
     stuck_receptance,
 )
 from .._parallel import ProcessMap, serial
@@ -302,7 +302,7 @@ def _den_hartog(system: TIDSystem) -> tuple[float, float]:
 
 def _linear_normalised(system: TIDSystem, frequencies_hz) -> tuple[np.ndarray, np.ndarray]:
     """|x| and |y| over A / K of the frictionless TID at `frequencies_hz`."""
-    receptance = linear_receptance(system, 2 * math.pi * np.asarray(frequencies_hz))
+    receptance = host_receptance(system, 2 * math.pi * np.asarray(frequencies_hz))
     stiffness = float(system.host_stiffness)
     return np.abs(np.asarray(receptance.host)) * stiffness, np.abs(
         np.asarray(receptance.inerter)

@@ -7,7 +7,7 @@ import numpy as np
 
 from .. import plot
 from .._io import write_json, write_toml
-from .._linear import breakaway_amplitude
+from .._linear import host_breakaway
 from .._response import frequency_response
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
@@ -107,7 +107,7 @@ def _run_frf(args) -> int:
         for i in range(amplitudes.size)
         for j in range(omegas.size)
     ]
-    breakaway = breakaway_amplitude(system, omegas)
+    breakaway = host_breakaway(system, omegas)
     save_records(output, "frf.csv", FRF_COLUMNS, records)
     write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
     plot.save_figure(

@@ -6,7 +6,7 @@ import numpy as np
 
 from .. import plot
 from .._io import write_json, write_toml
-from .._linear import breakaway_amplitude
+from .._linear import host_breakaway
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
 from . import _building
@@ -97,7 +97,7 @@ def _run_retune(args) -> int:
     json_path = output.path("retune.json")
     data = output.document("retune", inputs, system, settings, frequencies_hz, results=records)
     write_json(json_path, data)
-    breakaway = breakaway_amplitude(system, omegas)
+    breakaway = host_breakaway(system, omegas)
     return output.finish(data, _table(records, system, inputs["stroke_limit"]) + "\n"
                          + "With the initial tuning: " + _breakaway_line(breakaway))
 

@@ -1,0 +1,81 @@
+"""One API for every structure: each verb is one public function that takes the paper's
+single-storey `TIDSystem` and a `BuildingTID` alike, with one argument order; a
+one-storey building gives the paper system's numbers."""
+
+import inspect
+import re
+
+import numpy as np
+import pytest
+
+import tid_jax as tj
+
+# The verbs, each once, in the order (system, frequencies, amplitudes) where they take
+# both positionally.
+VERBS = ("frequency_response", "peaks", "retune", "robust_tune", "sensitivities",
+         "amplitude_sensitivities", "breakaway_amplitude", "linear_receptance",
+         "default_omegas")
+# Words that name one kind of structure in a public function's name.
+STRUCTURE_WORDS = re.compile(r"(^|_)(building|host|storey|single|multi)(_|$)")
+
+
+def _functions():
+    return [name for name in tj.__all__
+            if callable(getattr(tj, name)) and not inspect.isclass(getattr(tj, name))]
+
+
+def test_no_public_function_is_written_for_one_kind_of_structure():
+    twinned = [name for name in _functions()
+               if STRUCTURE_WORDS.search(name) and name != "as_building"]
+    assert not twinned, f"public functions for one kind of structure: {twinned}"
+    names = set(tj.__all__)
+    pairs = [(name, other) for name in names for other in names if name != other and (
+        other in (f"building_{name}", f"{name}_building", f"building{name}"))]
+    assert not pairs
+
+
+def test_the_arguments_run_system_frequencies_amplitudes():
+    for verb in VERBS:
+        parameters = list(inspect.signature(getattr(tj, verb)).parameters)
+        assert parameters[0] == "system", verb
+        positional = [name for name, p in inspect.signature(getattr(tj, verb)).parameters.items()
+                      if p.kind is p.POSITIONAL_OR_KEYWORD]
+        if "omegas" in positional and any(name.startswith("amplitude") for name in positional):
+            amplitude = next(name for name in positional if name.startswith("amplitude"))
+            assert positional.index("omegas") < positional.index(amplitude), verb
+        # a building's measured response, by the same keyword everywhere it applies
+        if verb not in ("breakaway_amplitude", "default_omegas"):
+            assert "quantity" in inspect.signature(getattr(tj, verb)).parameters, verb
+
+
+def test_a_band_in_the_old_argument_order_is_refused_in_one_line(system):
+    with pytest.raises(ValueError, match="system, omegas, amplitudes"):
+        tj.peaks(system, [200.0], tj.default_omegas(system, 9))
+    with pytest.raises(ValueError, match="system, omegas, amplitudes"):
+        tj.peak_response(system, 200.0, tj.default_omegas(system, 9))
+
+
+def test_a_single_storey_system_refuses_another_quantity(system):
+    with pytest.raises(ValueError, match="as_building"):
+        tj.frequency_response(system, [25.0], [200.0], quantity=tj.Quantity("acceleration"))
+
+
+def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system):
+    building = tj.as_building(system)
+    omegas = np.asarray(tj.default_omegas(system, 41))
+    # linear theory: the receptances of the host and the inerter terminal (the stroke
+    # from the ground) are the paper's eq. (3) with host damping
+    mine, paper = tj.linear_receptance(building, omegas), tj.linear_receptance(system, omegas)
+    np.testing.assert_allclose(mine.host, paper.host, rtol=1e-10)
+    np.testing.assert_allclose(mine.inerter, paper.inerter, rtol=1e-10)
+    # the breakaway amplitude: the building's minimum on a grid, the paper's exact
+    mine, paper = (tj.breakaway_amplitude(s, omegas) for s in (building, system))
+    np.testing.assert_allclose(mine.amplitude, paper.amplitude, rtol=1e-10)
+    assert float(mine.minimum) == pytest.approx(float(paper.minimum), rel=1e-6)
+    # the peak over the band with exact friction: both the maximum in continuous
+    # frequency, each by its own refinement
+    amplitudes = [100.0, 1000.0]
+    mine, paper = tj.peaks(building, omegas, amplitudes), tj.peaks(system, omegas, amplitudes)
+    assert np.all(mine.converged) and np.all(paper.converged)
+    np.testing.assert_allclose(mine.value, paper.x_peak, rtol=1e-5)
+    np.testing.assert_allclose(mine.omega, paper.omega_x, rtol=1e-3)
