@@ -1,6 +1,8 @@
 """The package's public API: its names, loaded when first used."""
 
+import ast
 import importlib
+import pathlib
 import subprocess
 import sys
 
@@ -31,3 +33,18 @@ def test_importing_the_package_imports_no_jax():
             "print(sorted({'jax', 'numpy', 'tid_jax._response'} & set(sys.modules)))")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True).stdout == "[]\n"
+
+
+def test_type_checkers_see_every_public_name_as_an_explicit_re_export():
+    # `from .module import name as name` under TYPE_CHECKING, as diffrax writes its API:
+    # what IDEs and type checkers read, while the names load lazily at run time.
+    tree = ast.parse(pathlib.Path(tj.__file__).read_text())
+    (block,) = [node for node in tree.body if isinstance(node, ast.If)
+                and getattr(node.test, "id", None) == "TYPE_CHECKING"]
+    seen = {}
+    for node in block.body:
+        assert isinstance(node, ast.ImportFrom) and node.level == 1
+        for alias in node.names:
+            assert alias.asname == alias.name
+            seen.setdefault(node.module, set()).add(alias.name)
+    assert seen == {module: set(names) for module, names in tj._API.items()}

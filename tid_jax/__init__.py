@@ -6,6 +6,7 @@ point can set their environment first (the `tid-jax` command's `EQX_ON_ERROR`).
 """
 
 import importlib
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
@@ -47,6 +48,145 @@ _API = {
                         "simulate_substructuring", "substructuring_stability"),
     "_system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
 }
+if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily below
+    from ._band import (
+        Peaks as Peaks,
+        default_omegas as default_omegas,
+        peak_response as peak_response,
+        peaks as peaks,
+    )
+    from ._best_tunings import (
+        BestTunings as BestTunings,
+        best_tunings as best_tunings,
+    )
+    from ._building import (
+        BuildingTID as BuildingTID,
+        Quantity as Quantity,
+        as_building as as_building,
+        first_mode_tunings as first_mode_tunings,
+    )
+    from ._building_design import (
+        BuildingRetune as BuildingRetune,
+        Peak as Peak,
+    )
+    from ._building_orbit import (
+        BuildingResponse as BuildingResponse,
+    )
+    from ._building_robust import (
+        BuildingRobust as BuildingRobust,
+    )
+    from ._building_sensitivity import (
+        BuildingOptimum as BuildingOptimum,
+        BuildingSensitivities as BuildingSensitivities,
+    )
+    from ._cache import (
+        enable_compilation_cache as enable_compilation_cache,
+    )
+    from ._cache_folder import (
+        default_cache_dir as default_cache_dir,
+    )
+    from ._device import (
+        ForceSettings as ForceSettings,
+        InerterDevice as InerterDevice,
+    )
+    from ._identify import (
+        IdentifySettings as IdentifySettings,
+        InerterFit as InerterFit,
+        InerterRecord as InerterRecord,
+        ModelComparison as ModelComparison,
+        identify_inerter as identify_inerter,
+    )
+    from ._linear import (
+        Breakaway as Breakaway,
+        LinearReceptance as LinearReceptance,
+        den_hartog as den_hartog,
+        den_hartog_tuning as den_hartog_tuning,
+        paper_system as paper_system,
+        stuck_receptance as stuck_receptance,
+    )
+    from ._monte_carlo import (
+        MonteCarlo as MonteCarlo,
+        MonteCarloSettings as MonteCarloSettings,
+        friction_history as friction_history,
+        monte_carlo as monte_carlo,
+        random_history as random_history,
+    )
+    from ._parallel import (
+        ProcessMap as ProcessMap,
+    )
+    from ._random_design import (
+        RandomDesign as RandomDesign,
+        RandomSensitivities as RandomSensitivities,
+        random_sensitivities as random_sensitivities,
+        retune_random as retune_random,
+    )
+    from ._receptance import (
+        breakaway_amplitude as breakaway_amplitude,
+        linear_receptance as linear_receptance,
+    )
+    from ._record_design import (
+        RecordDesign as RecordDesign,
+        design_for_records as design_for_records,
+    )
+    from ._records import (
+        GroundMotion as GroundMotion,
+        History as History,
+        jennings_envelope as jennings_envelope,
+        linear_history as linear_history,
+        read_at2 as read_at2,
+        read_csv_record as read_csv_record,
+        synthetic_motion as synthetic_motion,
+    )
+    from ._response import (
+        FrequencyResponse as FrequencyResponse,
+        frequency_response as frequency_response,
+    )
+    from ._retune import (
+        RetuneResult as RetuneResult,
+        RetuneSettings as RetuneSettings,
+        retune as retune,
+    )
+    from ._robust import (
+        RobustDesign as RobustDesign,
+        RobustSettings as RobustSettings,
+        TuningPerformance as TuningPerformance,
+        robust_tune as robust_tune,
+        tuning_performance as tuning_performance,
+    )
+    from ._sensitivity import (
+        OptimumSensitivities as OptimumSensitivities,
+        Sensitivities as Sensitivities,
+        SensitivitySettings as SensitivitySettings,
+        amplitude_sensitivities as amplitude_sensitivities,
+        sensitivities as sensitivities,
+    )
+    from ._settings import (
+        SolverSettings as SolverSettings,
+    )
+    from ._stationary import (
+        Linearisation as Linearisation,
+        StationaryLoad as StationaryLoad,
+        h2_tuning as h2_tuning,
+        rms_response as rms_response,
+        stationary_covariance as stationary_covariance,
+        statistical_linearisation as statistical_linearisation,
+    )
+    from ._structure import (
+        Structure as Structure,
+    )
+    from ._substructuring import (
+        Substructuring as Substructuring,
+        SubstructuringStability as SubstructuringStability,
+        simulate_substructuring as simulate_substructuring,
+        substructuring_stability as substructuring_stability,
+    )
+    from ._system import (
+        DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
+        PAPER_AMPLITUDES as PAPER_AMPLITUDES,
+        PAPER_STROKE as PAPER_STROKE,
+        TIDSystem as TIDSystem,
+    )
+
 _MODULE_OF = {name: module for module, names in _API.items() for name in names}
 __all__ = sorted(_MODULE_OF)
 
