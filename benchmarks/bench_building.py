@@ -13,7 +13,7 @@ mode, 2% modal damping; b = 5% of the first modal mass, ff = (20/75) b N, the fi
 mode's exact H-infinity k and c; ground acceleration 0.5 m/s2 at `--points` frequencies
 evenly over 0.7..1.3 times the first mode; the peak roof displacement.
 
-- tid_jax: warm `building_response` (compiled by a first call, then the best of 3), with
+- tid_jax: warm `frequency_response` (compiled by a first call, then the best of 3), with
   exact Coulomb friction (`friction_width=0`) and smoothed (`friction_width=None`:
   tanh(r'/w_s), w_s = 0.02 omega A d_ref).
 - LSODA: `scipy.integrate.solve_ivp(method="LSODA")`, one call per point, on the same
@@ -25,7 +25,7 @@ evenly over 0.7..1.3 times the first mode; the peak roof displacement.
   points would take longer than `--lsoda-budget` seconds, it is timed on `--lsoda-subset`
   points spread over the band.
 
-`--retune` also times `tid_jax.retune_building` of the 10-storey building (exact friction,
+`--retune` also times `tid_jax.retune` of the 10-storey building (exact friction,
 default settings) at `--retune-amplitudes`, cold (first call in the process, compiling)
 and warm.
 Prints markdown.
@@ -331,7 +331,7 @@ def table(results, periods, matched, tried, points):
     lines = [
         f"Shear building, TID from the ground to floor 1, ground acceleration "
         f"{AMPLITUDE} m/s2, {points} frequencies over {BAND[0]}..{BAND[1]} times the first "
-        f"mode; peak roof displacement. tid_jax: warm `building_response`, best of "
+        f"mode; peak roof displacement. tid_jax: warm `frequency_response`, best of "
         f"{REPEATS}. LSODA: one `solve_ivp` call per point, rtol {RTOL:g}, from the linear "
         f"steady state over P = {periods} periods, chosen at n = {CHOOSE_AT} "
         f"({'matched' if matched else 'NOT matched'} within {MATCH:g}; tried {choice}).",
@@ -366,7 +366,7 @@ def time_retune(amplitudes):
     result = run()
     warm = time.perf_counter() - start
     ratio = np.asarray(result.peak) / np.asarray(result.h_infinity_peak)
-    return [f"`retune_building`, {RETUNE_STOREYS} storeys (exact friction, default "
+    return [f"`retune`, {RETUNE_STOREYS} storeys (exact friction, default "
             f"settings), {len(amplitudes)} amplitudes {amplitudes[0]:.3g}.."
             f"{amplitudes[-1]:.3g} m/s2: cold {cold:.1f} s (compiling), warm {warm:.1f} s; "
             f"converged {int(np.sum(result.converged))}/{len(amplitudes)}; retuned peak / "

@@ -10,7 +10,7 @@ building's mass, as an inerter's inertance may be), the paper's friction scaled 
 inerter from there to the ground. At each ground acceleration amplitude,
 three tunings: the first mode's Den Hartog tuning, its exact single-mode H-infinity
 tuning (Nishihara-Asami), and the retune of the whole structure with friction for that
-amplitude (`tid_jax.retune_building`, on the roof's displacement). For each: the peak
+amplitude (`tid_jax.retune`, on the roof's displacement). For each: the peak
 roof displacement over the band and the peak drift of the storey that drifts most in
 the first mode.
 

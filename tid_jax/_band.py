@@ -54,7 +54,7 @@ LANE_CHUNK = 16
 def default_omegas(system: TIDSystem | BuildingTID,
                    n: int | None = None) -> Float[Array, " freqs"]:
     """The default frequency band: 0.65-1.4 times the host frequency of a `TIDSystem`
-    (`n` default `DEFAULT_FREQUENCIES`), or `BUILDING_BAND` times a `BuildingTID`'s first
+    (`n` default `DEFAULT_FREQUENCIES`), or 0.5-1.6 times a `BuildingTID`'s first
     natural frequency (`n` default `BAND_POINTS`).
 
     **Arguments:**
