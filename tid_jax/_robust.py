@@ -418,6 +418,18 @@ def _robust_start(system, best: BestTunings, target, settings,
     return candidates[min(range(len(candidates)), key=scores.__getitem__)]
 
 
+def _robust_building(system, amplitudes, host_frequency_scales, stroke_limit, omegas,
+                     quantity, settings, max_steps, tol, progress) -> BuildingRobust:
+    """`robust_tune` of a building (`robust_building`): its stiffness matrix times the
+    squared frequency scales."""
+    return robust_building(
+        system, amplitudes, quantity,
+        stiffness_scales=np.square(np.asarray(host_frequency_scales, float)),
+        stroke_limit=stroke_limit, omegas=omegas, settings=settings,
+        rtol=1e-6 if tol is None else tol, max_steps=100 if max_steps is None else max_steps,
+        progress=progress)
+
+
 def robust_tune(
     system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike = PAPER_AMPLITUDES,
@@ -485,12 +497,8 @@ def robust_tune(
     if isinstance(system, BuildingTID):
         if best is not None or map_lanes is not serial:
             raise ValueError("a BuildingTID's robust design takes neither best nor map_lanes")
-        return robust_building(
-            system, amplitudes, quantity,
-            stiffness_scales=np.square(np.asarray(host_frequency_scales, float)),
-            stroke_limit=stroke_limit, omegas=omegas, settings=settings,
-            rtol=1e-6 if tol is None else tol, max_steps=100 if max_steps is None else max_steps,
-            progress=progress)
+        return _robust_building(system, amplitudes, host_frequency_scales, stroke_limit,
+                                omegas, quantity, settings, max_steps, tol, progress)
     check_single_storey_quantity(quantity)
     settings = SolverSettings() if settings is None else settings
     max_steps = 40 if max_steps is None else max_steps
