@@ -172,3 +172,23 @@ def check_best(best, system: TIDSystem) -> None:
             f"best was computed for another system: {different[0]} is "
             f"{nominal[different[0]]!r} there and {given[different[0]]!r} here"
         )
+
+
+def checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress,
+                 map_lanes):
+    """`best` after checking that it was computed for this system, these scenarios and
+    this band, or, if None, the best tunings found afresh."""
+    if best is None:
+        return best_tunings(system, amps, host_frequency_scales=scales, omegas=omegas,
+                            settings=settings, retune_settings=retune_settings,
+                            progress=progress, map_lanes=map_lanes)
+    check_best(best, system)
+    for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
+        stored = np.asarray(getattr(best, name))
+        if stored.shape != given.shape or not np.allclose(stored, given, rtol=1e-12):
+            raise ValueError(f"{name} {given.tolist()} differ from best's {stored.tolist()}")
+    if omegas is not None:
+        band = _band(system, omegas)
+        if band.shape != best.omegas.shape or not np.allclose(band, best.omegas):
+            raise ValueError("omegas differ from the band best was computed on")
+    return best

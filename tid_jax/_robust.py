@@ -10,7 +10,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
-from ._best_tunings import BestTunings, best_tunings, check_best
+from ._best_tunings import BestTunings, check_best, checked_best
 from ._building import BuildingTID, Quantity
 from ._building_robust import BuildingRobust, robust_building
 from ._checks import (
@@ -418,10 +418,21 @@ def _robust_start(system, best: BestTunings, target, settings,
     return candidates[min(range(len(candidates)), key=scores.__getitem__)]
 
 
+def _defaults(settings, max_steps, tol):
+    return (SolverSettings() if settings is None else settings,
+            40 if max_steps is None else max_steps, 1e-9 if tol is None else tol)
+
+
+def _check_options(max_steps, tol, retune_settings, robust_settings) -> None:
+    check_retune_options(max_steps, tol, retune_settings)
+    if not isinstance(robust_settings, RobustSettings):
+        raise ValueError("robust_settings must be a RobustSettings, got "
+                         f"{type(robust_settings).__name__}")
+
+
 def _robust_building(system, amplitudes, host_frequency_scales, stroke_limit, omegas,
                      quantity, settings, max_steps, tol, progress) -> BuildingRobust:
-    """`robust_tune` of a building (`robust_building`): its stiffness matrix times the
-    squared frequency scales."""
+    """`robust_tune` of a building (`robust_building`, stiffness times the scales squared)."""
     return robust_building(
         system, amplitudes, quantity,
         stiffness_scales=np.square(np.asarray(host_frequency_scales, float)),
@@ -500,20 +511,15 @@ def robust_tune(
         return _robust_building(system, amplitudes, host_frequency_scales, stroke_limit,
                                 omegas, quantity, settings, max_steps, tol, progress)
     check_single_storey_quantity(quantity)
-    settings = SolverSettings() if settings is None else settings
-    max_steps = 40 if max_steps is None else max_steps
-    tol = 1e-9 if tol is None else tol
+    settings, max_steps, tol = _defaults(settings, max_steps, tol)
     check_system(system)
     check_steady_state_device(system, "robust_tune")
     amps = check_distinct("amplitudes", amplitudes)
     scales = check_distinct("host_frequency_scales", host_frequency_scales)
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
-    check_retune_options(max_steps, tol, retune_settings)
-    if not isinstance(robust_settings, RobustSettings):
-        raise ValueError("robust_settings must be a RobustSettings, got "
-                         f"{type(robust_settings).__name__}")
+    _check_options(max_steps, tol, retune_settings, robust_settings)
     say = progress if progress is not None else (lambda message: None)
-    best = _checked_best(system, amps, scales, best, omegas, settings, retune_settings,
+    best = checked_best(system, amps, scales, best, omegas, settings, retune_settings,
                          progress, map_lanes)
     band = np.asarray(best.omegas)
     # The worst case over scenarios is of the peaks on the band's grid (refined by
@@ -579,23 +585,3 @@ def robust_tune(
         converged=jnp.asarray(status == outcome_code(RobustOutcome.ok)),
         status=jnp.asarray(status),
     )
-
-
-def _checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress,
-                  map_lanes):
-    """`best` after checking that it was computed for this system, these scenarios and
-    this band, or, if None, the best tunings found afresh."""
-    if best is None:
-        return best_tunings(system, amps, host_frequency_scales=scales, omegas=omegas,
-                            settings=settings, retune_settings=retune_settings,
-                            progress=progress, map_lanes=map_lanes)
-    check_best(best, system)
-    for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
-        stored = np.asarray(getattr(best, name))
-        if stored.shape != given.shape or not np.allclose(stored, given, rtol=1e-12):
-            raise ValueError(f"{name} {given.tolist()} differ from best's {stored.tolist()}")
-    if omegas is not None:
-        band = _band(system, omegas)
-        if band.shape != best.omegas.shape or not np.allclose(band, best.omegas):
-            raise ValueError("omegas differ from the band best was computed on")
-    return best
