@@ -1,0 +1,297 @@
+"""Exact stick-slip time histories of a rigid device with Coulomb friction under a
+recorded ground motion.
+
+Between two samples the ground acceleration is a straight line, `a = a0 + slope t`.
+In each mode the state z = (u, u') obeys a linear equation with that input and one
+constant, so its motion is known in closed form, `z(t) = p0 + p1 t + V e^{L t} V^-1
+(z(0) - p0)` (the particular solution p0 + p1 t of the linear input and the constant,
+the mode's eigen-decomposition, computed once per system):
+
+- slipping with sign s (`s u_f' > 0`): `z' = A z + g a - s ff e`, the friction force
+  `F = -s ff` on the friction's coordinate f (e its rate per unit force);
+- stuck (`u_f = r` held, `u_f' = 0`): the reduced system of the other coordinates, with
+  r as its constant, and the force F that holds f: the friction force the inerter
+  carries while `|F| <= ff`.
+
+Events end a mode: slipping, `s u_f'` reaches 0 (the inerter sticks if the holding
+force there is within ff, else it slips back); stuck, `|F|` reaches ff (it slips against
+F). Each record step checks its event signal at `GRID` points, with its slope (a sign
+change, or a dip between two points with a negative minimum); a step without one is
+advanced by matrices computed once; otherwise the step is cut at each event, located by
+safeguarded Newton steps on the closed form, at most `MAX_EVENTS` events a step (more
+are flagged and the history is NaN from there on).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Complex, Float, Int
+
+from ._building import BuildingTID, Quantity, selection, state_space
+from ._eigen import eigensystem
+from ._records import GroundMotion, History
+
+MAX_EVENTS = 32  # mode changes within one record step; more is flagged as a failure
+GRID = 4  # points per record step at which the event signal is checked
+_ROOT_ITERATIONS = 60
+_ROOT_TOLERANCE = 1e-13  # of the record's step, in time
+_STICK = 0
+
+
+class _Mode(eqx.Module):
+    """`z' = matrix z + load a(t) + constant c`: the matrix's eigen-decomposition and
+    inverse. The stuck mode keeps the full state: its rows of u_f and u_f' are
+    `u_f' = r - u_f`, `u_f'' = -2 u_f'`, which hold them at (r, 0)."""
+
+    eigenvalues: Complex[Array, " N"]
+    vectors: Complex[Array, "N N"]
+    inverse: Complex[Array, "N N"]
+    solve: Float[Array, "N N"]
+    load: Float[Array, " N"]
+    constant: Float[Array, " N"]
+
+
+class RecordFlow(eqx.Module):
+    """A system's modes, the holding force `F = holding . z + holding_load a` and the
+    states and rates at the grid of a whole record step per unit (z, a0, slope, c)."""
+
+    slip: _Mode
+    stuck: _Mode
+    holding: Float[Array, " N"]
+    holding_load: Float[Array, ""]
+    friction_force: Float[Array, ""]
+    states: Float[Array, "2 points N P"]  # [slip, stuck] at the grid, P = N + 3
+    rates: Float[Array, "2 points N P"]
+    time_step: float = eqx.field(static=True)
+
+
+def evolve(mode: _Mode, inputs, time):
+    """The state and its rate at `time` (s) after the start of a segment in `mode`, from
+    `inputs` = (z(0), a(0), slope, c)."""
+    n = mode.load.shape[0]
+    z0, start, slope, constant = inputs[:n], inputs[n], inputs[n + 1], inputs[n + 2]
+    p1 = -mode.solve @ (mode.load * slope)
+    p0 = mode.solve @ (p1 - mode.load * start - mode.constant * constant)
+    growth = (mode.inverse @ (z0 - p0)) * jnp.exp(mode.eigenvalues * time)
+    return (p0 + p1 * time + jnp.real(mode.vectors @ growth),
+            p1 + jnp.real(mode.vectors @ (mode.eigenvalues * growth)))
+
+
+def _modes(system: BuildingTID):
+    mass, damping, stiffness = system.generalised_matrices()
+    load = system.load_vector()
+    m = system.coordinates
+    f, size = m - 1, 2 * m
+    A, g = state_space(system)
+    friction = jnp.zeros(size).at[m:].set(jnp.linalg.solve(mass, jnp.eye(m)[f]))
+    values, vectors = eigensystem(A)
+    slip = _Mode(values, vectors, jnp.linalg.inv(vectors), jnp.linalg.inv(A), g, friction)
+    # stuck: the other coordinates x, with u_f = r held
+    inverse = jnp.linalg.inv(mass[:f, :f])
+    kept = jnp.concatenate([jnp.arange(f), m + jnp.arange(f)])
+    reduced = jnp.zeros((2 * f, 2 * f)).at[:f, f:].set(jnp.eye(f))
+    reduced = reduced.at[f:, :f].set(-inverse @ stiffness[:f, :f])
+    reduced = reduced.at[f:, f:].set(-inverse @ damping[:f, :f])
+    matrix = jnp.zeros((size, size)).at[jnp.ix_(kept, kept)].set(reduced)
+    matrix = matrix.at[f, f].set(-1.0).at[size - 1, size - 1].set(-2.0)
+    small_values, small_vectors = eigensystem(reduced)
+    vectors = jnp.eye(size, dtype=small_vectors.dtype).at[jnp.ix_(kept, kept)].set(
+        small_vectors)
+    values = jnp.zeros(size, small_values.dtype).at[kept].set(small_values)
+    values = values.at[f].set(-1.0).at[size - 1].set(-2.0)
+    stuck_load = jnp.zeros(size).at[m:m + f].set(inverse @ load[:f])
+    stuck_constant = jnp.zeros(size).at[m:m + f].set(-inverse @ stiffness[:f, f]).at[f].set(1.0)
+    stuck = _Mode(values, vectors, jnp.linalg.inv(vectors), jnp.linalg.inv(matrix),
+                  stuck_load, stuck_constant)
+    # F = M[f,x] x'' + C[f,:] u' + K[f,:] u - g_f a, x'' from the stuck x rows
+    row = mass[f, :f] @ inverse
+    holding = jnp.concatenate([stiffness[f] - row @ stiffness[:f], damping[f] - row @ damping[:f]])
+    return slip, stuck, holding, row @ load[:f] - load[f]
+
+
+def record_flow(system: BuildingTID, time_step: float) -> RecordFlow:
+    """The flow of a rigid device with exact friction over record steps of `time_step` (s)."""
+    slip, stuck, holding, holding_load = _modes(system)
+    size = 2 * system.coordinates
+    basis = jnp.eye(size + 3)
+    times = jnp.linspace(0.0, time_step, GRID + 1)
+
+    def tabulated(mode):
+        at = lambda t: jax.vmap(lambda x: evolve(mode, x, t), out_axes=-1)(basis)
+        return jax.vmap(at)(times)
+
+    (slip_states, slip_rates), (stuck_states, stuck_rates) = tabulated(slip), tabulated(stuck)
+    return RecordFlow(slip, stuck, holding, holding_load, system.friction_force,
+                      jnp.stack([slip_states, stuck_states]),
+                      jnp.stack([slip_rates, stuck_rates]), time_step)
+
+
+def holding_force(flow: RecordFlow, z, a):
+    """The force (N) on the friction's coordinate that keeps it stuck at state z."""
+    return z @ flow.holding + flow.holding_load * a
+
+
+def _decide(flow: RecordFlow, z, a):
+    """The mode at a state with u_f' = 0: stuck (0) while the holding force is within
+    ff, else slipping (+-1) against it."""
+    force = holding_force(flow, z, a)
+    return jnp.where(jnp.abs(force) <= flow.friction_force, _STICK,
+                     -jnp.sign(force).astype(int))
+
+
+def _signal(flow: RecordFlow, sign, states, rates, a, slope):
+    """The event signal (positive while the mode holds) and its rate at states."""
+    force = holding_force(flow, states, a)
+    rate = rates @ flow.holding + flow.holding_load * slope
+    stuck = sign == _STICK
+    g = jnp.where(stuck, flow.friction_force - jnp.abs(force), sign * states[..., -1])
+    return g, jnp.where(stuck, -jnp.sign(force) * rate, sign * rates[..., -1])
+
+
+def _constant(flow: RecordFlow, sign, z):
+    m = z.shape[0] // 2
+    return jnp.where(sign == _STICK, z[m - 1], -sign * flow.friction_force)
+
+
+def _mode(flow: RecordFlow, sign) -> _Mode:
+    return jax.tree.map(lambda a, b: jnp.where(sign == _STICK, b, a), flow.slip, flow.stuck)
+
+
+def _crossing(times, g, rate, signal_at):
+    """Whether the signal, sampled at `times` with its `rate`, falls below zero, and a
+    bracket of its first fall: a sample below zero, or the minimum (by the secant of
+    the rate) between two samples."""
+    tolerance = 1e-12 * jnp.max(jnp.abs(g))
+    dip = (rate[:-1] < 0) & (rate[1:] > 0)
+    fraction = rate[:-1] / jnp.where(dip, rate[:-1] - rate[1:], 1.0)
+    lowest = times[:-1] + jnp.clip(fraction, 0.0, 1.0) * (times[1:] - times[:-1])
+    g_lowest = jax.vmap(signal_at)(lowest)
+    below = g[1:] < -tolerance
+    dipped = dip & (g_lowest < -tolerance)
+    hit = below | dipped
+    k = jnp.argmax(hit)
+    high = jnp.where(dipped[k], lowest[k], times[k + 1])
+    return jnp.any(hit), times[k], high
+
+
+def _root(signal_with_rate, low, high, time_step):
+    """The time in [low, high] where the signal falls through zero (non-negative at
+    low, negative at high): Newton steps kept in the shrinking bracket."""
+
+    def cond(carry):
+        _, _, _, i, done = carry
+        return ~done & (i < _ROOT_ITERATIONS)
+
+    def body(carry):
+        low, high, x, i, _ = carry
+        g, rate = signal_with_rate(x)
+        below = g < 0
+        low, high = jnp.where(below, low, x), jnp.where(below, x, high)
+        newton = x - g / rate
+        inside = (newton > low) & (newton < high)
+        step = jnp.where(inside, newton, 0.5 * (low + high))
+        done = (jnp.abs(step - x) <= _ROOT_TOLERANCE * time_step) | (
+            high - low <= _ROOT_TOLERANCE * time_step) | (g == 0)
+        return low, high, jnp.where(g == 0, x, step), i + 1, done
+
+    start = 0.5 * (low + high)
+    return jax.lax.while_loop(cond, body, (low, high, start, 0, False))[2]
+
+
+class _Cut(eqx.Module):
+    time: Float[Array, ""]  # into the record step (s)
+    z: Float[Array, " N"]
+    sign: Int[Array, ""]
+    events: Int[Array, ""]
+    done: Bool[Array, ""]
+
+
+def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
+    """From `cut` to the next event in the record step, or to the step's end."""
+    mode = _mode(flow, cut.sign)
+    a0 = start + slope * cut.time
+    inputs = jnp.concatenate([cut.z, jnp.stack([a0, slope, _constant(flow, cut.sign, cut.z)])])
+    at = lambda t: evolve(mode, inputs, t)
+
+    def signal_with_rate(t):
+        z, rate = at(t)
+        return _signal(flow, cut.sign, z, rate, a0 + slope * t, slope)
+
+    times = jnp.linspace(0.0, flow.time_step - cut.time, GRID + 1)
+    states, rates = jax.vmap(at)(times)
+    g, rate = _signal(flow, cut.sign, states, rates, a0 + slope * times, slope)
+    event, low, high = _crossing(times, g, rate, lambda t: signal_with_rate(t)[0])
+    when = jnp.where(event, _root(signal_with_rate, low, high, flow.time_step), times[-1])
+    z, _ = at(when)
+    z = jnp.where(event, z.at[-1].set(0.0), z)
+    # slipping: stuck or back; stuck: slipping against the holding force
+    force = holding_force(flow, z, a0 + slope * when)
+    after = jnp.where(cut.sign == _STICK, -jnp.sign(force).astype(int),
+                      _decide(flow, z, a0 + slope * when))
+    return _Cut(jnp.where(event, cut.time + when, flow.time_step), z,
+                jnp.where(event, after, cut.sign), cut.events + event, ~event)
+
+
+def _cut_step(flow: RecordFlow, z, sign, start, slope):
+    """A record step cut at its events: the state, the mode and whether it took more
+    than `MAX_EVENTS` events."""
+    first = _Cut(jnp.asarray(0.0), z, sign, jnp.asarray(0), jnp.asarray(False))
+    last = jax.lax.while_loop(lambda cut: ~cut.done & (cut.events < MAX_EVENTS),
+                              lambda cut: _segment(flow, cut, start, slope), first)
+    return last.z, last.sign, ~last.done
+
+
+def _step(flow: RecordFlow, carry, pair):
+    z, sign, capped = carry
+    start, end = pair
+    slope = (end - start) / flow.time_step
+    stuck = (sign == _STICK).astype(int)
+    inputs = jnp.concatenate([z, jnp.stack([start, slope, _constant(flow, sign, z)])])
+    states = flow.states[stuck] @ inputs
+    rates = flow.rates[stuck] @ inputs
+    times = jnp.linspace(0.0, flow.time_step, GRID + 1)
+    g, rate = _signal(flow, sign, states, rates, start + slope * times, slope)
+    tolerance = 1e-12 * jnp.max(jnp.abs(g))
+    quiet = jnp.all(g[1:] >= -tolerance) & ~jnp.any((rate[:-1] < 0) & (rate[1:] > 0))
+    z, sign, over = jax.lax.cond(
+        quiet, lambda: (states[-1], sign, jnp.asarray(False)),
+        lambda: _cut_step(flow, z, sign, start, slope))
+    capped = capped | over
+    z = jnp.where(capped, jnp.nan, z)
+    return (z, sign, capped), (z, sign)
+
+
+@eqx.filter_jit
+def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity) -> History:
+    """The exact stick-slip history of `quantity` and the stroke of `system` (a rigid
+    device with exact friction, a ground load) under `motion`, from rest."""
+    a = motion.acceleration
+    states, signs, forces, capped = _states(system, a, motion.time_step)
+    m = system.coordinates
+    A, g = state_space(system)
+    friction = jnp.zeros(2 * m).at[m:].set(
+        jnp.linalg.solve(system.generalised_matrices()[0], jnp.eye(m)[-1]))
+    rates = states @ A.T + a[:, None] * g + forces[:, None] * friction
+    w, wd, kappa, _ = selection(system, quantity)
+    values = states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd) + kappa * a
+    return History(time=jnp.arange(a.shape[0]) * motion.time_step, quantity=values,
+                   stroke=states[:, system.floors], peak=jnp.max(jnp.abs(values)),
+                   rms=jnp.sqrt(jnp.mean(values**2)), stuck=signs == _STICK,
+                   friction_force=forces, events_capped=capped)
+
+
+def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float):
+    """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
+    friction forces (N) and whether some step needed more than `MAX_EVENTS` events."""
+    flow = record_flow(system, time_step)
+    size = 2 * system.coordinates
+    z0 = jnp.zeros(size)
+    sign0 = _decide(flow, z0, acceleration[0])
+    (_, _, capped), (states, signs) = jax.lax.scan(
+        lambda carry, pair: _step(flow, carry, pair), (z0, sign0, jnp.asarray(False)),
+        (acceleration[:-1], acceleration[1:]))
+    states = jnp.concatenate([z0[None], states])
+    signs = jnp.concatenate([sign0[None], signs])
+    forces = jnp.where(signs == _STICK, holding_force(flow, states, acceleration),
+                       -signs * flow.friction_force)
+    return states, signs, forces, capped
