@@ -52,29 +52,43 @@ class _Mode(eqx.Module):
 
 
 class RecordFlow(eqx.Module):
-    """A system's modes, the holding force `F = holding . z + holding_load a` and the
-    states and rates at the grid of a whole record step per unit (z, a0, slope, c)."""
+    """A system's modes, the holding force `F = holding . z + holding_load a`, and over a
+    whole record step per unit (z, a0, slope, c): the event signals' parts at the grid
+    (u_f', its rate, F, its rate) and the state at the step's end."""
 
     slip: _Mode
     stuck: _Mode
     holding: Float[Array, " N"]
     holding_load: Float[Array, ""]
     friction_force: Float[Array, ""]
-    states: Float[Array, "2 points N P"]  # [slip, stuck] at the grid, P = N + 3
-    rates: Float[Array, "2 points N P"]
+    signals: Float[Array, "2 points 4 P"]  # [slip, stuck], P = N + 3
+    ends: Float[Array, "2 N P"]
     time_step: float = eqx.field(static=True)
+
+
+def coefficients(mode: _Mode, inputs):
+    """A segment's particular solution `p0 + p1 t` and modal coefficients, from `inputs`
+    = (z(0), a(0), slope, c)."""
+    n = mode.load.shape[0]
+    z0, start, slope, constant = inputs[:n], inputs[n], inputs[n + 1], inputs[n + 2]
+    p1 = -mode.solve @ (mode.load * slope)
+    p0 = mode.solve @ (p1 - mode.load * start - mode.constant * constant)
+    return p0, p1, mode.inverse @ (z0 - p0)
+
+
+def state_at(mode: _Mode, segment, time):
+    """The state and its rate at `time` (s) after the start of a segment (its
+    `coefficients`)."""
+    p0, p1, modal = segment
+    growth = modal * jnp.exp(mode.eigenvalues * time)
+    return (p0 + p1 * time + jnp.real(mode.vectors @ growth),
+            p1 + jnp.real(mode.vectors @ (mode.eigenvalues * growth)))
 
 
 def evolve(mode: _Mode, inputs, time):
     """The state and its rate at `time` (s) after the start of a segment in `mode`, from
     `inputs` = (z(0), a(0), slope, c)."""
-    n = mode.load.shape[0]
-    z0, start, slope, constant = inputs[:n], inputs[n], inputs[n + 1], inputs[n + 2]
-    p1 = -mode.solve @ (mode.load * slope)
-    p0 = mode.solve @ (p1 - mode.load * start - mode.constant * constant)
-    growth = (mode.inverse @ (z0 - p0)) * jnp.exp(mode.eigenvalues * time)
-    return (p0 + p1 * time + jnp.real(mode.vectors @ growth),
-            p1 + jnp.real(mode.vectors @ (mode.eigenvalues * growth)))
+    return state_at(mode, coefficients(mode, inputs), time)
 
 
 def _modes(system: BuildingTID):
@@ -120,10 +134,17 @@ def record_flow(system: BuildingTID, time_step: float) -> RecordFlow:
         at = lambda t: jax.vmap(lambda x: evolve(mode, x, t), out_axes=-1)(basis)
         return jax.vmap(at)(times)
 
-    (slip_states, slip_rates), (stuck_states, stuck_rates) = tabulated(slip), tabulated(stuck)
+    def signals(mode):
+        states, rates = tabulated(mode)
+        start, slope = basis[size], basis[size + 1]
+        force = holding @ states + holding_load * (start + times[:, None] * slope)
+        rate = holding @ rates + holding_load * slope
+        return jnp.stack([states[:, -1], rates[:, -1], force, rate], axis=1), states[-1]
+
+    (slip_signals, slip_end), (stuck_signals, stuck_end) = signals(slip), signals(stuck)
     return RecordFlow(slip, stuck, holding, holding_load, system.friction_force,
-                      jnp.stack([slip_states, stuck_states]),
-                      jnp.stack([slip_rates, stuck_rates]), time_step)
+                      jnp.stack([slip_signals, stuck_signals]),
+                      jnp.stack([slip_end, stuck_end]), time_step)
 
 
 def holding_force(flow: RecordFlow, z, a):
@@ -143,9 +164,14 @@ def _signal(flow: RecordFlow, sign, states, rates, a, slope):
     """The event signal (positive while the mode holds) and its rate at states."""
     force = holding_force(flow, states, a)
     rate = rates @ flow.holding + flow.holding_load * slope
+    return _event(flow, sign, states[..., -1], rates[..., -1], force, rate)
+
+
+def _event(flow: RecordFlow, sign, velocity, acceleration, force, rate):
+    """The event signal and its rate from u_f', u_f'', the holding force and its rate."""
     stuck = sign == _STICK
-    g = jnp.where(stuck, flow.friction_force - jnp.abs(force), sign * states[..., -1])
-    return g, jnp.where(stuck, -jnp.sign(force) * rate, sign * rates[..., -1])
+    g = jnp.where(stuck, flow.friction_force - jnp.abs(force), sign * velocity)
+    return g, jnp.where(stuck, -jnp.sign(force) * rate, sign * acceleration)
 
 
 def _constant(flow: RecordFlow, sign, z):
@@ -171,12 +197,14 @@ def _crossing(times, g, rate, signal_at):
     hit = below | dipped
     k = jnp.argmax(hit)
     high = jnp.where(dipped[k], lowest[k], times[k + 1])
-    return jnp.any(hit), times[k], high
+    g_high = jnp.where(dipped[k], g_lowest[k], g[k + 1])
+    return jnp.any(hit), times[k], high, jnp.maximum(g[k], 0.0), g_high
 
 
-def _root(signal_with_rate, low, high, time_step):
-    """The time in [low, high] where the signal falls through zero (non-negative at
-    low, negative at high): Newton steps kept in the shrinking bracket."""
+def _root(signal_with_rate, low, high, g_low, g_high, time_step, active):
+    """The time in [low, high] where the signal falls through zero (`g_low` >= 0 at low,
+    `g_high` < 0 at high): Newton steps from the secant, kept in the shrinking bracket;
+    none where not `active`."""
 
     def cond(carry):
         _, _, _, i, done = carry
@@ -194,8 +222,9 @@ def _root(signal_with_rate, low, high, time_step):
             high - low <= _ROOT_TOLERANCE * time_step) | (g == 0)
         return low, high, jnp.where(g == 0, x, step), i + 1, done
 
-    start = 0.5 * (low + high)
-    return jax.lax.while_loop(cond, body, (low, high, start, 0, False))[2]
+    fraction = g_low / jnp.where(active, g_low - g_high, 1.0)
+    start = low + jnp.clip(fraction, 0.0, 1.0) * (high - low)
+    return jax.lax.while_loop(cond, body, (low, high, start, 0, ~active))[2]
 
 
 class _Cut(eqx.Module):
@@ -211,7 +240,8 @@ def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
     mode = _mode(flow, cut.sign)
     a0 = start + slope * cut.time
     inputs = jnp.concatenate([cut.z, jnp.stack([a0, slope, _constant(flow, cut.sign, cut.z)])])
-    at = lambda t: evolve(mode, inputs, t)
+    segment = coefficients(mode, inputs)
+    at = lambda t: state_at(mode, segment, t)
 
     def signal_with_rate(t):
         z, rate = at(t)
@@ -220,8 +250,9 @@ def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
     times = jnp.linspace(0.0, flow.time_step - cut.time, GRID + 1)
     states, rates = jax.vmap(at)(times)
     g, rate = _signal(flow, cut.sign, states, rates, a0 + slope * times, slope)
-    event, low, high = _crossing(times, g, rate, lambda t: signal_with_rate(t)[0])
-    when = jnp.where(event, _root(signal_with_rate, low, high, flow.time_step), times[-1])
+    event, *bracket = _crossing(times, g, rate, lambda t: signal_with_rate(t)[0])
+    when = jnp.where(event, _root(signal_with_rate, *bracket, flow.time_step, event),
+                     times[-1])
     z, _ = at(when)
     z = jnp.where(event, z.at[-1].set(0.0), z)
     # slipping: stuck or back; stuck: slipping against the holding force
@@ -241,24 +272,53 @@ def _cut_step(flow: RecordFlow, z, sign, start, slope):
     return last.z, last.sign, ~last.done
 
 
-def _step(flow: RecordFlow, carry, pair):
-    z, sign, capped = carry
-    start, end = pair
+class _March(eqx.Module):
+    """The history so far: the states and modes at the samples up to `index`."""
+
+    index: Int[Array, ""]
+    z: Float[Array, " N"]
+    sign: Int[Array, ""]
+    capped: Bool[Array, ""]
+    blocked: Bool[Array, ""]  # the next step has an event to cut
+    states: Float[Array, "samples N"]
+    signs: Int[Array, " samples"]
+
+
+def _advance(march: _March, go, z, sign, capped=False) -> _March:
+    """`march` with the next sample's state and mode where `go`."""
+    j = march.index + go
+    z, sign = jnp.where(go, z, march.z), jnp.where(go, sign, march.sign)
+    # (without a step, the sample reached is written again)
+    return _March(j, z, sign, march.capped | (go & capped), ~go,
+                  jax.lax.dynamic_update_index_in_dim(march.states, z, j, 0),
+                  jax.lax.dynamic_update_index_in_dim(march.signs, sign, j, 0))
+
+
+def _quiet_step(flow: RecordFlow, acceleration, march: _March) -> _March:
+    """The next record step from matrices computed once, where its event signal shows no
+    event; else `march` blocked."""
+    start, end = acceleration[march.index], acceleration[march.index + 1]
     slope = (end - start) / flow.time_step
-    stuck = (sign == _STICK).astype(int)
-    inputs = jnp.concatenate([z, jnp.stack([start, slope, _constant(flow, sign, z)])])
-    states = flow.states[stuck] @ inputs
-    rates = flow.rates[stuck] @ inputs
-    times = jnp.linspace(0.0, flow.time_step, GRID + 1)
-    g, rate = _signal(flow, sign, states, rates, start + slope * times, slope)
+    stuck = (march.sign == _STICK).astype(int)
+    inputs = jnp.concatenate([march.z, jnp.stack([start, slope,
+                                                  _constant(flow, march.sign, march.z)])])
+    g, rate = _event(flow, march.sign, *(flow.signals[stuck] @ inputs).T)
     tolerance = 1e-12 * jnp.max(jnp.abs(g))
     quiet = jnp.all(g[1:] >= -tolerance) & ~jnp.any((rate[:-1] < 0) & (rate[1:] > 0))
-    z, sign, over = jax.lax.cond(
-        quiet, lambda: (states[-1], sign, jnp.asarray(False)),
-        lambda: _cut_step(flow, z, sign, start, slope))
-    capped = capped | over
-    z = jnp.where(capped, jnp.nan, z)
-    return (z, sign, capped), (z, sign)
+    return _advance(march, quiet, flow.ends[stuck] @ inputs, march.sign)
+
+
+def _march(flow: RecordFlow, acceleration, march: _March) -> _March:
+    """Quiet steps as far as they go, then one step cut at its events."""
+    last = acceleration.shape[0] - 1
+    march = jax.lax.while_loop(lambda m: ~m.blocked & (m.index < last),
+                               lambda m: _quiet_step(flow, acceleration, m),
+                               eqx.tree_at(lambda m: m.blocked, march, jnp.asarray(False)))
+    j = jnp.minimum(march.index, last - 1)
+    start, end = acceleration[j], acceleration[j + 1]
+    z, sign, capped = _cut_step(flow, march.z, march.sign, start,
+                                (end - start) / flow.time_step)
+    return _advance(march, march.index < last, z, sign, capped)
 
 
 @eqx.filter_jit
@@ -284,14 +344,16 @@ def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_st
     """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
     friction forces (N) and whether some step needed more than `MAX_EVENTS` events."""
     flow = record_flow(system, time_step)
-    size = 2 * system.coordinates
+    size, count = 2 * system.coordinates, acceleration.shape[0]
     z0 = jnp.zeros(size)
     sign0 = _decide(flow, z0, acceleration[0])
-    (_, _, capped), (states, signs) = jax.lax.scan(
-        lambda carry, pair: _step(flow, carry, pair), (z0, sign0, jnp.asarray(False)),
-        (acceleration[:-1], acceleration[1:]))
-    states = jnp.concatenate([z0[None], states])
-    signs = jnp.concatenate([sign0[None], signs])
+    # (samples never reached, after a failure, stay NaN)
+    first = _March(jnp.asarray(0), z0, sign0, jnp.asarray(False), jnp.asarray(False),
+                   jnp.full((count, size), jnp.nan).at[0].set(z0),
+                   jnp.zeros(count, sign0.dtype).at[0].set(sign0))
+    march = jax.lax.while_loop(lambda m: (m.index < count - 1) & ~m.capped,
+                               lambda m: _march(flow, acceleration, m), first)
+    states, signs, capped = march.states, march.signs, march.capped
     forces = jnp.where(signs == _STICK, holding_force(flow, states, acceleration),
-                       -signs * flow.friction_force)
+                       -signs * flow.friction_force + 0 * states[:, 0])
     return states, signs, forces, capped
