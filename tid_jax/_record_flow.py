@@ -33,6 +33,9 @@ from ._records import GroundMotion, History
 
 MAX_EVENTS = 32  # mode changes within one record step; more is flagged as a failure
 GRID = 4  # points per record step at which the event signal is checked
+# a turn of the event signal between two points whose cubic stays above this fraction of
+# the signal's scale is taken as no event
+DIP_MARGIN = 1e-2
 _ROOT_ITERATIONS = 60
 _ROOT_TOLERANCE = 1e-13  # of the record's step, in time
 _STICK = 0
@@ -303,9 +306,19 @@ def _quiet_step(flow: RecordFlow, acceleration, march: _March) -> _March:
     inputs = jnp.concatenate([march.z, jnp.stack([start, slope,
                                                   _constant(flow, march.sign, march.z)])])
     g, rate = _event(flow, march.sign, *(flow.signals[stuck] @ inputs).T)
-    tolerance = 1e-12 * jnp.max(jnp.abs(g))
-    quiet = jnp.all(g[1:] >= -tolerance) & ~jnp.any((rate[:-1] < 0) & (rate[1:] > 0))
-    return _advance(march, quiet, flow.ends[stuck] @ inputs, march.sign)
+    return _advance(march, _quiet(g, rate, flow.time_step / GRID),
+                    flow.ends[stuck] @ inputs, march.sign)
+
+
+def _quiet(g, rate, spacing):
+    """Whether the event signal, at points `spacing` (s) apart with its rate, certainly
+    stays positive: positive at the points and, between two where it turns up, above
+    `DIP_MARGIN` of its scale at the cubic's control points (a lower bound of the cubic
+    through the values and slopes)."""
+    scale = jnp.max(jnp.abs(g))
+    upturn = (rate[:-1] < 0) & (rate[1:] > 0)
+    lower = jnp.minimum(g[:-1] + rate[:-1] * spacing / 3, g[1:] - rate[1:] * spacing / 3)
+    return jnp.all(g[1:] >= -1e-12 * scale) & ~jnp.any(upturn & (lower < DIP_MARGIN * scale))
 
 
 def _march(flow: RecordFlow, acceleration, march: _March) -> _March:
