@@ -159,8 +159,13 @@ def _decide(flow: RecordFlow, z, a):
     """The mode at a state with u_f' = 0: stuck (0) while the holding force is within
     ff, else slipping (+-1) against it."""
     force = holding_force(flow, z, a)
-    return jnp.where(jnp.abs(force) <= flow.friction_force, _STICK,
-                     -jnp.sign(force).astype(int))
+    held = (jnp.abs(force) <= flow.friction_force) & (flow.friction_force > 0)
+    return jnp.where(held, _STICK, _against(force))
+
+
+def _against(force):
+    """The sign of a slip against `force` (forwards where it is zero)."""
+    return jnp.where(force > 0, -1, 1)
 
 
 def _signal(flow: RecordFlow, sign, states, rates, a, slope):
@@ -260,7 +265,7 @@ def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
     z = jnp.where(event, z.at[-1].set(0.0), z)
     # slipping: stuck or back; stuck: slipping against the holding force
     force = holding_force(flow, z, a0 + slope * when)
-    after = jnp.where(cut.sign == _STICK, -jnp.sign(force).astype(int),
+    after = jnp.where(cut.sign == _STICK, _against(force),
                       _decide(flow, z, a0 + slope * when))
     return _Cut(jnp.where(event, cut.time + when, flow.time_step), z,
                 jnp.where(event, after, cut.sign), cut.events + event, ~event)
