@@ -339,12 +339,17 @@ def _march(flow: RecordFlow, acceleration, march: _March) -> _March:
     return _advance(march, march.index < last, z, sign, capped)
 
 
-@eqx.filter_jit
 def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity) -> History:
     """The exact stick-slip history of `quantity` and the stroke of `system` (a rigid
     device with exact friction, a ground load) under `motion`, from rest."""
     a = motion.acceleration
     states, signs, forces, capped = _states(system, a, motion.time_step)
+    return _history(system, quantity, a, motion.time_step, states, signs == _STICK, forces,
+                    capped)
+
+
+@eqx.filter_jit
+def _history(system, quantity, a, time_step, states, stuck, forces, capped) -> History:
     m = system.coordinates
     A, g = state_space(system)
     friction = jnp.zeros(2 * m).at[m:].set(
@@ -352,12 +357,13 @@ def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity)
     rates = states @ A.T + a[:, None] * g + forces[:, None] * friction
     w, wd, kappa, _ = selection(system, quantity)
     values = states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd) + kappa * a
-    return History(time=jnp.arange(a.shape[0]) * motion.time_step, quantity=values,
+    return History(time=jnp.arange(a.shape[0]) * time_step, quantity=values,
                    stroke=states[:, system.floors], peak=jnp.max(jnp.abs(values)),
-                   rms=jnp.sqrt(jnp.mean(values**2)), stuck=signs == _STICK,
-                   friction_force=forces, events_capped=capped)
+                   rms=jnp.sqrt(jnp.mean(values**2)), stuck=stuck, friction_force=forces,
+                   events_capped=capped)
 
 
+@eqx.filter_jit
 def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float):
     """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
     friction forces (N) and whether some step needed more than `MAX_EVENTS` events."""
