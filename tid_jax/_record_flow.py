@@ -15,12 +15,18 @@ the mode's eigen-decomposition, computed once per system):
 
 Events end a mode: slipping, `s u_f'` reaches 0 (the inerter sticks if the holding
 force there is within ff, else it slips back); stuck, `|F|` reaches ff (it slips against
-F). Each record step checks its event signal at `GRID` points, with its slope (a sign
-change, or a dip between two points with a negative minimum); a step without one is
-advanced by matrices computed once; otherwise the step is cut at each event, located by
-safeguarded Newton steps on the closed form, at most `MAX_EVENTS` events a step (more
-are flagged and the history is NaN from there on).
+F). Each record step checks its event signal at `grid` points (at least `GRID`, and
+enough that the fastest mode turns by at most half a radian between two) with its
+slope: a point below zero, or a turn between two points that may dip below it. A step
+without one is advanced by matrices computed once; otherwise the step is cut at each
+event, located by safeguarded Newton steps on the closed form, at most `MAX_EVENTS`
+events a step (more are flagged, and the history is NaN from there on).
+
+Smoothed friction and a compliant device are not written here (`friction_history`
+holds their friction over substeps).
 """
+
+import math
 
 import equinox as eqx
 import jax
@@ -28,11 +34,12 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._building import BuildingTID, Quantity, selection, state_space
-from ._eigen import eigensystem
+from ._eigen import eigensystem, eigenvalues
 from ._records import GroundMotion, History
 
 MAX_EVENTS = 32  # mode changes within one record step; more is flagged as a failure
-GRID = 4  # points per record step at which the event signal is checked
+GRID = 4  # the fewest points per record step at which the event signal is checked
+_MAX_GRID = 64
 # a turn of the event signal between two points whose cubic stays above this fraction of
 # the signal's scale is taken as no event
 DIP_MARGIN = 1e-2
@@ -67,6 +74,7 @@ class RecordFlow(eqx.Module):
     signals: Float[Array, "2 points 4 P"]  # [slip, stuck], P = N + 3
     ends: Float[Array, "2 N P"]
     time_step: float = eqx.field(static=True)
+    grid: int = eqx.field(static=True)
 
 
 def coefficients(mode: _Mode, inputs):
@@ -126,12 +134,26 @@ def _modes(system: BuildingTID):
     return slip, stuck, holding, row @ load[:f] - load[f]
 
 
-def record_flow(system: BuildingTID, time_step: float) -> RecordFlow:
-    """The flow of a rigid device with exact friction over record steps of `time_step` (s)."""
+def grid_points(system: BuildingTID, time_step: float) -> int:
+    """The points per record step of `time_step` (s) at which events are looked for:
+    the fastest mode (slipping) turns by at most half a radian between two."""
+    fastest = float(_fastest(system))
+    return int(min(_MAX_GRID, max(GRID, math.ceil(2 * fastest * time_step))))
+
+
+@eqx.filter_jit
+def _fastest(system: BuildingTID):
+    """The largest |eigenvalue| (rad/s) of the slipping system."""
+    return jnp.max(jnp.abs(eigenvalues(state_space(system)[0])))
+
+
+def record_flow(system: BuildingTID, time_step: float, grid: int = GRID) -> RecordFlow:
+    """The flow of a rigid device with exact friction over record steps of `time_step`
+    (s), events looked for at `grid` points a step."""
     slip, stuck, holding, holding_load = _modes(system)
     size = 2 * system.coordinates
     basis = jnp.eye(size + 3)
-    times = jnp.linspace(0.0, time_step, GRID + 1)
+    times = jnp.linspace(0.0, time_step, grid + 1)
 
     def tabulated(mode):
         at = lambda t: jax.vmap(lambda x: evolve(mode, x, t), out_axes=-1)(basis)
@@ -147,7 +169,7 @@ def record_flow(system: BuildingTID, time_step: float) -> RecordFlow:
     (slip_signals, slip_end), (stuck_signals, stuck_end) = signals(slip), signals(stuck)
     return RecordFlow(slip, stuck, holding, holding_load, system.friction_force,
                       jnp.stack([slip_signals, stuck_signals]),
-                      jnp.stack([slip_end, stuck_end]), time_step)
+                      jnp.stack([slip_end, stuck_end]), time_step, grid)
 
 
 def holding_force(flow: RecordFlow, z, a):
@@ -255,7 +277,7 @@ def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
         z, rate = at(t)
         return _signal(flow, cut.sign, z, rate, a0 + slope * t, slope)
 
-    times = jnp.linspace(0.0, flow.time_step - cut.time, GRID + 1)
+    times = jnp.linspace(0.0, flow.time_step - cut.time, flow.grid + 1)
     states, rates = jax.vmap(at)(times)
     g, rate = _signal(flow, cut.sign, states, rates, a0 + slope * times, slope)
     event, *bracket = _crossing(times, g, rate, lambda t: signal_with_rate(t)[0])
@@ -311,7 +333,7 @@ def _quiet_step(flow: RecordFlow, acceleration, march: _March) -> _March:
     inputs = jnp.concatenate([march.z, jnp.stack([start, slope,
                                                   _constant(flow, march.sign, march.z)])])
     g, rate = _event(flow, march.sign, *(flow.signals[stuck] @ inputs).T)
-    return _advance(march, _quiet(g, rate, flow.time_step / GRID),
+    return _advance(march, _quiet(g, rate, flow.time_step / flow.grid),
                     flow.ends[stuck] @ inputs, march.sign)
 
 
@@ -343,7 +365,8 @@ def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity)
     """The exact stick-slip history of `quantity` and the stroke of `system` (a rigid
     device with exact friction, a ground load) under `motion`, from rest."""
     a = motion.acceleration
-    states, signs, forces, capped = _states(system, a, motion.time_step)
+    grid = grid_points(system, motion.time_step)
+    states, signs, forces, capped = _states(system, a, motion.time_step, grid)
     return _history(system, quantity, a, motion.time_step, states, signs == _STICK, forces,
                     capped)
 
@@ -364,10 +387,11 @@ def _history(system, quantity, a, time_step, states, stuck, forces, capped) -> H
 
 
 @eqx.filter_jit
-def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float):
+def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float,
+            grid: int):
     """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
     friction forces (N) and whether some step needed more than `MAX_EVENTS` events."""
-    flow = record_flow(system, time_step)
+    flow = record_flow(system, time_step, grid)
     size, count = 2 * system.coordinates, acceleration.shape[0]
     z0 = jnp.zeros(size)
     sign0 = _decide(flow, z0, acceleration[0])
