@@ -126,6 +126,21 @@ def test_friction_history_is_the_event_driven_reference_s(stick_slip):
                                atol=1e-8 * FRICTION)
 
 
+def test_a_failed_record_solve_is_flagged_and_not_a_number(stick_slip):
+    # with no event allowed in a record step, the solve fails at the first event
+    motion, reference = stick_slip
+    first = int(reference["events"][0][0] / motion.time_step) + 1
+    system = tj.BuildingTID(STRUCTURE, B, FRICTION, 41668.57, 524.636, load="ground",
+                            **BETWEEN_FLOORS)
+    history = tj.friction_history(system, motion, max_events=0)
+    assert bool(history.events_capped)
+    assert np.isnan(float(history.peak)) and np.isnan(float(history.rms))
+    quantity = np.asarray(history.quantity)
+    assert np.all(np.isfinite(quantity[:first])) and np.all(np.isnan(quantity[first:]))
+    with pytest.raises(ValueError, match="max_events"):
+        tj.friction_history(system, motion, max_events=-1)
+
+
 def test_csv_records_in_g_and_in_si(tmp_path):
     times = np.arange(6) * 0.02
     values = np.array([0.0, 0.1, -0.2, 0.15, 0.0, -0.05])

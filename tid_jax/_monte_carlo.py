@@ -35,7 +35,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._building import BuildingTID, Quantity, selection, state_space
-from ._record_flow import exact_history
+from ._record_flow import MAX_EVENTS, exact_history
 from ._records import GroundMotion, History, propagators
 from ._stationary import StationaryLoad, joint_state_space, quantity_row, stationary_covariance
 from ._system import FRICTION_WIDTH_RATIO
@@ -380,13 +380,15 @@ def substeps(motion: GroundMotion, time_step: float) -> tuple[int, np.ndarray]:
 
 def friction_history(system: BuildingTID, motion: GroundMotion,
                      quantity: Quantity = Quantity(), *,
-                     time_step: float | None = None) -> History:
+                     time_step: float | None = None,
+                     max_events: int = MAX_EVENTS) -> History:
     """The time history of `quantity` and the stroke of `system` (a ground load, with
     its friction) under `motion` from rest, sampled at the record's samples, with the
     stuck flags and the friction force (see `History`).
 
     A rigid device with exact friction (`friction_width` 0) is stepped exactly by
-    default (`_record_flow`: closed-form modes, events located in time). With a
+    default (`_record_flow`: closed-form modes, events located in time, at most
+    `max_events` in one record step: more set `events_capped`). With a
     `time_step` (s), or for smoothed friction or a compliant device, the friction force
     is held over substeps of at most `time_step` (default the first mode's period / 200;
     first order in the step, Monte Carlo's scheme); smoothed friction never sticks."""
@@ -394,8 +396,10 @@ def friction_history(system: BuildingTID, motion: GroundMotion,
     quantity.floor_of(system.floors)
     if system.load != "ground":
         raise ValueError("a recorded ground motion needs a system with load='ground'")
+    if isinstance(max_events, bool) or not isinstance(max_events, int) or max_events < 0:
+        raise ValueError(f"max_events must be a non-negative integer, got {max_events!r}")
     if time_step is None and system.exact_friction and not system.compliant:
-        return exact_history(system, motion, quantity)
+        return exact_history(system, motion, quantity, max_events)
     h = first_period(system) / 200 if time_step is None else time_step
     count, inputs = substeps(motion, h)
     start, outputs, forces = _record_outputs(system, quantity, jnp.asarray(inputs),

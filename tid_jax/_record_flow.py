@@ -19,8 +19,8 @@ F). Each record step checks its event signal at `grid` points (at least `GRID`, 
 enough that the fastest mode turns by at most half a radian between two) with its
 slope: a point below zero, or a turn between two points that may dip below it. A step
 without one is advanced by matrices computed once; otherwise the step is cut at each
-event, located by safeguarded Newton steps on the closed form, at most `MAX_EVENTS`
-events a step (more are flagged, and the history is NaN from there on).
+event, located by safeguarded Newton steps on the closed form, at most `max_events`
+(default `MAX_EVENTS`) events a step (more are flagged, and the history is NaN from there on).
 
 Smoothed friction and a compliant device are not written here (`friction_history`
 holds their friction over substeps).
@@ -75,6 +75,7 @@ class RecordFlow(eqx.Module):
     ends: Float[Array, "2 N P"]
     time_step: float = eqx.field(static=True)
     grid: int = eqx.field(static=True)
+    max_events: int = eqx.field(static=True)
 
 
 def coefficients(mode: _Mode, inputs):
@@ -147,9 +148,10 @@ def _fastest(system: BuildingTID):
     return jnp.max(jnp.abs(eigenvalues(state_space(system)[0])))
 
 
-def record_flow(system: BuildingTID, time_step: float, grid: int = GRID) -> RecordFlow:
+def record_flow(system: BuildingTID, time_step: float, grid: int = GRID,
+                max_events: int = MAX_EVENTS) -> RecordFlow:
     """The flow of a rigid device with exact friction over record steps of `time_step`
-    (s), events looked for at `grid` points a step."""
+    (s), events looked for at `grid` points a step, at most `max_events` a step."""
     slip, stuck, holding, holding_load = _modes(system)
     size = 2 * system.coordinates
     basis = jnp.eye(size + 3)
@@ -169,7 +171,8 @@ def record_flow(system: BuildingTID, time_step: float, grid: int = GRID) -> Reco
     (slip_signals, slip_end), (stuck_signals, stuck_end) = signals(slip), signals(stuck)
     return RecordFlow(slip, stuck, holding, holding_load, system.friction_force,
                       jnp.stack([slip_signals, stuck_signals]),
-                      jnp.stack([slip_end, stuck_end]), time_step, grid)
+                      jnp.stack([slip_end, stuck_end]), time_step, grid,
+                      max_events)
 
 
 def holding_force(flow: RecordFlow, z, a):
@@ -295,9 +298,9 @@ def _segment(flow: RecordFlow, cut: _Cut, start, slope) -> _Cut:
 
 def _cut_step(flow: RecordFlow, z, sign, start, slope):
     """A record step cut at its events: the state, the mode and whether it took more
-    than `MAX_EVENTS` events."""
+    than the flow's `max_events` events."""
     first = _Cut(jnp.asarray(0.0), z, sign, jnp.asarray(0), jnp.asarray(False))
-    last = jax.lax.while_loop(lambda cut: ~cut.done & (cut.events < MAX_EVENTS),
+    last = jax.lax.while_loop(lambda cut: ~cut.done & (cut.events <= flow.max_events),
                               lambda cut: _segment(flow, cut, start, slope), first)
     return last.z, last.sign, ~last.done
 
@@ -358,15 +361,17 @@ def _march(flow: RecordFlow, acceleration, march: _March) -> _March:
     start, end = acceleration[j], acceleration[j + 1]
     z, sign, capped = _cut_step(flow, march.z, march.sign, start,
                                 (end - start) / flow.time_step)
-    return _advance(march, march.index < last, z, sign, capped)
+    # a step left unfinished is no state
+    return _advance(march, march.index < last, jnp.where(capped, jnp.nan, z), sign, capped)
 
 
-def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity) -> History:
+def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity,
+                  max_events: int = MAX_EVENTS) -> History:
     """The exact stick-slip history of `quantity` and the stroke of `system` (a rigid
     device with exact friction, a ground load) under `motion`, from rest."""
     a = motion.acceleration
     grid = grid_points(system, motion.time_step)
-    states, signs, forces, capped = _states(system, a, motion.time_step, grid)
+    states, signs, forces, capped = _states(system, a, motion.time_step, grid, max_events)
     return _history(system, quantity, a, motion.time_step, states, signs == _STICK, forces,
                     capped)
 
@@ -380,18 +385,19 @@ def _history(system, quantity, a, time_step, states, stuck, forces, capped) -> H
     rates = states @ A.T + a[:, None] * g + forces[:, None] * friction
     w, wd, kappa, _ = selection(system, quantity)
     values = states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd) + kappa * a
+    failed = lambda value: jnp.where(capped, jnp.nan, value)
     return History(time=jnp.arange(a.shape[0]) * time_step, quantity=values,
-                   stroke=states[:, system.floors], peak=jnp.max(jnp.abs(values)),
-                   rms=jnp.sqrt(jnp.mean(values**2)), stuck=stuck, friction_force=forces,
-                   events_capped=capped)
+                   stroke=states[:, system.floors], peak=failed(jnp.max(jnp.abs(values))),
+                   rms=failed(jnp.sqrt(jnp.mean(values**2))), stuck=stuck,
+                   friction_force=forces, events_capped=capped)
 
 
 @eqx.filter_jit
 def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float,
-            grid: int):
+            grid: int, max_events: int):
     """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
-    friction forces (N) and whether some step needed more than `MAX_EVENTS` events."""
-    flow = record_flow(system, time_step, grid)
+    friction forces (N) and whether some step needed more than `max_events` events."""
+    flow = record_flow(system, time_step, grid, max_events)
     size, count = 2 * system.coordinates, acceleration.shape[0]
     z0 = jnp.zeros(size)
     sign0 = _decide(flow, z0, acceleration[0])
