@@ -110,8 +110,7 @@ def _modes(system: BuildingTID):
     f, size = m - 1, 2 * m
     A, g = state_space(system)
     friction = jnp.zeros(size).at[m:].set(jnp.linalg.solve(mass, jnp.eye(m)[f]))
-    values, vectors = eigensystem(A)
-    slip = _Mode(values, vectors, jnp.linalg.inv(vectors), jnp.linalg.inv(A), g, friction)
+    slip_values, slip_vectors = eigensystem(A)
     # stuck: the other coordinates x, with u_f = r held
     inverse = jnp.linalg.inv(mass[:f, :f])
     kept = jnp.concatenate([jnp.arange(f), m + jnp.arange(f)])
@@ -127,8 +126,11 @@ def _modes(system: BuildingTID):
     values = values.at[f].set(-1.0).at[size - 1].set(-2.0)
     stuck_load = jnp.zeros(size).at[m:m + f].set(inverse @ load[:f])
     stuck_constant = jnp.zeros(size).at[m:m + f].set(-inverse @ stiffness[:f, f]).at[f].set(1.0)
-    stuck = _Mode(values, vectors, jnp.linalg.inv(vectors), jnp.linalg.inv(matrix),
-                  stuck_load, stuck_constant)
+    # (both modes' inverses in one batch each: fewer programs to compile)
+    inverses = jnp.linalg.inv(jnp.stack([slip_vectors, vectors]))
+    solves = jnp.linalg.inv(jnp.stack([A, matrix]))
+    slip = _Mode(slip_values, slip_vectors, inverses[0], solves[0], g, friction)
+    stuck = _Mode(values, vectors, inverses[1], solves[1], stuck_load, stuck_constant)
     # F = M[f,x] x'' + C[f,:] u' + K[f,:] u - g_f a, x'' from the stuck x rows
     row = mass[f, :f] @ inverse
     holding = jnp.concatenate([stiffness[f] - row @ stiffness[:f], damping[f] - row @ damping[:f]])
