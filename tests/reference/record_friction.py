@@ -59,7 +59,7 @@ class _Model:
         return self.Mxi @ (self.g[x] * a(t) - self.C[x] @ v - self.K[x] @ u)
 
     def stuck_rhs(self, a, r):
-        f, m = self.f, self.m
+        f = self.f
 
         def rhs(t, y):
             u = np.concatenate([y[:f], [r]])
