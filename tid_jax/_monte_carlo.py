@@ -35,6 +35,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._building import BuildingTID, Quantity, selection, state_space
+from ._record_flow import MAX_EVENTS, exact_history
 from ._records import GroundMotion, History, propagators
 from ._stationary import StationaryLoad, joint_state_space, quantity_row, stationary_covariance
 from ._system import FRICTION_WIDTH_RATIO
@@ -107,13 +108,18 @@ class Stepper(eqx.Module):
     exact: bool = eqx.field(static=True)
 
     def __call__(self, z, u):
+        z, y, _ = self.advance(z, u)
+        return z, y
+
+    def advance(self, z, u):
+        """The state and the outputs at the step's end, and the friction force held."""
         free = z @ self.phi.T + u @ self.inputs.T
         trial = free[..., self.velocity]
         gain = self.friction[self.velocity]
         force = _friction(trial, gain, self.friction_force, self.width, self.exact)
         z = free + force[..., None] * self.friction
         y = z @ self.out.T + force[..., None] * self.out_friction + u @ self.out_inputs.T
-        return z, y
+        return z, y, force
 
 
 def _friction(trial, gain, ff, width, exact):
@@ -374,41 +380,54 @@ def substeps(motion: GroundMotion, time_step: float) -> tuple[int, np.ndarray]:
 
 def friction_history(system: BuildingTID, motion: GroundMotion,
                      quantity: Quantity = Quantity(), *,
-                     time_step: float | None = None) -> History:
+                     time_step: float | None = None,
+                     max_events: int = MAX_EVENTS) -> History:
     """The time history of `quantity` and the stroke of `system` (a ground load, with
-    its friction: exact or smoothed with a given `friction_width`) under `motion` from
-    rest, sampled at the record's samples; substeps of at most `time_step` (s; default
-    the first mode's period / 200)."""
+    its friction) under `motion` from rest, sampled at the record's samples, with the
+    stuck flags and the friction force (see `History`).
+
+    A rigid device with exact friction (`friction_width` 0) is stepped exactly by
+    default (`_record_flow`: closed-form modes, events located in time, at most
+    `max_events` in one record step: more set `events_capped`). With a
+    `time_step` (s), or for smoothed friction or a compliant device, the friction force
+    is held over substeps of at most `time_step` (default the first mode's period / 200;
+    first order in the step, Monte Carlo's scheme); smoothed friction never sticks."""
     check_system(system)
     quantity.floor_of(system.floors)
     if system.load != "ground":
         raise ValueError("a recorded ground motion needs a system with load='ground'")
+    if isinstance(max_events, bool) or not isinstance(max_events, int) or max_events < 0:
+        raise ValueError(f"max_events must be a non-negative integer, got {max_events!r}")
+    if time_step is None and system.exact_friction and not system.compliant:
+        return exact_history(system, motion, quantity, max_events)
     h = first_period(system) / 200 if time_step is None else time_step
     count, inputs = substeps(motion, h)
-    start, outputs = _record_outputs(system, quantity, jnp.asarray(inputs),
-                                     motion.time_step / count)
+    start, outputs, forces = _record_outputs(system, quantity, jnp.asarray(inputs),
+                                             motion.time_step / count)
     values = np.concatenate([np.asarray(start)[None], np.asarray(outputs)[count - 1::count]])
+    forces = np.concatenate([[0.0], np.asarray(forces)[count - 1::count]])
+    ff = float(np.max(np.asarray(system.friction_force)))
+    stuck = np.abs(forces) < ff if system.exact_friction else np.zeros(forces.shape, bool)
     times = np.arange(values.shape[0]) * motion.time_step
     quantity_values = jnp.asarray(values[:, 0])
     return History(time=jnp.asarray(times), quantity=quantity_values,
                    stroke=jnp.asarray(values[:, 1]), peak=jnp.max(jnp.abs(quantity_values)),
-                   rms=jnp.sqrt(jnp.mean(quantity_values**2)))
+                   rms=jnp.sqrt(jnp.mean(quantity_values**2)), stuck=jnp.asarray(stuck),
+                   friction_force=jnp.asarray(forces), events_capped=jnp.asarray(False))
 
 
 @eqx.filter_jit
 def _record_outputs(system, quantity, inputs, time_step):
     stepper = record_stepper(system, quantity, time_step)
-    steps = inputs.shape[0]
-    chunks = -(-steps // CHUNK)
-    padded = jnp.zeros((chunks * CHUNK, 1, 2)).at[:steps, 0].set(inputs)
-    weights = jnp.zeros(chunks * CHUNK).at[:steps].set(1.0)
-    chunk_inputs = lambda c: (jax.lax.dynamic_slice_in_dim(padded, c * CHUNK, CHUNK),
-                              jax.lax.dynamic_slice_in_dim(weights, c * CHUNK, CHUNK))
-    z0 = jnp.zeros((1, stepper.phi.shape[0]))
-    _, _, outputs = run(stepper, z0, chunk_inputs, chunks, keep=True)
+
+    def step(z, u):
+        z, y, force = stepper.advance(z, u)
+        return z, (y, force)
+
+    _, (outputs, forces) = jax.lax.scan(step, jnp.zeros(stepper.phi.shape[0]), inputs)
     # at rest at the start: only the ground's own acceleration shows
     start = stepper.out_inputs[:, 0] * inputs[0, 0]
-    return start, outputs[:steps, 0]
+    return start, outputs, forces
 
 
 def random_history(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Quantity(),

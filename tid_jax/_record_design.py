@@ -1,15 +1,15 @@
 """Design of the TID with its friction over a suite of recorded ground motions: the
 (k, c) that minimise the mean over the records of the response's peak.
 
-Each record is stepped with the friction (`friction_history`'s scheme: substeps of at
-most h, the record a straight line between its samples); the records are padded to the
-longest and stepped together, and the peaks and RMS are read at the records' own
-samples. The mean peak is continuous but not smooth in (k, c) (a peak moves from one
-instant to another), so optimistix's Nelder-Mead minimises it over (ln k, ln c). A stroke
-limit enters as an exact penalty, `STROKE_PENALTY` times the excess of ln(largest stroke
-peak / limit): once the weight exceeds the constraint's multiplier (the decrease of
-ln(mean peak) per unit of ln(stroke) along the limit, below 1 on the paper's TID) the
-penalised minimum is the constrained one.
+Each record is stepped with the friction held over substeps of at most h (Monte Carlo's
+scheme, `friction_history` with `time_step=h`; the record a straight line between its
+samples); the records are padded to the longest and stepped together, and the peaks and
+RMS are read at the records' own samples. The mean peak is continuous but not smooth in
+(k, c) (a peak moves from one instant to another), so optimistix's Nelder-Mead minimises
+it over (ln k, ln c). A stroke limit enters as an exact penalty, `STROKE_PENALTY` times
+the excess of ln(largest stroke peak / limit): once the weight exceeds the constraint's
+multiplier (the decrease of ln(mean peak) per unit of ln(stroke) along the limit, below
+1 on the paper's TID) the penalised minimum is the constrained one.
 """
 
 import equinox as eqx
@@ -81,7 +81,7 @@ def _suite(motions, time_step: float) -> _Suite:
 
 def suite_statistics(system: BuildingTID, quantity: Quantity, suite: _Suite):
     """The peak and the RMS of `quantity` and the stroke's peak over each record's
-    samples, from rest (as `friction_history`)."""
+    samples, from rest (as `friction_history` with `time_step`)."""
 
     def one(inputs, weights, time_step):
         stepper = record_stepper(system, quantity, time_step)

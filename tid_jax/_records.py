@@ -16,7 +16,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from ._building import BuildingTID, G, Quantity, selection, state_space
 
@@ -132,14 +132,23 @@ def read_csv_record(path, units: str = "g") -> GroundMotion:
 
 
 class History(eqx.Module):
-    """A time history under a record: `time` (s), `quantity` (SI) and `stroke` (m), with
-    the quantity's `peak` and `rms` over the record."""
+    """A time history under a record, at the record's samples: `time` (s), `quantity`
+    (SI) and `stroke` (m); `stuck` (whether the inerter is stuck at each sample, None
+    where not computed) and `friction_force` (N, the force the friction puts on the
+    inerter's coordinate, along the stroke: -ff sgn(stroke rate) while slipping, the
+    force that holds it while stuck; None where not computed); the quantity's `peak`
+    (the largest |quantity| over the samples) and `rms` over the record; and
+    `events_capped`, true where the solve failed (a record step needed more mode changes
+    than allowed): the history is then NaN from that step on."""
 
     time: Float[Array, " samples"]
     quantity: Float[Array, " samples"]
     stroke: Float[Array, " samples"]
     peak: Float[Array, ""]
     rms: Float[Array, ""]
+    stuck: Bool[Array, " samples"] | None = None
+    friction_force: Float[Array, " samples"] | None = None
+    events_capped: Bool[Array, ""] = False
 
 
 def propagators(A, g, dt):
@@ -152,13 +161,21 @@ def propagators(A, g, dt):
     return exponential[:n, :n], exponential[:n, n], exponential[:n, n + 1]
 
 
-@eqx.filter_jit
 def linear_history(system: BuildingTID, motion: GroundMotion,
                    quantity: Quantity = Quantity()) -> History:
-    """The frictionless (friction and backlash left out) time history of `quantity` and
-    the stroke of `system` (a ground load) under `motion`, from rest."""
+    """The frictionless (backlash left out) time history of `quantity` and the stroke of
+    `system` (a ground load, friction_force 0) under `motion`, from rest."""
     if system.load != "ground":
         raise ValueError("a recorded ground motion needs a system with load='ground'")
+    if np.any(np.asarray(system.friction_force) > 0):
+        raise ValueError(f"linear_history has no friction, but friction_force is "
+                         f"{float(np.max(np.asarray(system.friction_force)))!r} N: use "
+                         "friction_history, or give friction_force=0")
+    return _linear_history(system, motion, quantity)
+
+
+@eqx.filter_jit
+def _linear_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity) -> History:
     m = system.coordinates
     A, g = state_space(system)
     phi, gamma0, gamma1 = propagators(A, g, motion.time_step)
@@ -176,7 +193,8 @@ def linear_history(system: BuildingTID, motion: GroundMotion,
     values = states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd) + kappa * a
     return History(time=jnp.arange(a.shape[0]) * motion.time_step, quantity=values,
                    stroke=states[:, system.floors], peak=jnp.max(jnp.abs(values)),
-                   rms=jnp.sqrt(jnp.mean(values**2)))
+                   rms=jnp.sqrt(jnp.mean(values**2)), stuck=jnp.zeros(a.shape[0], bool),
+                   friction_force=jnp.zeros(a.shape[0]), events_capped=jnp.asarray(False))
 
 
 def jennings_envelope(times, rise: float, end: float, decay: float):
