@@ -79,3 +79,17 @@ def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system)
     assert np.all(mine.converged) and np.all(paper.converged)
     np.testing.assert_allclose(mine.value, paper.x_peak, rtol=1e-5)
     np.testing.assert_allclose(mine.omega, paper.omega_x, rtol=1e-3)
+
+
+def test_random_and_recorded_loads_take_the_paper_system_as_its_one_storey_building(system):
+    # a stationary load is a force on the host, a record a ground acceleration
+    load = tj.StationaryLoad("white_noise", 500.0)
+    assert float(tj.rms_response(system, load)) == float(
+        tj.rms_response(tj.as_building(system, "force"), load))
+    ground = tj.StationaryLoad("kanai_tajimi", 0.01, ground_frequency=15.0, ground_damping=0.6)
+    motion = tj.synthetic_motion(ground, 4.0, 0.01, seed=3)
+    mine = tj.friction_history(system, motion)
+    building = tj.friction_history(tj.as_building(system, "ground"), motion)
+    np.testing.assert_array_equal(np.asarray(mine.quantity), np.asarray(building.quantity))
+    with pytest.raises(ValueError, match="TIDSystem or a BuildingTID"):
+        tj.monte_carlo("paper", load)

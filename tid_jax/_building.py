@@ -302,6 +302,17 @@ def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
                        series_stiffness=system.series_stiffness, backlash=system.backlash)
 
 
+def building_of(system: "BuildingTID | TIDSystem", load: str) -> BuildingTID:
+    """`system` as a `BuildingTID`: itself, or a `TIDSystem`'s host as a one-storey
+    building under `load` ("force" or "ground", `as_building`)."""
+    if isinstance(system, TIDSystem):
+        return as_building(system, load)
+    if not isinstance(system, BuildingTID):
+        raise ValueError("system must be a TIDSystem or a BuildingTID, got "
+                         f"{type(system).__name__}")
+    return system
+
+
 def log_tuned(system: BuildingTID, log_tuning) -> BuildingTID:
     """The system with the TID's `(k, c) = exp(log_tuning)`: the designs' variables."""
     k, c = jnp.exp(log_tuning)

@@ -34,11 +34,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, Quantity, selection, state_space
+from ._building import BuildingTID, Quantity, building_of, selection, state_space
 from ._record_flow import MAX_EVENTS, exact_history
 from ._records import GroundMotion, History, propagators
 from ._stationary import StationaryLoad, joint_state_space, quantity_row, stationary_covariance
-from ._system import FRICTION_WIDTH_RATIO
+from ._system import FRICTION_WIDTH_RATIO, TIDSystem
 
 CHUNK = 256  # steps between checkpoints of the reverse-mode derivative
 _BISECTIONS = 48
@@ -340,13 +340,15 @@ def statistics(squares, peaks, counted: int, time_step: float) -> MonteCarlo:
                       peaks=peaks[:, 0], time_step=time_step, duration=counted * time_step)
 
 
-def monte_carlo(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Quantity(),
-                *, settings: MonteCarloSettings = MonteCarloSettings(),
+def monte_carlo(system: BuildingTID | TIDSystem, load: StationaryLoad,
+                quantity: Quantity = Quantity(), *,
+                settings: MonteCarloSettings = MonteCarloSettings(),
                 envelope=None) -> MonteCarlo:
     """Monte Carlo statistics of `quantity` and the stroke of `system` (exact or smoothed
     friction, see the module) under the stationary random `load`: `settings.samples`
     realisations stepped together. With an `envelope` (a function of time in s, e.g.
     `jennings_envelope`) the white noise is modulated from rest and every step counts."""
+    system = building_of(system, "force")
     check_load(system, load, quantity)
     run_plan = plan(system, settings, stationary=envelope is None)
     key = jax.random.key(settings.seed)
@@ -378,7 +380,7 @@ def substeps(motion: GroundMotion, time_step: float) -> tuple[int, np.ndarray]:
     return count, np.stack([starts, np.repeat(slope, count)], axis=1)
 
 
-def friction_history(system: BuildingTID, motion: GroundMotion,
+def friction_history(system: BuildingTID | TIDSystem, motion: GroundMotion,
                      quantity: Quantity = Quantity(), *,
                      time_step: float | None = None,
                      max_events: int = MAX_EVENTS) -> History:
@@ -392,6 +394,7 @@ def friction_history(system: BuildingTID, motion: GroundMotion,
     `time_step` (s), or for smoothed friction or a compliant device, the friction force
     is held over substeps of at most `time_step` (default the first mode's period / 200;
     first order in the step, Monte Carlo's scheme); smoothed friction never sticks."""
+    system = building_of(system, "ground")
     check_system(system)
     quantity.floor_of(system.floors)
     if system.load != "ground":
@@ -430,11 +433,13 @@ def _record_outputs(system, quantity, inputs, time_step):
     return start, outputs, forces
 
 
-def random_history(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Quantity(),
-                   *, settings: MonteCarloSettings = MonteCarloSettings()) -> History:
+def random_history(system: BuildingTID | TIDSystem, load: StationaryLoad,
+                   quantity: Quantity = Quantity(), *,
+                   settings: MonteCarloSettings = MonteCarloSettings()) -> History:
     """The time history of `quantity` and the stroke in the first realisation of
     `monte_carlo` with these `settings`, every step of `settings.duration` (from the
     frictionless stationary state); its `peak` and `rms` over the counted steps."""
+    system = building_of(system, "force")
     check_load(system, load, quantity)
     run_plan = plan(system, settings)
     outputs = np.asarray(_first_realisation(system, load, quantity, run_plan,

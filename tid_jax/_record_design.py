@@ -19,10 +19,10 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from ._building import BuildingTID, Quantity, log_tuned, log_tuning_of
+from ._building import BuildingTID, Quantity, building_of, log_tuned, log_tuning_of
 from ._monte_carlo import CHUNK, check_system, first_period, record_stepper, run, substeps
 from ._records import GroundMotion
-from ._system import check_values
+from ._system import TIDSystem, check_values
 
 STROKE_PENALTY = 10.0
 # The limit is aimed this fraction below the given one: the simplex stops within its
@@ -119,7 +119,7 @@ def _design(system, quantity, suite, log_limit, rtol, max_steps):
     return solution.value, solution.result == optx.RESULTS.successful, before, after
 
 
-def design_for_records(system: BuildingTID, motions, quantity: Quantity = Quantity(), *,
+def design_for_records(system: BuildingTID | TIDSystem, motions, quantity: Quantity = Quantity(), *,
                        stroke_limit: float | None = None, time_step: float | None = None,
                        rtol: float = 1e-4, max_steps: int = 400) -> RecordDesign:
     """The TID's (k, c) minimising the mean peak of `quantity` over the ground motions
@@ -128,6 +128,7 @@ def design_for_records(system: BuildingTID, motions, quantity: Quantity = Quanti
     system's own tuning, with every record's stroke peak within `stroke_limit` (m; None:
     no limit); substeps of at most `time_step` (s; default the first mode's period /
     200)."""
+    system = building_of(system, "ground")
     check_system(system)
     quantity.floor_of(system.floors)
     if system.load != "ground":

@@ -18,7 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._building import BuildingTID, G, Quantity, selection, state_space
+from ._building import BuildingTID, G, Quantity, building_of, selection, state_space
+from ._system import TIDSystem
 
 _AT2_STEP = re.compile(r"NPTS\s*=\s*(\d+)\s*,?\s*DT\s*=\s*([0-9.eE+-]+)", re.IGNORECASE)
 
@@ -161,10 +162,11 @@ def propagators(A, g, dt):
     return exponential[:n, :n], exponential[:n, n], exponential[:n, n + 1]
 
 
-def linear_history(system: BuildingTID, motion: GroundMotion,
+def linear_history(system: BuildingTID | TIDSystem, motion: GroundMotion,
                    quantity: Quantity = Quantity()) -> History:
     """The frictionless (backlash left out) time history of `quantity` and the stroke of
     `system` (a ground load, friction_force 0) under `motion`, from rest."""
+    system = building_of(system, "ground")
     if system.load != "ground":
         raise ValueError("a recorded ground motion needs a system with load='ground'")
     if np.any(np.asarray(system.friction_force) > 0):

@@ -25,7 +25,16 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._building import BuildingTID, Quantity, log_tuned, log_tuning_of, selection, state_space
+from ._building import (
+    BuildingTID,
+    Quantity,
+    building_of,
+    log_tuned,
+    log_tuning_of,
+    selection,
+    state_space,
+)
+from ._system import TIDSystem
 
 KINDS = ("white_noise", "kanai_tajimi", "clough_penzien")
 
@@ -119,19 +128,22 @@ def lyapunov(A: Float[Array, "n n"], Q: Float[Array, "n n"]) -> Float[Array, "n 
     return 0.5 * (P + P.T)
 
 
-def stationary_covariance(system: BuildingTID, load: StationaryLoad) -> Float[Array, "n n"]:
+def stationary_covariance(system: BuildingTID | TIDSystem,
+                          load: StationaryLoad) -> Float[Array, "n n"]:
     """The stationary covariance of the joint state `(u, u', s)` of the frictionless
     system (its friction and backlash left out) under `load`."""
+    system = building_of(system, "force")
     A, B = joint_state_space(system, load)
     return lyapunov(A, 2 * jnp.pi * load.psd * jnp.outer(B, B))
 
 
-def rms_response(system: BuildingTID, load: StationaryLoad,
+def rms_response(system: BuildingTID | TIDSystem, load: StationaryLoad,
                  quantity: Quantity = Quantity()) -> Float[Array, ""]:
     """The RMS of `quantity` (SI) of the frictionless system under the stationary
     `load`: the square root of `c P c^T` for the quantity's row c of the joint state (an
     absolute acceleration from the state's derivative; the white-noise load's own part of
     it, infinite in variance, needs a filtered ground motion). One compiled program."""
+    system = building_of(system, "force")
     quantity.floor_of(system.floors)
     return _rms(system, load, quantity)
 
@@ -173,11 +185,12 @@ def _h2_minimise(system, load, quantity, rtol):
     return solution.value, solution.result == optx.RESULTS.successful
 
 
-def h2_tuning(system: BuildingTID, load: StationaryLoad, quantity: Quantity = Quantity(), *,
-              rtol: float = 1e-10) -> tuple[float, float]:
+def h2_tuning(system: BuildingTID | TIDSystem, load: StationaryLoad,
+              quantity: Quantity = Quantity(), *, rtol: float = 1e-10) -> tuple[float, float]:
     """The TID's (k, c) that minimise the frictionless RMS of `quantity` under the
     stationary `load` (`rms_response`): BFGS (optimistix) on (log k, log c) from the
     system's own tuning, the gradients by differentiating the Lyapunov solve."""
+    system = building_of(system, "force")
     quantity.floor_of(system.floors)
     value, successful = _h2_minimise(system, load, quantity, rtol)
     if not bool(successful):
@@ -209,7 +222,7 @@ def _velocity_rms(system: BuildingTID, load: StationaryLoad, damping):
     return jnp.sqrt(P[index, index]), changed
 
 
-def statistical_linearisation(system: BuildingTID, load: StationaryLoad,
+def statistical_linearisation(system: BuildingTID | TIDSystem, load: StationaryLoad,
                               quantity: Quantity = Quantity(), *,
                               span: float = 30.0, points: int = 121) -> Linearisation:
     """The self-consistent statistical linearisation of the friction (Caughey): the
@@ -217,6 +230,7 @@ def statistical_linearisation(system: BuildingTID, load: StationaryLoad,
     `span` (natural log units) on each side of the frictionless sigma_v, scanned at
     `points` and refined by bisection; the largest attracting one (where
     ln RMS(sigma) - ln sigma falls through zero) is kept."""
+    system = building_of(system, "force")
     kappa = system.friction_force * jnp.sqrt(2 / jnp.pi)
     free, _ = _velocity_rms(system, load, 0.0)
 
