@@ -200,7 +200,6 @@ def test_frictionless_retune_is_the_h_infinity_optimum(building):
     system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
     result = tj.retune(system, [1.0])
     M, K, C = _matrices(building)
-    first = building.modes()[0][0]
     omegas = np.asarray(tj.default_omegas(system))
     band = (omegas[0], omegas[-1])
     reference = building_hinf.h_infinity_search(

@@ -25,6 +25,7 @@ _API = {
                   "identify_inerter"),
     "_monte_carlo": ("MonteCarlo", "MonteCarloSettings", "friction_history", "monte_carlo",
                      "random_history"),
+    "_outcomes": ("Outcome",),
     "_parallel": ("ProcessMap",),
     "_linear": ("Breakaway", "LinearReceptance", "den_hartog", "den_hartog_tuning",
                 "paper_system", "stuck_receptance"),
@@ -110,6 +111,9 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         friction_history as friction_history,
         monte_carlo as monte_carlo,
         random_history as random_history,
+    )
+    from ._outcomes import (
+        Outcome as Outcome,
     )
     from ._parallel import (
         ProcessMap as ProcessMap,

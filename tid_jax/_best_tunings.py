@@ -13,11 +13,11 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._band import _band
 from ._checks import check_distinct, check_steady_state_device, check_system, is_positive
-from ._outcomes import outcome_code
+from ._outcomes import Outcome, outcome_code
 from ._parallel import serial
 from ._peaks import lane_grid_peaks, smooth_log_peak
 from ._response import batched
-from ._retune import RetuneOutcome, RetuneSettings, check_retune_options, optimal_tunings
+from ._retune import RetuneSettings, check_retune_options, optimal_tunings
 from ._settings import SolverSettings
 from ._system import FIELD_NAMES, TIDSystem
 
@@ -147,7 +147,7 @@ def best_tunings(
         objective=grid(_smooth_objective(on_band, bands, objective_sharpness)),
         iterations=grid(result.iterations),
         stationary=grid(np.asarray(result.status)
-                        != outcome_code(RetuneOutcome.not_stationary)),
+                        != outcome_code(Outcome.not_stationary)),
         converged=grid(result.converged),
         damping_at_bound=grid(result.damping_at_bound),
     )

@@ -1,6 +1,6 @@
-"""Outcome codes of the optimisers. Each optimiser's outcomes are an `eqx.Enumeration`
-whose first item, `ok`, means success; its results hold the items' integer codes (arrays
-of them, as NumPy, CSV and JSON take them), whose messages `outcome_message` reads."""
+"""Outcome codes: one `eqx.Enumeration`, `Outcome`, for every result, whose first item,
+`ok`, means success; results hold the items' integer codes (arrays of them, as NumPy, CSV
+and JSON take them) in their `status`, whose messages `outcome_message` reads."""
 
 import equinox as eqx
 import jax
@@ -22,3 +22,17 @@ def outcome_message(enumeration: type[eqx.Enumeration], code) -> str:
     structure = jax.tree.structure(enumeration.ok)
     item = jax.tree.unflatten(structure, [np.asarray(code, dtype=np.int32)])
     return enumeration[item]
+
+
+class Outcome(eqx.Enumeration):
+    """How a solve or a design ended, the same codes on every result (`status`)."""
+
+    ok = "ok"
+    not_stationary = "optimiser did not converge"
+    steady_states_failed = "some steady states did not converge"
+    peak_at_band_edge = "peak at the edge of the frequency band"
+    initial_kept = ("the retuned peak was above the initial tuning's on the check grid: "
+                    "initial tuning kept")
+    stuck = ("below the breakaway amplitude: the inerter never slips and the TID is a spring "
+             "and damper to ground, which retuning would only stiffen; initial tuning kept")
+    stroke_over_limit = "stroke over the limit on the check grid"

@@ -27,7 +27,7 @@ from ._checks import (
 from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._dynamics import PARAMETERS
 from ._linear import den_hartog_tuning, host_breakaway
-from ._outcomes import outcome_code, outcome_message
+from ._outcomes import Outcome, outcome_code, outcome_message
 from ._parallel import process_count, serial
 from ._period import initial_state
 from ._response import (
@@ -98,25 +98,13 @@ class RetuneSettings(eqx.Module):
         return len(self.sharpness) + 2
 
 
-# The outcomes of `retune` (codes in `RetuneResult.status`).
-class RetuneOutcome(eqx.Enumeration):
-    ok = "ok"
-    not_stationary = "optimiser did not converge"
-    steady_states_failed = "some steady states did not converge"
-    peak_at_band_edge = "peak at the edge of the frequency band"
-    initial_kept = ("the retuned peak was above the initial tuning's on the check grid: "
-                    "initial tuning kept")
-    stuck = ("below the breakaway amplitude: the inerter never slips and the TID is a spring "
-             "and damper to ground, which retuning would only stiffen; initial tuning kept")
-
-
 class RetuneResult(eqx.Module):
     """Per-amplitude retuned TID (SI units). `x_peak`/`x_peak_initial` and `y_peak`/
     `y_peak_initial` are the peak host and inerter displacements over the band after and
     before retuning, confirmed on a frequency grid `RetuneSettings.check_refinement` times
     finer than the design grid, `check_omegas`, on which `x_response`/`x_response_initial`
     hold the peak host displacement over a period at every frequency. `status` holds codes
-    of `RetuneOutcome`, explained by `status_messages()`."""
+    of `Outcome`, explained by `status_messages()`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -139,7 +127,7 @@ class RetuneResult(eqx.Module):
     def status_messages(self) -> list[str]:
         messages = []
         for code, at_bound in zip(np.asarray(self.status), np.asarray(self.damping_at_bound)):
-            text = outcome_message(RetuneOutcome, code)
+            text = outcome_message(Outcome, code)
             messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
         return messages
 
@@ -496,7 +484,7 @@ def _checked_result(both: FrequencyResponse, found: Peaks, k0, c0, k, c, ok, ite
     initial, retuned = _rows(both, slice(None, n)), _rows(both, slice(n, None))
     before = jax.tree.map(lambda a: a[:n], found)
     after = jax.tree.map(lambda a: a[n:], found)
-    code = {name: outcome_code(getattr(RetuneOutcome, name)) for name in (
+    code = {name: outcome_code(getattr(Outcome, name)) for name in (
         "ok", "not_stationary", "steady_states_failed", "peak_at_band_edge", "initial_kept",
         "stuck")}
     status = jnp.where(after.at_edge, code["peak_at_band_edge"], code["ok"])

@@ -9,7 +9,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._band import _band
 from ._best_tunings import BestTunings, check_best, checked_best
 from ._building import BuildingTID, Quantity
 from ._building_robust import BuildingRobust, robust_building
@@ -28,7 +27,7 @@ from ._design_evaluation import (
     evaluate_design,
     evaluation_of,
 )
-from ._outcomes import outcome_code, outcome_message
+from ._outcomes import Outcome, outcome_code, outcome_message
 from ._parallel import map_shares, serial
 from ._peaks import (
     lane_grid_peaks,
@@ -109,14 +108,6 @@ class RobustSettings(eqx.Module):
             if not (isinstance(value, int) and not isinstance(value, bool) and value >= low):
                 raise ValueError(f"RobustSettings.{name} must be an integer >= {low}, "
                                  f"got {value!r}")
-
-
-# The outcomes of `robust_tune` (the code in `RobustDesign.status`).
-class RobustOutcome(eqx.Enumeration):
-    ok = "ok"
-    not_stationary = "optimiser did not converge"
-    steady_states_failed = "some steady states did not converge"
-    stroke_over_limit = "stroke over the limit on the check grid"
 
 
 class _Minimum(NamedTuple):
@@ -358,7 +349,7 @@ class RobustDesign(eqx.Module):
       `ratio` per scenario); `check_stroke_peak`: inerter peaks `[scales, amps]` on the
       fine grid, `check_converged`: whether every steady state there converged; `best`:
       the `BestTunings` it was measured against.
-    - `iterations`: Newton steps; `converged`; `status`: a code of `RobustOutcome`,
+    - `iterations`: Newton steps; `converged`; `status`: a code of `Outcome`,
       see `status_messages()`.
     """
 
@@ -381,7 +372,7 @@ class RobustDesign(eqx.Module):
     def status_messages(self) -> list[str]:
         """The meaning of `status`, one message per entry (one here), as
         `RetuneResult.status_messages`."""
-        return [outcome_message(RobustOutcome, code) for code in np.atleast_1d(self.status)]
+        return [outcome_message(Outcome, code) for code in np.atleast_1d(self.status)]
 
 
 def _check_stroke_limit(stroke_limit) -> float:
@@ -559,14 +550,14 @@ def robust_tune(
         system.replace(tid_stiffness=k, tid_damping=c), best, settings=settings,
         map_lanes=map_lanes)
     steady = bool(np.all(performance.converged) and np.all(check_ok))
-    outcome = (RobustOutcome.not_stationary if not minimum.converged
-               else RobustOutcome.steady_states_failed if not steady
-               else RobustOutcome.stroke_over_limit if max_stroke > limit else RobustOutcome.ok)
+    outcome = (Outcome.not_stationary if not minimum.converged
+               else Outcome.steady_states_failed if not steady
+               else Outcome.stroke_over_limit if max_stroke > limit else Outcome.ok)
     status = outcome_code(outcome)
     say(
         f"robust tuning: k = {k:.6g} N/m, c = {c:.5g} N s/m, worst ratio "
         f"{float(performance.worst_ratio):.4f} at {float(performance.worst_amplitude):g} N; "
-        f"{outcome_message(RobustOutcome, status)}"
+        f"{outcome_message(Outcome, status)}"
     )
     return RobustDesign(
         tid_stiffness=jnp.asarray(k),
@@ -582,6 +573,6 @@ def robust_tune(
         check_converged=jnp.asarray(check_ok),
         best=best,
         iterations=jnp.asarray(steps),
-        converged=jnp.asarray(status == outcome_code(RobustOutcome.ok)),
+        converged=jnp.asarray(status == outcome_code(Outcome.ok)),
         status=jnp.asarray(status),
     )
