@@ -216,7 +216,8 @@ def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):
         2.0 / 0.980665, rel=1e-6)
     assert results[1]["stroke_after_m"] / results[0]["stroke_after_m"] == pytest.approx(
         2.0 / 0.980665, rel=1e-3)
-    for name in ("retune.csv", "retune.json", "retune_summary.png", "retune_config.toml"):
+    for name in ("retune.csv", "retune.json", "retune_summary.png",
+                 "retune_frequency_response.png", "retune_config.toml"):
         assert (out / name).stat().st_size > 0
 
 

@@ -113,21 +113,24 @@ def plot_retune_responses(
     linear=None,
     host_frequency_hz=None,
     title=None,
+    ylabel="peak host displacement x / (A/K)",
+    amplitude_unit="N",
 ):
     """The paper's Figure 6: for each forcing amplitude (one panel each), the peak host
-    displacement over A / K against frequency (Hz) before retuning (`x_before`) and after
-    (`x_after`, arrays `(n_amplitudes, n_frequencies)`), with the retuned `k_ratio` and
-    `c_ratio` to Den Hartog's in the panel title; `linear = (frequencies_hz, x)` adds the
-    frictionless TID with the initial tuning."""
+    displacement over A / K (or a building's response, named by `ylabel`) against
+    frequency (Hz) before retuning (`x_before`) and after (`x_after`, arrays
+    `(n_amplitudes, n_frequencies)`), with the retuned `k_ratio` and `c_ratio` to Den
+    Hartog's in the panel title; `linear = (frequencies_hz, x)` adds the frictionless TID
+    with the initial tuning."""
     n = len(amplitudes)
     columns = min(n, 4)
     rows = -(-n // columns)
-    width, height = 3.6 * columns + 0.6, 3.0 * rows + 0.6
+    width, height = 3.6 * columns + 0.85, 3.0 * rows + 0.6
     fig, axes = plt.subplots(rows, columns, figsize=(width, height), sharex=True, squeeze=False)
     # Fixed margins (inches) for the labels and titles: as the constrained layout would
     # place them, without its search over a dozen panels, which takes as long as drawing.
     # (more between rows where the last is short: the panels above its gaps are labelled)
-    fig.subplots_adjust(left=0.6 / width, right=1 - 0.1 / width, bottom=0.5 / height,
+    fig.subplots_adjust(left=0.85 / width, right=1 - 0.1 / width, bottom=0.5 / height,
                         top=1 - 0.7 / height, wspace=0.15, hspace=0.16 if n % columns == 0 else 0.3)
     for i, ax in enumerate(axes.flat):
         if i >= n:
@@ -141,13 +144,14 @@ def plot_retune_responses(
                     label="linear TID (no friction)")
         _mark_host_frequency(ax, host_frequency_hz)
         ax.set_title(
-            f"A = {amplitudes[i]:g} N: k = {k_ratio[i]:.3f} k_DH, c = {c_ratio[i]:.2f} c_DH",
+            f"A = {amplitudes[i]:g} {amplitude_unit}: k = {k_ratio[i]:.3f} k_DH, "
+            f"c = {c_ratio[i]:.2f} c_DH",
             fontsize=9,
         )
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
         if i % columns == 0:
-            ax.set_ylabel("peak host displacement x / (A/K)")
+            ax.set_ylabel(ylabel)
         if i >= n - columns:
             ax.xaxis.set_tick_params(labelbottom=True)
             ax.set_xlabel("forcing frequency [Hz]")

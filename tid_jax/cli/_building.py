@@ -3,6 +3,7 @@ config with a [structure] table (and [tid], [load], [response]) to a `BuildingTI
 and their tables, CSV, JSON and PNG files."""
 
 import math
+import textwrap
 
 import numpy as np
 
@@ -139,12 +140,14 @@ def uncontrolled_peak(system: BuildingTID, quantity: Quantity, omegas) -> float:
 
 
 def strokes(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
-            settings: SolverSettings) -> tuple[np.ndarray, np.ndarray]:
+            settings: SolverSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The largest stroke (m) over the band of `omegas` at each amplitude with the
-    system's tuning, and whether every steady state there was found."""
+    system's tuning, whether every steady state there was found, and the response's
+    peaks over a period (amplitudes x frequencies, SI)."""
     response = building_response(system, omegas, amplitudes, quantity, settings)
     ok = np.all(np.asarray(response.converged), axis=1)
-    return np.nanmax(np.asarray(response.stroke_max), axis=1), ok
+    return (np.nanmax(np.asarray(response.stroke_max), axis=1), ok,
+            np.asarray(response.response_max))
 
 
 def amplitude_label(system: BuildingTID) -> str:
@@ -250,26 +253,22 @@ def run_retune(args, inputs: dict) -> int:
             system, amplitudes, quantity, omegas=omegas, settings=settings,
             progress=lambda done, total: step(f"amplitude {done}/{total} retuned"))
         before = _given_peaks(system, quantity, amplitudes, omegas, settings, result)
-        stroke_before, _ = strokes(system, quantity, amplitudes, omegas, settings)
+        stroke_before, _, response_before = strokes(system, quantity, amplitudes, omegas,
+                                                    settings)
         after = [strokes(system.replace(tid_stiffness=float(result.tid_stiffness[i]),
                                         tid_damping=float(result.tid_damping[i])),
                          quantity, amplitudes[i:i + 1], omegas, settings)
                  for i in range(amplitudes.size)]
         step("strokes over the band before and after retuning")
     stroke_after = np.asarray([float(s[0][0]) for s in after])
+    response_after = np.concatenate([s[2] for s in after])
     records = _retune_records(system, quantity, result, before, stroke_before, stroke_after,
                               [bool(s[1][0]) for s in after], inputs["stroke_limit"], omegas)
     save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     save_config(inputs, output, "retune")
-    plot.save_figure(plot.plot_retune_summary(
-        amplitudes, [r["k_over_k_den_hartog"] for r in records],
-        [r["c_over_c_den_hartog"] for r in records], before, np.asarray(result.peak),
-        stroke_before, stroke_after, stroke_limit=inputs["stroke_limit"],
-        converged=np.asarray(result.converged), amplitude_label=amplitude_label(system),
-        peak_label=f"peak {quantity.describe(system.floors)} [{quantity.unit}]",
-        reference="first-mode Den Hartog",
-        title=f"TID retuned for each amplitude: {describe(system, quantity)}"),
-        output.path("retune_summary.png"))
+    _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
+                       stroke_after, (frequencies_hz, response_before, response_after),
+                       inputs["stroke_limit"])
     tunings = first_mode_tunings(system)
     data = document("retune", inputs, system, quantity, frequencies_hz, output,
                      first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
@@ -281,6 +280,31 @@ def run_retune(args, inputs: dict) -> int:
              f"mode's Den Hartog tuning")
     return output.finish(data, title + "\n" + table(
         RETUNE_TABLE, records, limit_cm=100 * inputs["stroke_limit"]))
+
+
+def _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
+                       stroke_after, responses, limit) -> None:
+    """The paper's Figures 7 (k and c, peaks and strokes against amplitude) and 6 (the
+    response over the band before and after retuning, `responses` = (Hz, before, after))
+    for the building."""
+    amplitudes = np.asarray(result.amplitudes)
+    k_ratio = [r["k_over_k_den_hartog"] for r in records]
+    c_ratio = [r["c_over_c_den_hartog"] for r in records]
+    peak_label = f"peak {quantity.describe(system.floors)} [{quantity.unit}]"
+    described = textwrap.fill(describe(system, quantity), 110)
+    plot.save_figure(plot.plot_retune_summary(
+        amplitudes, k_ratio, c_ratio, before, np.asarray(result.peak), stroke_before,
+        stroke_after, stroke_limit=limit, converged=np.asarray(result.converged),
+        amplitude_label=amplitude_label(system), peak_label=peak_label,
+        reference="first-mode Den Hartog",
+        title=f"TID retuned for each amplitude\n{described}"),
+        output.path("retune_summary.png"))
+    frequencies_hz, response_before, response_after = responses
+    plot.save_figure(plot.plot_retune_responses(
+        frequencies_hz, amplitudes, response_before, response_after, k_ratio, c_ratio,
+        ylabel=peak_label, amplitude_unit=amplitude_unit(system.load),
+        title=f"{quantity.describe(system.floors).capitalize()} before and after retuning "
+        "the TID"), output.path("retune_frequency_response.png"))
 
 
 def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.ndarray:
@@ -369,7 +393,7 @@ def run_sensitivity(args, inputs: dict) -> int:
                 system, [amplitude], quantity, omegas=omegas, settings=settings,
                 optimum=optimum))
             step(f"amplitude {i + 1}/{amplitudes.size}")
-        stroke, _ = strokes(system, quantity, amplitudes, omegas, settings)
+        stroke = strokes(system, quantity, amplitudes, omegas, settings)[0]
         step("strokes over the band")
     records = []
     for i, (amplitude, result) in enumerate(zip(amplitudes, results, strict=True)):
