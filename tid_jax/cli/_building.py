@@ -307,6 +307,18 @@ def _save_retune_plots(output, system, quantity, records, result, before, stroke
         "the TID"), output.path("retune_frequency_response.png"))
 
 
+def _retune_problem(result, i: int, found: bool) -> str | None:
+    """The status's start where the retune at amplitude `i` did not converge (None where
+    it did): which part, and what is left empty."""
+    if not bool(result.converged[i]):
+        return ("not converged: the search for k and c did not end at a minimax point, or a "
+                "steady state its peak rests on was not found (peak_after left empty)")
+    if not found:
+        return ("not converged: a steady state over the band with the retuned k and c was "
+                "not found (stroke_after_m from the others)")
+    return None
+
+
 def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.ndarray:
     """The peaks with the given tuning: the first-mode Den Hartog tuning's (the default)
     from `result`, else found now."""
@@ -340,7 +352,8 @@ def _retune_records(system, quantity, result, before, stroke_before, stroke_afte
             peak_after_over_uncontrolled=ratio(after, amplitude * bare),
             stroke_before_m=finite(stroke_before[i]), stroke_after_m=finite(stroke_after[i]),
             stroke_limit_m=limit, within_stroke_limit=bool(stroke_after[i] <= limit),
-            converged=ok, status=status(ok, stroke_problem(stroke_after[i], limit))))
+            converged=ok, status=status(ok, stroke_problem(stroke_after[i], limit),
+                                        base=_retune_problem(result, i, found[i]))))
     return records
 
 
