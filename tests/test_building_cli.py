@@ -54,6 +54,12 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     assert data["response"] == {"kind": "drift", "floor": 1, "unit": "m",
                                 "describes": "storey 1 drift"}
     assert data["amplitudes"][0] == pytest.approx(0.980665)
+    # its rows: the same values, the unit of each, stroke and status
+    rows = data["results"]
+    assert len(rows) == 14 and {r["amplitude_unit"] for r in rows} == {"m/s2"}
+    assert [r["peak"] for r in rows] == np.asarray(data["response_max"]).ravel().tolist()
+    assert [r["stroke_m"] for r in rows] == np.asarray(data["y_max_m"]).ravel().tolist()
+    assert all(r["status"].startswith("ok") and r["x_over_A_K"] is None for r in rows)
     # the TID lowers the peak over the band below the bare structure's
     assert np.all(response.max(axis=1) < 0.9 * np.asarray(data["uncontrolled"]).max(axis=1))
     # the band's default is around the first mode
@@ -195,15 +201,24 @@ def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):
     status, stdout, stderr = run(["retune", "--config", _config(tmp_path, text), "--out", out,
                                   "--json", "--quiet"])
     assert status == 0, stderr
-    results = json.loads(stdout)["results"]
+    data = json.loads(stdout)
+    results = data["results"]
     assert len(results) == 2 and all(r["converged"] for r in results)
-    for r in results:
-        assert r["k_N_per_m"] > 0 and r["c_N_s_per_m"] > 0
-        assert r["peak"] <= r["h_infinity_peak"] * (1 + 1e-9)
-    # frictionless: the tuning does not depend on the amplitude, the peak is proportional
+    for r, h_infinity in zip(results, data["h_infinity_peaks"], strict=True):
+        assert r["k_N_per_m"] > 0 and r["c_N_s_per_m"] > 0 and r["status"].startswith("ok")
+        assert r["peak_after"] <= h_infinity * (1 + 1e-9)
+        assert r["peak_after"] <= r["peak_before"] * (1 + 1e-9)  # below Den Hartog's
+        assert r["peak_before"] == pytest.approx(r["peak_after"] / r["peak_after_over_before"])
+        assert r["stroke_after_m"] > 0 and r["amplitude_unit"] == "m/s2"
+    # frictionless: the tuning does not depend on the amplitude, the peak and the stroke
+    # are proportional
     assert results[0]["k_N_per_m"] == pytest.approx(results[1]["k_N_per_m"], rel=1e-3)
-    assert results[1]["peak"] / results[0]["peak"] == pytest.approx(2.0 / 0.980665, rel=1e-6)
-    for name in ("retune.csv", "retune.json", "retune.png", "retune_config.toml"):
+    assert results[1]["peak_after"] / results[0]["peak_after"] == pytest.approx(
+        2.0 / 0.980665, rel=1e-6)
+    assert results[1]["stroke_after_m"] / results[0]["stroke_after_m"] == pytest.approx(
+        2.0 / 0.980665, rel=1e-3)
+    for name in ("retune.csv", "retune.json", "retune_summary.png",
+                 "retune_frequency_response.png", "retune_config.toml"):
         assert (out / name).stat().st_size > 0
 
 
@@ -216,11 +231,12 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
     data = json.loads(stdout)
     robust, records = data["robust"], data["results"]
     assert robust["converged"] and not robust["stroke_limited"]
-    assert [r["structure_frequency_scale"] for r in records] == pytest.approx([0.95, 1.0, 1.05])
-    ratios = [r["robust_ratio"] for r in records]
+    assert [r["frequency_scale"] for r in records] == pytest.approx([0.95, 1.0, 1.05])
+    ratios = [r["peak_after_over_best"] for r in records]
     assert min(ratios) >= 1 - 1e-6 and robust["worst_ratio"] == pytest.approx(max(ratios))
     assert robust["worst_ratio"] <= robust["given_worst_ratio"] * (1 + 1e-6)
     for r in records:
-        assert r["robust_peak"] == pytest.approx(r["robust_ratio"] * r["best_peak"])
+        assert r["peak_after"] == pytest.approx(r["peak_after_over_best"] * r["peak_best"])
+        assert r["stroke_after_m"] > 0 and r["status"].startswith("ok")
     for name in ("robust.csv", "robust.json", "robust.png", "robust_config.toml"):
         assert (out / name).exists()

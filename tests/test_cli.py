@@ -91,15 +91,19 @@ def test_frf_writes_parsable_files(frf_run):
     table = {
         name: np.array([float(row[i]) for row in rows])
         for i, name in enumerate(header)
-        if name not in ("converged", "stable")
+        if name not in ("converged", "stable", "amplitude_unit", "peak_unit", "status")
     }
-    assert set(table["amplitude_N"]) == {200.0, 600.0}
+    assert set(table["amplitude"]) == {200.0, 600.0}
     np.testing.assert_allclose(np.unique(table["frequency_Hz"]), np.linspace(3, 5, 5))
     stiffness = tj.paper_system().host_stiffness
     np.testing.assert_allclose(
-        table["x_over_A_K"], table["x_max_m"] / (table["amplitude_N"] / stiffness)
+        table["x_over_A_K"], table["peak"] / (table["amplitude"] / stiffness)
     )
+    np.testing.assert_allclose(table["stroke_m"], table["y_over_A_K"] * table["amplitude"]
+                               / stiffness)
     assert all(row[header.index("converged")] == "True" for row in rows)
+    assert {row[header.index("amplitude_unit")] for row in rows} == {"N"}
+    assert all(row[header.index("status")] == "ok" for row in rows)
     assert leftovers(out) == []
 
 
@@ -257,7 +261,7 @@ def test_flags_override_config_and_table_is_printed(frf_run, tmp_path):
     assert status == 0
     assert stderr == ""
     lines = stdout.splitlines()
-    assert lines[1].split()[:2] == ["A", "[N]"]
+    assert lines[1].split()[:2] == ["A", "unit"] and lines[3].split()[:2] == ["300", "N"]
     assert [line.split()[0] for line in lines[3:-1]] == ["300", "700"]
     assert lines[-1].startswith("Breakaway amplitude over the band:")
     data = json.loads((tmp_path / "out" / "frf.json").read_text())

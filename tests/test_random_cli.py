@@ -18,9 +18,14 @@ from tid_jax._monte_carlo import first_period
 # Short Monte Carlo runs: the command's numbers against the library's, not converged ones.
 SETTINGS = tj.MonteCarloSettings(samples=16, duration=12.0)
 MONTE_CARLO = ["--samples", "16", "--duration", "12"]
-RESULT_KEYS = ("psd", "tid_stiffness", "tid_damping", "converged", "rms_before",
-               "rms_before_se", "rms_after", "rms_after_se", "linearised_stiffness",
-               "linearised_damping", "rms_linearised", "rms_linearised_se")
+# the columns and the library's `RandomDesign` fields they hold
+RESULT_KEYS = {"psd": "psd_levels", "k_N_per_m": "tid_stiffness",
+               "c_N_s_per_m": "tid_damping", "converged": "converged",
+               "rms_before": "rms_before", "rms_before_se": "rms_before_se",
+               "rms_after": "rms_after", "rms_after_se": "rms_after_se",
+               "linearised_k_N_per_m": "linearised_stiffness",
+               "linearised_c_N_s_per_m": "linearised_damping",
+               "rms_linearised": "rms_linearised", "rms_linearised_se": "rms_linearised_se"}
 RANDOM_FILES = ("random.csv", "random.json", "random_config.toml", "random_rms.png",
                 "random_history.png", "random_spectrum.png")
 
@@ -53,8 +58,7 @@ def test_random_json_is_the_library_s_retune(random_run):
                             tj.Quantity(), settings=SETTINGS)
     (result,) = data["results"]
     assert set(RESULT_KEYS) <= set(result)
-    for key in RESULT_KEYS:
-        name = "psd_levels" if key == "psd" else key
+    for key, name in RESULT_KEYS.items():
         assert _same(result[key], np.asarray(getattr(mine, name))[0]), key
     assert result["rms_linearised"] is None and result["rms_before_se"] > 0
     assert result["rms_frictionless"] == pytest.approx(
@@ -134,16 +138,16 @@ def test_random_without_friction_is_exact_on_a_building(tmp_path):
         assert r["rms_before_se"] == r["rms_after_se"] == r["rms_linearised_se"] == 0
         assert r["rms_before"] == pytest.approx(float(tj.rms_response(system, load, quantity)),
                                                 rel=1e-10)
-        tuned = system.replace(tid_stiffness=r["tid_stiffness"], tid_damping=r["tid_damping"])
+        tuned = system.replace(tid_stiffness=r["k_N_per_m"], tid_damping=r["c_N_s_per_m"])
         assert r["rms_after"] == pytest.approx(float(tj.rms_response(tuned, load, quantity)),
                                                rel=1e-10)
         assert r["rms_after"] < r["rms_before"] and r["converged"]
     # without friction the optimum does not depend on the intensity
-    assert results[0]["tid_stiffness"] == pytest.approx(results[1]["tid_stiffness"], rel=1e-6)
+    assert results[0]["k_N_per_m"] == pytest.approx(results[1]["k_N_per_m"], rel=1e-6)
     assert data["load"]["psd_unit"] == "(m/s2)^2 s/rad" and data["response"]["unit"] == "m"
     assert data["tid"]["friction_force_N"] == 0.0
     header, rows = read_csv(out / "random.csv")
-    assert len(rows) == 2 and header[:3] == ["psd", "tid_stiffness", "tid_damping"]
+    assert len(rows) == 2 and header[:4] == ["psd", "psd_unit", "k_N_per_m", "c_N_s_per_m"]
     for name in RANDOM_FILES:
         assert (out / name).stat().st_size > 0, name
 
@@ -214,11 +218,12 @@ def test_records_json_is_the_library_s(records_run):
         # the command steps the records as its design does (friction held over substeps)
         history = tj.friction_history(system, motion, tj.Quantity(),
                                       time_step=first_period(system) / 200)
-        assert r["peak"] == pytest.approx(float(history.peak), rel=1e-10)
-        assert r["rms"] == pytest.approx(float(history.rms), rel=1e-10)
-        assert r["pga"] == pytest.approx(0.2 * 9.80665, rel=1e-12)
-        assert r["stroke_peak"] == pytest.approx(float(np.max(np.abs(history.stroke))),
-                                                 rel=1e-10)
+        assert r["peak_before"] == pytest.approx(float(history.peak), rel=1e-10)
+        assert r["rms_before"] == pytest.approx(float(history.rms), rel=1e-10)
+        assert r["amplitude"] == pytest.approx(0.2 * 9.80665, rel=1e-12)
+        assert r["amplitude_unit"] == "m/s2" and r["peak_unit"] == "m"
+        assert r["stroke_before_m"] == pytest.approx(float(np.max(np.abs(history.stroke))),
+                                                     rel=1e-10)
     design = tj.design_for_records(system, motions, tj.Quantity(), stroke_limit=0.025)
     assert data["tid_stiffness"] == pytest.approx(float(design.tid_stiffness), rel=1e-10)
     assert data["tid_damping"] == pytest.approx(float(design.tid_damping), rel=1e-10)
@@ -230,7 +235,9 @@ def test_records_json_is_the_library_s(records_run):
     assert data["given_tuning"]["tid_damping"] == pytest.approx(float(system.tid_damping))
     assert data["friction_width"] == 0.0 and data["pga_g"] == 0.2
     assert data["stroke_limit"] == 0.025 and data["within_stroke_limit"] is True
-    assert 0.0245 < max(r["stroke_peak_after"] for r in results) <= 0.025
+    assert 0.0245 < max(r["stroke_after_m"] for r in results) <= 0.025
+    assert all(r["within_stroke_limit"] and r["status"].startswith("ok") == data["converged"]
+               for r in results)
 
 
 def test_records_write_their_files(records_run):
@@ -239,7 +246,7 @@ def test_records_write_their_files(records_run):
                  "records_histories.png", "records_peaks.png"):
         assert (out / name).stat().st_size > 0, name
     header, rows = read_csv(out / "records.csv")
-    assert len(rows) == 2 and {"name", "peak", "rms", "peak_after", "rms_after"} <= set(header)
+    assert len(rows) == 2 and {"name", "peak_before", "rms_before", "peak_after", "rms_after"} <= set(header)
     assert json.loads((out / "records.json").read_text()) == data
     assert "designed over the suite" in stderr and "record 2/2 slice" in stderr
 

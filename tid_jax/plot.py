@@ -18,6 +18,7 @@ from ._io import atomic_path  # noqa: E402
 from ._parallel import serial  # noqa: E402
 
 LINEAR_STYLE = dict(color="black", linestyle="--", linewidth=2.0, label="linear TID (no friction)")
+AMPLITUDE_LABEL = "forcing amplitude A [N]"  # the single-storey host's amplitude axis
 HOST_FREQUENCY_STYLE = dict(color="0.5", linestyle=":", linewidth=1.2)
 
 
@@ -112,21 +113,24 @@ def plot_retune_responses(
     linear=None,
     host_frequency_hz=None,
     title=None,
+    ylabel="peak host displacement x / (A/K)",
+    amplitude_unit="N",
 ):
     """The paper's Figure 6: for each forcing amplitude (one panel each), the peak host
-    displacement over A / K against frequency (Hz) before retuning (`x_before`) and after
-    (`x_after`, arrays `(n_amplitudes, n_frequencies)`), with the retuned `k_ratio` and
-    `c_ratio` to Den Hartog's in the panel title; `linear = (frequencies_hz, x)` adds the
-    frictionless TID with the initial tuning."""
+    displacement over A / K (or a building's response, named by `ylabel`) against
+    frequency (Hz) before retuning (`x_before`) and after (`x_after`, arrays
+    `(n_amplitudes, n_frequencies)`), with the retuned `k_ratio` and `c_ratio` to Den
+    Hartog's in the panel title; `linear = (frequencies_hz, x)` adds the frictionless TID
+    with the initial tuning."""
     n = len(amplitudes)
     columns = min(n, 4)
     rows = -(-n // columns)
-    width, height = 3.6 * columns + 0.6, 3.0 * rows + 0.6
+    width, height = 3.6 * columns + 0.85, 3.0 * rows + 0.6
     fig, axes = plt.subplots(rows, columns, figsize=(width, height), sharex=True, squeeze=False)
     # Fixed margins (inches) for the labels and titles: as the constrained layout would
     # place them, without its search over a dozen panels, which takes as long as drawing.
     # (more between rows where the last is short: the panels above its gaps are labelled)
-    fig.subplots_adjust(left=0.6 / width, right=1 - 0.1 / width, bottom=0.5 / height,
+    fig.subplots_adjust(left=0.85 / width, right=1 - 0.1 / width, bottom=0.5 / height,
                         top=1 - 0.7 / height, wspace=0.15, hspace=0.16 if n % columns == 0 else 0.3)
     for i, ax in enumerate(axes.flat):
         if i >= n:
@@ -140,13 +144,14 @@ def plot_retune_responses(
                     label="linear TID (no friction)")
         _mark_host_frequency(ax, host_frequency_hz)
         ax.set_title(
-            f"A = {amplitudes[i]:g} N: k = {k_ratio[i]:.3f} k_DH, c = {c_ratio[i]:.2f} c_DH",
+            f"A = {amplitudes[i]:g} {amplitude_unit}: k = {k_ratio[i]:.3f} k_DH, "
+            f"c = {c_ratio[i]:.2f} c_DH",
             fontsize=9,
         )
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
         if i % columns == 0:
-            ax.set_ylabel("peak host displacement x / (A/K)")
+            ax.set_ylabel(ylabel)
         if i >= n - columns:
             ax.xaxis.set_tick_params(labelbottom=True)
             ax.set_xlabel("forcing frequency [Hz]")
@@ -155,7 +160,8 @@ def plot_retune_responses(
     return fig
 
 
-def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None, converged=None):
+def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None, converged=None,
+                        amplitude_label=AMPLITUDE_LABEL, reference="Den Hartog"):
     amplitudes = np.asarray(amplitudes)
     failed = np.zeros(amplitudes.shape, bool) if converged is None else ~np.asarray(converged)
     paper_style = dict(color="tab:orange", markersize=8, fillstyle="none", markeredgewidth=2,
@@ -168,8 +174,8 @@ def _draw_tuning_ratios(ax_k, ax_c, amplitudes, k_ratio, c_ratio, paper=None, co
         if paper is not None:
             ax.plot(paper[0], paper[1 if ax is ax_k else 2], "s", **paper_style)
     for ax, label in ((ax_k, "stiffness  k / k_DH"), (ax_c, "damping  c / c_DH")):
-        ax.axhline(1.0, color="black", linestyle="--", linewidth=1.0, label="Den Hartog")
-        ax.set(xscale="log", xlabel="forcing amplitude A [N]", ylabel=label)
+        ax.axhline(1.0, color="black", linestyle="--", linewidth=1.0, label=reference)
+        ax.set(xscale="log", xlabel=amplitude_label, ylabel=label)
         _plain_log_axis(ax.xaxis)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
@@ -189,16 +195,17 @@ def plot_tuning_ratios(amplitudes, k_ratio, c_ratio, *, paper=None, converged=No
     return fig
 
 
-def _draw_peaks(ax_x, ax_y, curves, stroke_limit):
+def _draw_peaks(ax_x, ax_y, curves, stroke_limit, amplitude_label=AMPLITUDE_LABEL,
+                peak_label="peak host displacement  x / (A/K)"):
     for label, amplitudes, x_norm, y_peak, style in curves:
         ax_x.plot(amplitudes, x_norm, label=label, **style)
         ax_y.plot(amplitudes, 100 * np.asarray(y_peak), label=label, **style)
     if stroke_limit is not None:
         ax_y.axhline(100 * stroke_limit, color="tab:red", linewidth=1.5,
                      label=f"stroke limit +-{100 * stroke_limit:g} cm")
-    ax_x.set(xscale="log", xlabel="forcing amplitude A [N]",
-             ylabel="peak host displacement  x / (A/K)", title="(a) host structure")
-    ax_y.set(xscale="log", yscale="log", xlabel="forcing amplitude A [N]",
+    ax_x.set(xscale="log", xlabel=amplitude_label, ylabel=peak_label,
+             title="(a) host structure")
+    ax_y.set(xscale="log", yscale="log", xlabel=amplitude_label,
              ylabel="peak inerter stroke  |y| [cm]", title="(b) inerter stroke")
     ax_x.set_ylim(bottom=0)
     _plain_log_axis(ax_y.yaxis)
@@ -244,16 +251,23 @@ def plot_device_designs(devices, *, title=None):
 
 
 def plot_retune_summary(amplitudes, k_ratio, c_ratio, x_before, x_after, y_before, y_after, *,
-                        stroke_limit=None, converged=None, title=None):
-    """Retuning at a glance: k / k_DH and c / c_DH (top) and the peak host displacement over
-    A / K and inerter stroke (cm) before and after retuning (bottom) against amplitude (N)."""
+                        stroke_limit=None, converged=None, title=None,
+                        amplitude_label=AMPLITUDE_LABEL,
+                        peak_label="peak host displacement  x / (A/K)",
+                        reference="Den Hartog"):
+    """Retuning at a glance, in the style of the paper's Figure 7: k / k_DH and c / c_DH
+    (top) and the peak response (`x_before`, `x_after`: the host's over A / K, or a
+    building's in SI, named by `peak_label`) and inerter stroke (m, drawn in cm) before and
+    after retuning (bottom) against amplitude (N, or as `amplitude_label` names it);
+    `reference` names the tuning k_DH, c_DH."""
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), layout="constrained")
-    _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio, None, converged)
+    _draw_tuning_ratios(axes[0, 0], axes[0, 1], amplitudes, k_ratio, c_ratio, None, converged,
+                        amplitude_label, reference)
     curves = (("before (initial tuning)", amplitudes, x_before, y_before,
                dict(color="tab:red", linestyle="-.", marker="s")),
               ("retuned", amplitudes, x_after, y_after, dict(color="tab:blue", marker="o")))
-    _draw_peaks(axes[1, 0], axes[1, 1], curves, stroke_limit)
-    axes[1, 0].set_title("(c) host structure")
+    _draw_peaks(axes[1, 0], axes[1, 1], curves, stroke_limit, amplitude_label, peak_label)
+    axes[1, 0].set_title("(c) structure")
     axes[1, 1].set_title("(d) inerter stroke")
     fig.suptitle(title or "TID retuned for each forcing amplitude")
     return fig
@@ -379,10 +393,13 @@ def plot_elasticities(
     return fig
 
 
-def plot_robust_comparison(amplitudes, designs, *, stroke_limit=None, title=None):
-    """TID tunings over a range of forcing amplitudes (N): (a) peak host displacement over
-    the best achievable at each amplitude, (b) peak inerter stroke (cm). `designs` is a
-    sequence of `(label, ratio, stroke_m, style)` with `style` matplotlib line keywords;
+def plot_robust_comparison(amplitudes, designs, *, stroke_limit=None, title=None,
+                           amplitude_label=AMPLITUDE_LABEL,
+                           ratio_label="peak host displacement / best achievable at A"):
+    """TID tunings over a range of amplitudes (N; a building's axis named by
+    `amplitude_label`): (a) the peak response over the best achievable at each amplitude
+    (`ratio_label`), (b) peak inerter stroke (cm). `designs` is a sequence of
+    `(label, ratio, stroke_m, style)` with `style` matplotlib line keywords;
     `stroke_limit` (m) draws the stroke limit."""
     fig, (ax_r, ax_y) = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
     for label, ratio, stroke, style in designs:
@@ -392,10 +409,9 @@ def plot_robust_comparison(amplitudes, designs, *, stroke_limit=None, title=None
     if stroke_limit is not None:
         ax_y.axhline(100 * stroke_limit, color="tab:red", linewidth=1.5,
                      label=f"stroke limit +-{100 * stroke_limit:g} cm")
-    ax_r.set(xscale="log", xlabel="forcing amplitude A [N]",
-             ylabel="peak host displacement / best achievable at A",
-             title="(a) host structure, relative to retuning for each A")
-    ax_y.set(xscale="log", yscale="log", xlabel="forcing amplitude A [N]",
+    ax_r.set(xscale="log", xlabel=amplitude_label, ylabel=ratio_label,
+             title="(a) structure, relative to retuning for each A")
+    ax_y.set(xscale="log", yscale="log", xlabel=amplitude_label,
              ylabel="peak inerter stroke  |y| [cm]", title="(b) inerter stroke")
     _plain_log_axis(ax_y.yaxis)
     for ax in (ax_r, ax_y):
@@ -434,33 +450,22 @@ def plot_identification(records, *, title=None):
 
 
 def plot_building_response(frequencies_hz, amplitudes, response, uncontrolled, *, ylabel,
-                           title=None):
+                           amplitude_unit="N", title=None):
     """A structure's peak response (SI) against frequency, one line per amplitude, with
     the bare structure's dotted in the same colour; arrays `(n_amplitudes, n_freqs)`."""
     fig, ax = plt.subplots(figsize=(7.5, 4.6), layout="constrained")
     for amplitude, colour, row, bare in zip(amplitudes, _amplitude_colours(amplitudes),
                                             np.atleast_2d(response),
                                             np.atleast_2d(uncontrolled), strict=True):
-        ax.plot(frequencies_hz, row, color=colour, linewidth=1.0, label=f"A = {amplitude:g}")
+        ax.plot(frequencies_hz, row, color=colour, linewidth=1.0,
+                label=f"A = {amplitude:g} {amplitude_unit}")
         ax.plot(frequencies_hz, bare, color=colour, linewidth=0.8, linestyle=":")
-    ax.set(xlabel="frequency [Hz]", ylabel=ylabel,
+    ax.set(xlabel="forcing frequency [Hz]", ylabel=ylabel,
            title=title or "with the TID (solid), without (dotted)")
     ax.set_xlim(frequencies_hz[0], frequencies_hz[-1])
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
-    return fig
-
-
-def plot_building_retune(amplitudes, peaks: dict, *, ylabel, title=None):
-    """Peak response against amplitude for each tuning of `peaks` (name: values)."""
-    fig, ax = plt.subplots(figsize=(7.5, 4.6), layout="constrained")
-    for name, values in peaks.items():
-        ax.plot(amplitudes, values, marker="o", markersize=3, linewidth=1.0, label=name)
-    ax.set(xlabel="amplitude", ylabel=ylabel, title=title or "peak over the band")
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
     return fig
 
 

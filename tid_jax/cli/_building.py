@@ -3,11 +3,12 @@ config with a [structure] table (and [tid], [load], [response]) to a `BuildingTI
 and their tables, CSV, JSON and PNG files."""
 
 import math
+import textwrap
 
 import numpy as np
 
 from .. import plot
-from .._building import BuildingTID, Quantity, first_mode_tunings
+from .._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
 from .._building_design import BUILDING_BAND, building_peaks, retune_building
 from .._building_orbit import building_response
 from .._building_robust import robust_building, scaled_structure
@@ -24,7 +25,24 @@ from ._common import (
     _config_data,
     _Output,
 )
-from ._tables import save_records, shown, table
+from ._schema import (
+    FRF_COLUMNS,
+    FRF_TABLE,
+    RETUNE_COLUMNS,
+    RETUNE_TABLE,
+    ROBUST_COLUMNS,
+    ROBUST_TABLE,
+    SENSITIVITY_COLUMNS,
+    amplitude_unit,
+    finite,
+    frf_summary,
+    ratio,
+    row,
+    sensitivity_table,
+    status,
+    stroke_problem,
+)
+from ._tables import save_records, table
 
 
 def _structure(table: dict) -> Structure:
@@ -111,6 +129,33 @@ def _compliance(system: BuildingTID) -> str:
             f"{float(system.backlash):g} m")
 
 
+def uncontrolled_peak(system: BuildingTID, quantity: Quantity, omegas) -> float:
+    """The bare structure's peak of `quantity` per unit load amplitude over the band of
+    `omegas` (rad/s): the largest on a fine grid and at its natural frequencies there."""
+    low, high = float(np.min(omegas)), float(np.max(omegas))
+    natural = np.asarray(system.structure.modes()[0])
+    fine = np.concatenate([np.linspace(low, high, 2001),
+                           natural[(natural >= low) & (natural <= high)]])
+    return float(np.max(np.asarray(uncontrolled_amplitude(system, quantity, fine))))
+
+
+def strokes(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
+            settings: SolverSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The largest stroke (m) over the band of `omegas` at each amplitude with the
+    system's tuning, whether every steady state there was found, and the response's
+    peaks over a period (amplitudes x frequencies, SI)."""
+    response = building_response(system, omegas, amplitudes, quantity, settings)
+    ok = np.all(np.asarray(response.converged), axis=1)
+    return (np.nanmax(np.asarray(response.stroke_max), axis=1), ok,
+            np.asarray(response.response_max))
+
+
+def amplitude_label(system: BuildingTID) -> str:
+    """A figure's amplitude axis, with its unit."""
+    return (f"ground acceleration amplitude [{amplitude_unit(system.load)}]"
+            if system.load == "ground" else "forcing amplitude A [N]")
+
+
 def document(command, inputs, system, quantity, frequencies_hz, output, **results) -> dict:
     s = system.structure
     return {
@@ -130,7 +175,7 @@ def document(command, inputs, system, quantity, frequencies_hz, output, **result
                                              if system.compliant else None),
                 "backlash_m": float(system.backlash)},
         "load": system.load,
-        "amplitude_unit": "m/s2" if system.load == "ground" else "N",
+        "amplitude_unit": amplitude_unit(system.load),
         "response": {"kind": quantity.kind, "floor": quantity.floor_of(system.floors),
                      "unit": quantity.unit, "describes": quantity.describe(system.floors)},
         "frequencies_hz": [float(f) for f in frequencies_hz],
@@ -162,27 +207,28 @@ def run_frf(args, inputs: dict) -> int:
         "frequencies")
     response = building_response(system, omegas, amplitudes, quantity,
                                  SolverSettings(**inputs[SOLVER_TABLE]))
-    bare_peak = np.max(response.uncontrolled, axis=1)
-    records = [{"amplitude": float(a), "frequency_hz": float(f),
-                "response_max": float(response.response_max[i, j]),
-                "response_over_uncontrolled_peak": float(response.response_max[i, j]
-                                                         / bare_peak[i]),
-                "stroke_m": float(response.stroke_max[i, j]),
-                "converged": bool(response.converged[i, j]),
-                "stable": bool(response.stable[i, j]),
-                "transitions": int(response.transitions[i, j])}
+    bare = amplitudes * uncontrolled_peak(system, quantity, omegas)
+    unit = amplitude_unit(system.load)
+    k, c = float(system.tid_stiffness), float(system.tid_damping)
+    records = [row(FRF_COLUMNS, amplitude=float(a), amplitude_unit=unit,
+                   frequency_Hz=float(f), k_N_per_m=k, c_N_s_per_m=c, peak_unit=quantity.unit,
+                   peak=finite(response.response_max[i, j]),
+                   uncontrolled_peak=float(response.uncontrolled[i, j]),
+                   peak_over_uncontrolled=ratio(response.response_max[i, j], bare[i]),
+                   stroke_m=finite(response.stroke_max[i, j]),
+                   transitions=int(response.transitions[i, j]),
+                   stable=bool(response.stable[i, j]),
+                   converged=bool(response.converged[i, j]),
+                   status=status(bool(response.converged[i, j]),
+                                 "" if response.stable[i, j] else "unstable"))
                for i, a in enumerate(amplitudes) for j, f in enumerate(frequencies_hz)]
-    save_records(output, "frf.csv", list(records[0]), records)
+    save_records(output, "frf.csv", FRF_COLUMNS, records)
     save_config(inputs, output, "frf")
     plot.save_figure(plot.plot_building_response(
         frequencies_hz, amplitudes, response.response_max, response.uncontrolled,
-        ylabel=f"{quantity.describe(system.floors)} ({quantity.unit})"), output.path("frf.png"))
-    peaks = np.nanmax(np.where(response.converged, response.response_max, np.nan), axis=1)
-    summary = [{"amplitude": float(a), "peak": float(peaks[i]),
-                "ratio": float(peaks[i] / bare_peak[i]),
-                "stroke_cm": 100 * float(np.nanmax(response.stroke_max[i])),
-                "converged": f"{int(response.converged[i].sum())}/{omegas.size}"}
-               for i, a in enumerate(amplitudes)]
+        ylabel=f"{quantity.describe(system.floors)} [{quantity.unit}]",
+        amplitude_unit=unit), output.path("frf.png"))
+    summary = frf_summary(records, amplitudes, omegas.size)
     data = document("frf", inputs, system, quantity, frequencies_hz, output,
                      amplitudes=amplitudes.tolist(),
                      response_max=np.asarray(response.response_max).tolist(),
@@ -190,57 +236,125 @@ def run_frf(args, inputs: dict) -> int:
                      y_max_m=np.asarray(response.stroke_max).tolist(),
                      converged=np.asarray(response.converged).tolist(),
                      stable=np.asarray(response.stable).tolist(),
-                     transitions=np.asarray(response.transitions).tolist(), summary=summary)
+                     transitions=np.asarray(response.transitions).tolist(), summary=summary,
+                     results=records)
     write_json(output.path("frf.json"), data)
-    unit = data["amplitude_unit"]
-    columns = [shown(f"A ({unit})", "amplitude", "g"),
-               shown(f"peak ({quantity.unit})", "peak", ".4g"),
-               shown("/ uncontrolled", "ratio", ".3f"), shown("stroke (cm)", "stroke_cm", ".2f"),
-               shown("converged", "converged", "s")]
     title = f"Frequency response: {describe(system, quantity)}"
-    return output.finish(data, title + "\n" + table(columns, summary))
+    return output.finish(data, title + "\n" + table(FRF_TABLE, summary,
+                                                    limit_cm=100 * inputs["stroke_limit"]))
 
 
 def run_retune(args, inputs: dict) -> int:
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "retuning {amplitudes} amplitude(s) over {frequencies} frequencies")
-    with output.steps(amplitudes.size) as step:
+    settings = SolverSettings(**inputs[SOLVER_TABLE])
+    with output.steps(amplitudes.size + 1) as step:
         result = retune_building(
-            system, amplitudes, quantity, omegas=omegas,
-            settings=SolverSettings(**inputs[SOLVER_TABLE]),
+            system, amplitudes, quantity, omegas=omegas, settings=settings,
             progress=lambda done, total: step(f"amplitude {done}/{total} retuned"))
-    records = [{"amplitude": float(a), "k_N_per_m": float(result.tid_stiffness[i]),
-                "c_N_s_per_m": float(result.tid_damping[i]),
-                "peak": float(result.peak[i]),
-                "peak_over_uncontrolled": float(result.peak[i] / result.uncontrolled[i]),
-                "peak_frequency_hz": float(result.peak_omega[i]) / (2 * math.pi),
-                "den_hartog_peak": float(result.den_hartog_peak[i]),
-                "h_infinity_peak": float(result.h_infinity_peak[i]),
-                "converged": bool(result.converged[i])}
-               for i, a in enumerate(amplitudes)]
-    save_records(output, "retune.csv", list(records[0]), records)
+        before = _given_peaks(system, quantity, amplitudes, omegas, settings, result)
+        stroke_before, _, response_before = strokes(system, quantity, amplitudes, omegas,
+                                                    settings)
+        after = [strokes(system.replace(tid_stiffness=float(result.tid_stiffness[i]),
+                                        tid_damping=float(result.tid_damping[i])),
+                         quantity, amplitudes[i:i + 1], omegas, settings)
+                 for i in range(amplitudes.size)]
+        step("strokes over the band before and after retuning")
+    stroke_after = np.asarray([float(s[0][0]) for s in after])
+    response_after = np.concatenate([s[2] for s in after])
+    records = _retune_records(system, quantity, result, before, stroke_before, stroke_after,
+                              [bool(s[1][0]) for s in after], inputs["stroke_limit"], omegas)
+    save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     save_config(inputs, output, "retune")
-    plot.save_figure(plot.plot_building_retune(
-        amplitudes, {"retuned": result.peak, "first-mode Den Hartog": result.den_hartog_peak,
-                     "first-mode H-infinity": result.h_infinity_peak},
-        ylabel=f"peak {quantity.describe(system.floors)} ({quantity.unit})"),
-        output.path("retune.png"))
+    _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
+                       stroke_after, (frequencies_hz, response_before, response_after),
+                       inputs["stroke_limit"])
     tunings = first_mode_tunings(system)
     data = document("retune", inputs, system, quantity, frequencies_hz, output,
                      first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
                                          for name, (k, c) in tunings.items()},
+                     h_infinity_peaks=np.asarray(result.h_infinity_peak).tolist(),
                      results=records)
     write_json(output.path("retune.json"), data)
-    unit = data["amplitude_unit"]
-    columns = [shown(f"A ({unit})", "amplitude", "g"), shown("k (N/m)", "k_N_per_m", ".5g"),
-               shown("c (N s/m)", "c_N_s_per_m", ".5g"),
-               shown(f"peak ({quantity.unit})", "peak", ".4g"),
-               shown("/ uncontrolled", "peak_over_uncontrolled", ".3f"),
-               shown("Den Hartog", "den_hartog_peak", ".4g"),
-               shown("H-infinity", "h_infinity_peak", ".4g"),
-               shown("converged", "converged", "")]
-    title = f"Retuned per amplitude: {describe(system, quantity)}"
-    return output.finish(data, title + "\n" + table(columns, records))
+    title = (f"Retuned per amplitude: {describe(system, quantity)}; k_DH, c_DH: the first "
+             f"mode's Den Hartog tuning")
+    return output.finish(data, title + "\n" + table(
+        RETUNE_TABLE, records, limit_cm=100 * inputs["stroke_limit"]))
+
+
+def _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
+                       stroke_after, responses, limit) -> None:
+    """The paper's Figures 7 (k and c, peaks and strokes against amplitude) and 6 (the
+    response over the band before and after retuning, `responses` = (Hz, before, after))
+    for the building."""
+    amplitudes = np.asarray(result.amplitudes)
+    k_ratio = [r["k_over_k_den_hartog"] for r in records]
+    c_ratio = [r["c_over_c_den_hartog"] for r in records]
+    peak_label = f"peak {quantity.describe(system.floors)} [{quantity.unit}]"
+    described = textwrap.fill(describe(system, quantity), 110)
+    plot.save_figure(plot.plot_retune_summary(
+        amplitudes, k_ratio, c_ratio, before, np.asarray(result.peak), stroke_before,
+        stroke_after, stroke_limit=limit, converged=np.asarray(result.converged),
+        amplitude_label=amplitude_label(system), peak_label=peak_label,
+        reference="first-mode Den Hartog",
+        title=f"TID retuned for each amplitude\n{described}"),
+        output.path("retune_summary.png"))
+    frequencies_hz, response_before, response_after = responses
+    plot.save_figure(plot.plot_retune_responses(
+        frequencies_hz, amplitudes, response_before, response_after, k_ratio, c_ratio,
+        ylabel=peak_label, amplitude_unit=amplitude_unit(system.load),
+        title=f"{quantity.describe(system.floors).capitalize()} before and after retuning "
+        "the TID"), output.path("retune_frequency_response.png"))
+
+
+def _retune_problem(result, i: int, found: bool) -> str | None:
+    """The status's start where the retune at amplitude `i` did not converge (None where
+    it did): which part, and what is left empty."""
+    if not bool(result.converged[i]):
+        return ("not converged: the search for k and c did not end at a minimax point, or a "
+                "steady state its peak rests on was not found (peak_after left empty)")
+    if not found:
+        return ("not converged: a steady state over the band with the retuned k and c was "
+                "not found (stroke_after_m from the others)")
+    return None
+
+
+def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.ndarray:
+    """The peaks with the given tuning: the first-mode Den Hartog tuning's (the default)
+    from `result`, else found now."""
+    k, c = first_mode_tunings(system)["den_hartog"]
+    if np.allclose([float(system.tid_stiffness), float(system.tid_damping)], [k, c],
+                   rtol=1e-12):
+        return np.asarray(result.den_hartog_peak)
+    return np.asarray(building_peaks(system, amplitudes, quantity, omegas=omegas,
+                                     settings=settings).value)
+
+
+def _retune_records(system, quantity, result, before, stroke_before, stroke_after,
+                    found, limit, omegas) -> list[dict]:
+    """One record per amplitude, keyed by `RETUNE_COLUMNS`: the design, its peak before
+    and after, their ratios and the strokes over the band (`found`: every steady state of
+    the design's was)."""
+    k_dh, c_dh = first_mode_tunings(system)["den_hartog"]
+    bare = uncontrolled_peak(system, quantity, omegas)
+    records = []
+    for i, amplitude in enumerate(np.asarray(result.amplitudes)):
+        k, c = float(result.tid_stiffness[i]), float(result.tid_damping[i])
+        after, ok = float(result.peak[i]), bool(result.converged[i]) and found[i]
+        records.append(row(
+            RETUNE_COLUMNS, amplitude=float(amplitude), amplitude_unit=amplitude_unit(
+                system.load), k_N_per_m=k, c_N_s_per_m=c, k_over_k_den_hartog=k / k_dh,
+            c_over_c_den_hartog=c / c_dh, peak_unit=quantity.unit,
+            peak_before=finite(before[i]), peak_after=finite(after),
+            peak_frequency_after_Hz=finite(float(result.peak_omega[i]) / (2 * math.pi)),
+            peak_after_over_before=ratio(after, before[i]),
+            peak_after_over_den_hartog=ratio(after, result.den_hartog_peak[i]),
+            peak_after_over_uncontrolled=ratio(after, amplitude * bare),
+            stroke_before_m=finite(stroke_before[i]), stroke_after_m=finite(stroke_after[i]),
+            stroke_limit_m=limit, within_stroke_limit=bool(stroke_after[i] <= limit),
+            converged=ok, status=status(ok, stroke_problem(stroke_after[i], limit),
+                                        base=_retune_problem(result, i, found[i]))))
+    return records
 
 
 def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
@@ -268,10 +382,12 @@ def _optimum_fields(result, j: int) -> dict:
     o = result.optimum
     if o is None:
         return {}
-    return {"optimum_peak": float(o.peak[0]),
-            "optimum_elasticity": float(o.peak_elasticities[0, j]),
-            "optimum_stiffness_elasticity": float(o.stiffness_elasticities[0, j]),
-            "optimum_damping_elasticity": float(o.damping_elasticities[0, j]),
+    return {"optimum_k_N_per_m": float(o.tid_stiffness[0]),
+            "optimum_c_N_s_per_m": float(o.tid_damping[0]),
+            "optimum_peak": finite(o.peak[0]),
+            "optimum_elasticity": finite(o.peak_elasticities[0, j]),
+            "optimum_stiffness_elasticity": finite(o.stiffness_elasticities[0, j]),
+            "optimum_damping_elasticity": finite(o.damping_elasticities[0, j]),
             "optimum_converged": bool(o.converged[0])}
 
 
@@ -280,35 +396,41 @@ def run_sensitivity(args, inputs: dict) -> int:
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "sensitivities at {amplitudes} amplitude(s) over {frequencies} "
         "frequencies, at the given tuning" + (" and at the optimum" if optimum else ""))
-    unit = "m/s2" if system.load == "ground" else "N"
+    unit = amplitude_unit(system.load)
     parameters = _parameters(system, unit)
-    with output.steps(amplitudes.size) as step:
+    settings = SolverSettings(**inputs[SOLVER_TABLE])
+    with output.steps(amplitudes.size + 1) as step:
         results = []
         for i, amplitude in enumerate(amplitudes):
             results.append(building_sensitivities(
-                system, [amplitude], quantity, omegas=omegas,
-                settings=SolverSettings(**inputs[SOLVER_TABLE]), optimum=optimum))
+                system, [amplitude], quantity, omegas=omegas, settings=settings,
+                optimum=optimum))
             step(f"amplitude {i + 1}/{amplitudes.size}")
+        stroke = strokes(system, quantity, amplitudes, omegas, settings)[0]
+        step("strokes over the band")
     records = []
-    for amplitude, result in zip(amplitudes, results, strict=True):
+    for i, (amplitude, result) in enumerate(zip(amplitudes, results, strict=True)):
         peak = float(result.peak[0])
         for j, name in enumerate(result.names):
             value, parameter_unit = parameters[name]
             value = float(amplitude) if value is None else value
             elasticity = float(result.elasticities[0, j])
-            records.append({
-                "amplitude": float(amplitude), "parameter": name, "value": value,
-                "unit": parameter_unit, "peak": peak,
-                "peak_frequency_hz": float(result.peak_omega[0]) / (2 * math.pi),
-                "elasticity": elasticity,
-                "derivative_per_unit": elasticity * peak / value if value else 0.0,
-                "converged": bool(result.converged[0]), **_optimum_fields(result, j)})
-    save_records(output, "sensitivity.csv", list(records[0]), records)
+            fields = _optimum_fields(result, j)
+            ok = bool(result.converged[0]) and fields.get("optimum_converged", True)
+            records.append(row(
+                SENSITIVITY_COLUMNS, amplitude=float(amplitude), amplitude_unit=unit,
+                parameter=name, value=value, unit=parameter_unit,
+                k_N_per_m=float(system.tid_stiffness), c_N_s_per_m=float(system.tid_damping),
+                peak_unit=quantity.unit, peak=finite(peak), elasticity=finite(elasticity),
+                derivative_per_unit=finite(elasticity * peak / value) if value else 0.0,
+                stroke_m=finite(stroke[i]), converged=bool(result.converged[0]),
+                status=status(ok), **fields))
+    save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
     save_config(inputs, output, "sensitivity")
     elasticities = np.asarray([result.elasticities[0] for result in results])
     plot.save_figure(plot.plot_building_elasticities(
-        amplitudes, results[0].names, elasticities, xlabel=f"amplitude ({unit})",
-        title=f"elasticities of the peak {quantity.describe(system.floors)}"),
+        amplitudes, results[0].names, elasticities, xlabel=amplitude_label(system),
+        title=f"elasticities d ln peak / d ln p of the peak {quantity.describe(system.floors)}"),
         output.path("sensitivity.png"))
     optima = [{"amplitude": float(a), "k_N_per_m": float(r.optimum.tid_stiffness[0]),
                "c_N_s_per_m": float(r.optimum.tid_damping[0]),
@@ -320,16 +442,8 @@ def run_sensitivity(args, inputs: dict) -> int:
                     tid_damping_N_s_per_m=float(system.tid_damping), results=records,
                     optimum=optima or None)
     write_json(output.path("sensitivity.json"), data)
-    columns = [shown(f"A ({unit})", "amplitude", "g"), shown("parameter", "parameter", "s"),
-               shown("value", "value", ".5g"), shown("unit", "unit", "s"),
-               shown(f"peak ({quantity.unit})", "peak", ".4g"),
-               shown("elasticity", "elasticity", ".4f")]
-    if optimum:
-        columns += [shown("at optimum", "optimum_elasticity", ".4f"),
-                    shown("of k*", "optimum_stiffness_elasticity", ".4f"),
-                    shown("of c*", "optimum_damping_elasticity", ".4f")]
-    columns.append(shown("converged", "converged", ""))
-    ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"])))
+    columns = sensitivity_table(optimum)
+    ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"] or 0.0)))
     title = (f"Elasticities of the peak (d ln peak / d ln p; damping matrix held), at "
              f"k = {float(system.tid_stiffness):.5g} N/m, c = "
              f"{float(system.tid_damping):.5g} N s/m: {describe(system, quantity)}")
@@ -345,44 +459,70 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
         f"{len(scales)} structure frequencies, the stroke not limited for a [structure]")
     band = omegas if "band_hz" in inputs else None
     settings = SolverSettings(**inputs[SOLVER_TABLE])
-    with output.steps(len(scales) + 2) as step:
+    with output.steps(len(scales) + 3) as step:
         result = robust_building(system, amplitudes, quantity, stiffness_scales=scales,
                                  omegas=band, settings=settings, progress=step)
-    given = np.stack([np.asarray(building_peaks(
-        system.replace(structure=scaled_structure(system.structure, scale)), amplitudes,
-        quantity, omegas=band, settings=settings).value) for scale in scales], axis=1)
-    given_ratio = given / np.asarray(result.best)
-    records = [{"structure_frequency_scale": math.sqrt(scale), "amplitude": float(a),
-                "best_peak": float(result.best[i, j]), "robust_peak": float(result.peak[i, j]),
-                "robust_ratio": float(result.ratio[i, j]), "given_peak": float(given[i, j]),
-                "given_ratio": float(given_ratio[i, j])}
+        robust = tuned(system, result.tid_stiffness, result.tid_damping)
+        given = np.stack([np.asarray(building_peaks(
+            scaled(system, scale), amplitudes, quantity, omegas=band,
+            settings=settings).value) for scale in scales], axis=1)
+        stroke = {name: np.stack([strokes(scaled(s, scale), quantity, amplitudes, omegas,
+                                          settings)[0] for scale in scales], axis=1)
+                  for name, s in (("before", system), ("after", robust))}
+        step("the given tuning's peaks, and the strokes over the band")
+    limit = inputs["stroke_limit"]
+    records = [row(ROBUST_COLUMNS, frequency_scale=math.sqrt(scale), amplitude=float(a),
+                   amplitude_unit=amplitude_unit(system.load),
+                   k_N_per_m=float(result.tid_stiffness), c_N_s_per_m=float(result.tid_damping),
+                   peak_unit=quantity.unit, peak_best=finite(result.best[i, j]),
+                   peak_before=finite(given[i, j]), peak_after=finite(result.peak[i, j]),
+                   peak_before_over_best=ratio(given[i, j], result.best[i, j]),
+                   peak_after_over_best=finite(result.ratio[i, j]),
+                   stroke_before_m=finite(stroke["before"][i, j]),
+                   stroke_after_m=finite(stroke["after"][i, j]), stroke_limit_m=limit,
+                   within_stroke_limit=bool(stroke["after"][i, j] <= limit),
+                   converged=bool(result.converged),
+                   status=status(bool(result.converged),
+                                 stroke_problem(stroke["after"][i, j], limit)))
                for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
-    save_records(output, "robust.csv", list(records[0]), records)
+    save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     save_config(inputs, output, "robust")
     nominal = scales.index(1.0)
-    plot.save_figure(plot.plot_building_retune(
-        amplitudes, {"robust": np.asarray(result.ratio)[:, nominal],
-                     "given": given_ratio[:, nominal]},
-        ylabel="peak / best of a tuning of its own"), output.path("robust.png"))
+    given_ratio = given / np.asarray(result.best)
+    plot.save_figure(plot.plot_robust_comparison(
+        amplitudes,
+        [(f"given tuning: worst {float(np.max(given_ratio)):.3f}", given_ratio[:, nominal],
+          stroke["before"][:, nominal], dict(color="tab:red", linestyle="--", marker=".")),
+         (f"robust: worst {float(result.worst_ratio):.3f}",
+          np.asarray(result.ratio)[:, nominal], stroke["after"][:, nominal],
+          dict(color="tab:blue", linewidth=2.0, marker="."))],
+        stroke_limit=limit, amplitude_label=amplitude_label(system),
+        ratio_label=f"peak {quantity.describe(system.floors)} / best achievable",
+        title="Robust TID tuning" + (" (nominal structure)" if len(scales) > 1 else "")),
+        output.path("robust.png"))
     summary = {"k_N_per_m": float(result.tid_stiffness),
                "c_N_s_per_m": float(result.tid_damping),
                "worst_ratio": float(result.worst_ratio), "converged": bool(result.converged),
                "given_k_N_per_m": float(system.tid_stiffness),
                "given_c_N_s_per_m": float(system.tid_damping),
-               "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False}
+               "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False,
+               "max_stroke_m": finite(np.nanmax(stroke["after"])),
+               "status": status(bool(result.converged))}
     data = document("robust", inputs, system, quantity, frequencies_hz, output,
-                     structure_frequency_scales=[math.sqrt(s) for s in scales],
+                     frequency_scales=[math.sqrt(s) for s in scales],
                      robust=summary, results=records)
     write_json(output.path("robust.json"), data)
-    unit = data["amplitude_unit"]
-    columns = [shown("f scale", "structure_frequency_scale", ".3g"),
-               shown(f"A ({unit})", "amplitude", "g"),
-               shown(f"best ({quantity.unit})", "best_peak", ".4g"),
-               shown("robust / best", "robust_ratio", ".4f"),
-               shown("given / best", "given_ratio", ".4f")]
     title = (f"Robust tuning k = {summary['k_N_per_m']:.5g} N/m, c = "
              f"{summary['c_N_s_per_m']:.5g} N s/m: worst {summary['worst_ratio']:.4f} of "
-             f"the best (given tuning: {summary['given_worst_ratio']:.4f})"
-             f"{'' if summary['converged'] else ' (search not converged)'}; "
-             f"{describe(system, quantity)}")
-    return output.finish(data, title + "\n" + table(columns, records))
+             f"the best (given tuning: {summary['given_worst_ratio']:.4f}), the stroke not "
+             f"limited; {summary['status']}; {describe(system, quantity)}")
+    return output.finish(data, title + "\n" + table(ROBUST_TABLE, records))
+
+
+def scaled(system: BuildingTID, scale: float) -> BuildingTID:
+    """The system on its structure with the stiffness `scale` times."""
+    return system.replace(structure=scaled_structure(system.structure, scale))
+
+
+def tuned(system: BuildingTID, k, c) -> BuildingTID:
+    return system.replace(tid_stiffness=float(k), tid_damping=float(c))

@@ -6,6 +6,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import plot
+from .._building import Quantity, as_building, uncontrolled_amplitude
 from .._io import write_json, write_toml
 from .._linear import host_breakaway
 from .._response import frequency_response
@@ -23,22 +24,8 @@ from ._common import (
     _start,
     _stuck_curve,
 )
-from ._tables import Shown, save_records, shown, table
-
-FRF_COLUMNS = (
-    "amplitude_N",
-    "frequency_Hz",
-    "x_max_m",
-    "y_max_m",
-    "x_over_A_K",
-    "y_over_A_K",
-    "x_linear_over_A_K",
-    "y_linear_over_A_K",
-    "converged",
-    "stable",
-    "stick_fraction",
-    "transitions",
-)
+from ._schema import FRF_COLUMNS, FRF_TABLE, finite, frf_summary, ratio, row, status
+from ._tables import save_records, table
 
 
 def _add_frf_parser(subparsers) -> None:
@@ -52,17 +39,6 @@ def _add_frf_parser(subparsers) -> None:
     )
     _add_system_arguments(parser)
     _add_output_arguments(parser)
-
-
-# The printed table, a row per amplitude (`_summary`).
-FRF_TABLE = (
-    shown("A [N]", "amplitude_N", "g"),
-    shown("peak x/(A/K)", "x_peak_over_A_K", ".2f"),
-    shown("at f [Hz]", "peak_frequency_Hz", ".3f"),
-    shown("stroke [cm] (limit {limit_cm:g})", "stroke_m", ".2f", unit=0.01),
-    Shown("converged", lambda s: f"{s['converged_points']}/{s['points']}"),
-    shown("unstable", "unstable_points", "d"),
-)
 
 
 class _Grid(NamedTuple):
@@ -89,24 +65,7 @@ def _run_frf(args) -> int:
     static = (amplitudes / float(system.host_stiffness))[:, None]
     x_norm, y_norm = grid.x_max / static, grid.y_max / static
     x_linear, y_linear = _linear_normalised(system, frequencies_hz)
-    records = [
-        dict(zip(FRF_COLUMNS, (
-            float(amplitudes[i]),
-            float(frequencies_hz[j]),
-            float(grid.x_max[i, j]),
-            float(grid.y_max[i, j]),
-            float(x_norm[i, j]),
-            float(y_norm[i, j]),
-            float(x_linear[j]),
-            float(y_linear[j]),
-            bool(grid.converged[i, j]),
-            bool(grid.stable[i, j]),
-            float(grid.stick_fraction[i, j]),
-            int(grid.transitions[i, j]),
-        ), strict=True))
-        for i in range(amplitudes.size)
-        for j in range(omegas.size)
-    ]
+    records = _records(system, grid, amplitudes, frequencies_hz, omegas, x_linear, y_linear)
     breakaway = host_breakaway(system, omegas)
     save_records(output, "frf.csv", FRF_COLUMNS, records)
     write_toml(output.path("frf_config.toml"), _config_data(inputs), comment=_config_comment("frf"))
@@ -122,7 +81,7 @@ def _run_frf(args) -> int:
         ),
         output.path("frf.png"),
     )
-    summary = _summary(grid, amplitudes, frequencies_hz, x_norm)
+    summary = frf_summary(records, amplitudes, omegas.size)
     json_path = output.path("frf.json")
     data = output.document(
         "frf",
@@ -143,6 +102,7 @@ def _run_frf(args) -> int:
         breakaway_minimum_N=float(breakaway.minimum),
         breakaway_minimum_frequency_Hz=float(breakaway.omega_minimum) / (2 * math.pi),
         summary=summary,
+        results=records,
     )
     write_json(json_path, data)
     return output.finish(data, _table(summary, system, inputs["stroke_limit"]) + "\n"
@@ -166,21 +126,29 @@ def _solve(system, omegas, amplitudes, settings, output) -> _Grid:
     return grid
 
 
-def _summary(grid: _Grid, amplitudes, frequencies_hz, x_norm) -> list[dict]:
-    """Per amplitude: the peak over the converged points, where it is, the stroke."""
-    converged = grid.converged
-    peak = np.argmax(np.where(converged, grid.x_max, -np.inf), axis=1)
+def _records(system, grid: _Grid, amplitudes, frequencies_hz, omegas, x_linear,
+             y_linear) -> list[dict]:
+    """One record per amplitude and frequency, keyed by `FRF_COLUMNS`."""
+    bare = np.asarray(uncontrolled_amplitude(as_building(system), Quantity(), omegas))
+    bare_peak = _building.uncontrolled_peak(as_building(system), Quantity(), omegas)
+    stiffness = float(system.host_stiffness)
+    k, c = float(system.tid_stiffness), float(system.tid_damping)
     return [
-        {
-            "amplitude_N": float(amplitudes[i]),
-            "x_peak_over_A_K": float(x_norm[i, peak[i]]),
-            "peak_frequency_Hz": float(frequencies_hz[peak[i]]),
-            "stroke_m": float(np.max(np.where(converged[i], grid.y_max[i], -np.inf))),
-            "converged_points": int(converged[i].sum()),
-            "points": int(converged[i].size),
-            "unstable_points": int((converged[i] & ~grid.stable[i]).sum()),
-        }
-        for i in range(amplitudes.size)
+        row(FRF_COLUMNS, amplitude=float(a), amplitude_unit="N",
+            frequency_Hz=float(frequencies_hz[j]), k_N_per_m=k, c_N_s_per_m=c,
+            peak_unit="m", peak=finite(grid.x_max[i, j]),
+            uncontrolled_peak=float(a * bare[j]),
+            peak_over_uncontrolled=ratio(grid.x_max[i, j], a * bare_peak),
+            x_over_A_K=finite(grid.x_max[i, j] * stiffness / a),
+            x_linear_over_A_K=float(x_linear[j]),
+            y_over_A_K=finite(grid.y_max[i, j] * stiffness / a),
+            y_linear_over_A_K=float(y_linear[j]), stroke_m=finite(grid.y_max[i, j]),
+            stick_fraction=finite(grid.stick_fraction[i, j]),
+            transitions=int(grid.transitions[i, j]), stable=bool(grid.stable[i, j]),
+            converged=bool(grid.converged[i, j]),
+            status=status(bool(grid.converged[i, j]), "" if grid.stable[i, j] else "unstable"))
+        for i, a in enumerate(amplitudes)
+        for j in range(omegas.size)
     ]
 
 

@@ -22,6 +22,7 @@ from . import _building
 from ._arguments import _add_output_arguments, _add_structure_arguments
 from ._building_config import RANDOM_KEYS, RANDOM_KINDS
 from ._common import PROG, CLIError, _describe, _inputs, _number, _Output, _system
+from ._schema import RANDOM_COLUMNS, finite, ratio, row, status, stroke_problem
 from ._tables import save_records, shown, table
 
 # S0 (N^2 s/rad) of the white-noise force on the paper's host by default: from the inerter
@@ -31,23 +32,6 @@ PSD_UNITS = {"force": "N^2 s/rad", "ground": "(m/s2)^2 s/rad"}
 LOAD_NAMES = {"force": "force", "ground": "ground acceleration"}
 # The harmonic commands' inputs, which do not apply to `random` and `records`.
 HARMONIC_INPUTS = ("amplitudes", "amplitudes_given", "band_hz", "n_frequencies")
-RANDOM_COLUMNS = (
-    "psd",
-    "tid_stiffness",
-    "tid_damping",
-    "converged",
-    "rms_before",
-    "rms_before_se",
-    "rms_after",
-    "rms_after_se",
-    "linearised_stiffness",
-    "linearised_damping",
-    "rms_linearised",
-    "rms_linearised_se",
-    "rms_frictionless",
-)
-
-
 def _add_random_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "random",
@@ -179,11 +163,6 @@ def wrapped(title: str) -> str:
     return textwrap.fill(title, 130)
 
 
-def finite_or_none(value) -> float | None:
-    value = float(value)
-    return value if math.isfinite(value) else None
-
-
 # --- `random` ---------------------------------------------------------------------------
 
 
@@ -248,9 +227,8 @@ def _run_random(args) -> int:
         histories = [random_history(s, load(levels[top]), quantity, settings=common)
                      for s in (system, retuned)]
         step(f"time histories at S0 = {levels[top]:g} {unit}, given and retuned tuning")
-    records = [{name: (finite_or_none(value) if isinstance(value, float) else value)
-                for name, value in zip(RANDOM_COLUMNS, row, strict=True)}
-               for row in _rows(design, frictionless)]
+    records = _records(design, frictionless, histories, top, unit, quantity.unit,
+                       inputs["stroke_limit"])
     save_records(output, "random.csv", RANDOM_COLUMNS, records)
     _building.save_config(inputs, output, "random")
     _save_plots(output, case, design, records, histories, run_plan, load(levels[top]), unit)
@@ -276,11 +254,37 @@ def _cost(system: BuildingTID) -> str:
     return "; each level takes tens of seconds at the default settings"
 
 
-def _rows(design, frictionless) -> list[tuple]:
-    columns = [np.asarray(getattr(design, name)) for name in (
-        "psd_levels", *RANDOM_COLUMNS[1:-1])]
-    return [tuple(bool(c[i]) if c.dtype == bool else float(c[i]) for c in columns)
-            + (frictionless[i],) for i in range(columns[0].size)]
+def _records(design, frictionless, histories, top, psd_unit, rms_unit,
+             stroke_limit) -> list[dict]:
+    """One record per level S0, keyed by `RANDOM_COLUMNS`; the strokes (the first
+    realisation's peaks) at the level `top` of the time histories."""
+    def column(name):
+        return np.asarray(getattr(design, name))
+
+    records = []
+    for i, s0 in enumerate(column("psd_levels")):
+        stroke = ({} if i != top else {
+            f"stroke_{when}_m": float(np.max(np.abs(np.asarray(h.stroke))))
+            for when, h in zip(("before", "after"), histories, strict=True)})
+        converged = bool(column("converged")[i])
+        records.append(row(
+            RANDOM_COLUMNS, psd=float(s0), psd_unit=psd_unit,
+            k_N_per_m=finite(column("tid_stiffness")[i]),
+            c_N_s_per_m=finite(column("tid_damping")[i]), rms_unit=rms_unit,
+            rms_before=finite(column("rms_before")[i]),
+            rms_before_se=finite(column("rms_before_se")[i]),
+            rms_after=finite(column("rms_after")[i]),
+            rms_after_se=finite(column("rms_after_se")[i]),
+            rms_after_over_before=ratio(column("rms_after")[i], column("rms_before")[i]),
+            linearised_k_N_per_m=finite(column("linearised_stiffness")[i]),
+            linearised_c_N_s_per_m=finite(column("linearised_damping")[i]),
+            rms_linearised=finite(column("rms_linearised")[i]),
+            rms_linearised_se=finite(column("rms_linearised_se")[i]),
+            rms_frictionless=finite(frictionless[i]), converged=converged,
+            status=status(converged, stroke_problem(stroke.get("stroke_after_m"),
+                                                    stroke_limit)),
+            **stroke))
+    return records
 
 
 def _save_plots(output, case, design, records, histories, run_plan, load, unit) -> None:
@@ -297,9 +301,9 @@ def _save_plots(output, case, design, records, histories, run_plan, load, unit) 
                                             column("rms_linearised_se")),
                  "given tuning, no friction (exact)": (column("rms_frictionless"),
                                                        np.zeros(levels.size))},
-        {"k / k given": column("tid_stiffness") / k, "c / c given": column("tid_damping") / c,
-         "k / k given, linearisation": column("linearised_stiffness") / k,
-         "c / c given, linearisation": column("linearised_damping") / c},
+        {"k / k given": column("k_N_per_m") / k, "c / c given": column("c_N_s_per_m") / c,
+         "k / k given, linearisation": column("linearised_k_N_per_m") / k,
+         "c / c given, linearisation": column("linearised_c_N_s_per_m") / c},
         xlabel=xlabel, ylabel=f"RMS {described} [{q_unit}]",
         title=wrapped(f"TID retuned per intensity: {case.description}")),
         output.path("random_rms.png"))
@@ -353,15 +357,16 @@ def _top_frequency(system: BuildingTID, time_step: float) -> float:
 
 def _table(records, case: Case, kind: str, unit: str) -> str:
     q_unit = case.quantity.unit
-    columns = [shown(f"S0 ({unit})", "psd", "g"), shown("k (N/m)", "tid_stiffness", ".5g"),
-               shown("c (N s/m)", "tid_damping", ".4g"),
+    columns = [shown(f"S0 ({unit})", "psd", "g"), shown("k (N/m)", "k_N_per_m", ".5g"),
+               shown("c (N s/m)", "c_N_s_per_m", ".4g"),
                shown(f"RMS given ({q_unit})", "rms_before", ".4g"),
                shown("SE", "rms_before_se", ".2g"),
                shown(f"RMS retuned ({q_unit})", "rms_after", ".4g"),
                shown("SE", "rms_after_se", ".2g"),
                shown("linearised design", "rms_linearised", ".4g"),
                shown("no friction", "rms_frictionless", ".4g"),
-               shown("converged", "converged", "")]
+               shown("stroke after (mm)", "stroke_after_m", ".3g", unit=1e-3),
+               shown("status", "status", "s")]
     title = (f"TID retuned per intensity of a {kind.replace('_', '-')} load, RMS by Monte "
              f"Carlo (SE: standard error; '-': no linearised design): {case.description}")
     return title + "\n" + table(columns, records)

@@ -15,21 +15,10 @@ from .._records import GroundMotion, read_at2, read_csv_record
 from . import _building
 from ._arguments import _add_output_arguments, _add_structure_arguments
 from ._common import PROG, CLIError, _number, _Output
+from ._schema import RECORDS_COLUMNS, finite, ratio, row, status, stroke_problem
 from ._tables import save_records, shown, table
 from .random import build_case, case_inputs, document, tuned, wrapped
 
-RECORDS_COLUMNS = (
-    "name",
-    "file",
-    "pga",
-    "duration",
-    "peak",
-    "rms",
-    "stroke_peak",
-    "peak_after",
-    "rms_after",
-    "stroke_peak_after",
-)
 UNITS = ("g", "m/s2")
 EXACT_NOTE = ("the friction width relative to a forcing needs a stationary load: exact "
               "Coulomb friction (friction_width 0) under the records")
@@ -127,13 +116,7 @@ def _run_records(args) -> int:
             after.append(friction_history(designed, motion, quantity, time_step=time_step))
             step(f"record {i + 1}/{len(motions)} {motion.name}: peak "
                  f"{float(after[-1].peak):.4g} {quantity.unit} with the design")
-    records = [dict(zip(RECORDS_COLUMNS, (
-        motion.name, str(path), motion.peak, motion.duration, float(given.peak),
-        float(given.rms), float(np.max(np.abs(np.asarray(given.stroke)))),
-        float(design.peak_after[i]), float(design.rms_after[i]),
-        float(np.max(np.abs(np.asarray(mine.stroke))))), strict=True))
-        for i, (motion, path, given, mine) in enumerate(zip(motions, args.files, before, after,
-                                                            strict=True))]
+    records = _records(motions, args.files, before, after, design, quantity.unit, limit)
     save_records(output, "records.csv", RECORDS_COLUMNS, records)
     _building.save_config(inputs, output, "records")
     _save_plots(output, case, motions, before, after, records, limit)
@@ -143,11 +126,36 @@ def _run_records(args) -> int:
                     tid_stiffness=float(design.tid_stiffness),
                     tid_damping=float(design.tid_damping), converged=bool(design.converged),
                     stroke_limit=limit, within_stroke_limit=bool(design.within_stroke_limit),
-                    mean_peak=float(np.mean([r["peak"] for r in records])),
+                    mean_peak=float(np.mean([r["peak_before"] for r in records])),
                     mean_peak_after=float(np.mean([r["peak_after"] for r in records])),
                     results=records)
     write_json(json_path, data)
     return output.finish(data, _table(records, case, data))
+
+
+def _records(motions, files, before, after, design, unit, limit) -> list[dict]:
+    """One record per ground motion, keyed by `RECORDS_COLUMNS`: its peak, RMS and stroke
+    with the given tuning (before) and with the design over the suite (after)."""
+    converged = bool(design.converged)
+    records = []
+    for i, (motion, path, given, mine) in enumerate(zip(motions, files, before, after,
+                                                       strict=True)):
+        stroke_before = float(np.max(np.abs(np.asarray(given.stroke))))
+        stroke_after = float(np.max(np.abs(np.asarray(mine.stroke))))
+        peak_after = float(design.peak_after[i])
+        records.append(row(
+            RECORDS_COLUMNS, name=motion.name, file=str(path), amplitude=float(motion.peak),
+            amplitude_unit="m/s2", duration_s=float(motion.duration),
+            k_N_per_m=float(design.tid_stiffness), c_N_s_per_m=float(design.tid_damping),
+            peak_unit=unit, peak_before=finite(given.peak), peak_after=finite(peak_after),
+            peak_after_over_before=ratio(peak_after, given.peak),
+            rms_before=finite(given.rms), rms_after=finite(design.rms_after[i]),
+            stroke_before_m=stroke_before, stroke_after_m=stroke_after, stroke_limit_m=limit,
+            within_stroke_limit=stroke_after <= limit, converged=converged,
+            status=status(converged, stroke_problem(stroke_after, limit),
+                          base=None if converged else "not converged: the design's "
+                          "Nelder-Mead search over the suite did not converge")))
+    return records
 
 
 def _save_plots(output, case, motions, before, after, records, limit) -> None:
@@ -168,20 +176,21 @@ def _save_plots(output, case, motions, before, after, records, limit) -> None:
         output.path("records_histories.png"))
     plot.save_figure(plot.plot_record_peaks(
         [r["name"] for r in records],
-        {"given tuning": [r["peak"] for r in records],
+        {"given tuning": [r["peak_before"] for r in records],
          "designed over the suite": [r["peak_after"] for r in records]},
         ylabel=f"peak {described} [{unit}]"), output.path("records_peaks.png"))
 
 
 def _table(records, case, data) -> str:
     unit = case.quantity.unit
-    columns = [shown("record", "name", "s"), shown("PGA (g)", "pga", ".3g", unit=G),
-               shown(f"peak given ({unit})", "peak", ".4g"),
+    columns = [shown("record", "name", "s"), shown("PGA (g)", "amplitude", ".3g", unit=G),
+               shown(f"peak given ({unit})", "peak_before", ".4g"),
                shown(f"peak designed ({unit})", "peak_after", ".4g"),
-               shown(f"RMS given ({unit})", "rms", ".4g"),
+               shown(f"RMS given ({unit})", "rms_before", ".4g"),
                shown(f"RMS designed ({unit})", "rms_after", ".4g"),
-               shown("stroke given (mm)", "stroke_peak", ".3g", unit=1e-3),
-               shown("stroke designed (mm)", "stroke_peak_after", ".3g", unit=1e-3)]
+               shown("stroke given (mm)", "stroke_before_m", ".3g", unit=1e-3),
+               shown("stroke designed (mm)", "stroke_after_m", ".3g", unit=1e-3),
+               shown("status", "status", "s")]
     given = data["given_tuning"]
     title = (f"Under {len(records)} record(s): given k = {given['tid_stiffness']:.5g} N/m, "
              f"c = {given['tid_damping']:.4g} N s/m; designed over the suite k = "

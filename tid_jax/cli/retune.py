@@ -5,12 +5,14 @@ import math
 import numpy as np
 
 from .. import plot
+from .._building import Quantity, as_building
 from .._io import write_json, write_toml
 from .._linear import host_breakaway
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
+from ._building import uncontrolled_peak
 from ._common import (
     _breakaway_line,
     _config_comment,
@@ -22,40 +24,8 @@ from ._common import (
     _linear_curves,
     _start,
 )
-from ._tables import save_records, shown, table
-
-RETUNE_COLUMNS = (
-    "amplitude_N",
-    "k_over_k_den_hartog",
-    "k_N_per_m",
-    "c_over_c_den_hartog",
-    "c_N_s_per_m",
-    "x_peak_before_over_A_K",
-    "x_peak_after_over_A_K",
-    "peak_frequency_after_Hz",
-    "stroke_before_m",
-    "stroke_after_m",
-    "stroke_limit_m",
-    "within_stroke_limit",
-    "iterations",
-    "converged",
-    "status",
-)
-
-
-# The printed table: a header and the record's value shown.
-RETUNE_TABLE = (
-    shown("A [N]", "amplitude_N", "g"),
-    shown("k/k_DH", "k_over_k_den_hartog", ".3f"),
-    shown("k [kN/m]", "k_N_per_m", ".2f", unit=1e3),
-    shown("c/c_DH", "c_over_c_den_hartog", ".3f"),
-    shown("c [N s/m]", "c_N_s_per_m", ".1f"),
-    shown("x/(A/K) before", "x_peak_before_over_A_K", ".2f"),
-    shown("x/(A/K) after", "x_peak_after_over_A_K", ".2f"),
-    shown("f_peak [Hz]", "peak_frequency_after_Hz", ".3f"),
-    shown("stroke [cm] (limit {limit_cm:g})", "stroke_after_m", ".2f", unit=0.01),
-    shown("status", "status", "s"),
-)
+from ._schema import RETUNE_COLUMNS, RETUNE_TABLE, finite, ratio, row, status, stroke_problem
+from ._tables import save_records, table
 
 
 def _add_retune_parser(subparsers) -> None:
@@ -106,34 +76,36 @@ def _records(result, system, amplitudes, stroke_limit) -> list[dict]:
     """One record per amplitude, keyed by `RETUNE_COLUMNS`."""
     k_dh, c_dh = _den_hartog(system)
     static = amplitudes / float(system.host_stiffness)
-    x_peak_before = np.asarray(result.x_peak_initial) / static
-    x_peak_after = np.asarray(result.x_peak) / static
+    before, after = np.asarray(result.x_peak_initial), np.asarray(result.x_peak)
     y_before, y_after = np.asarray(result.y_peak_initial), np.asarray(result.y_peak)
-    within = y_after <= stroke_limit
-    improved = x_peak_after <= x_peak_before
+    # the given tuning is Den Hartog's (the default): its peak is the "before"
+    given_is_den_hartog = np.allclose([float(system.tid_stiffness), float(system.tid_damping)],
+                                      [k_dh, c_dh], rtol=1e-12)
+    bare = amplitudes * uncontrolled_peak(as_building(system), Quantity(),
+                                          np.asarray(result.check_omegas))
     statuses = result.status_messages()
-    return [
-        dict(zip(RETUNE_COLUMNS, (
-            float(amplitudes[i]),
-            float(result.tid_stiffness[i]) / k_dh,
-            float(result.tid_stiffness[i]),
-            float(result.tid_damping[i]) / c_dh,
-            float(result.tid_damping[i]),
-            float(x_peak_before[i]),
-            float(x_peak_after[i]),
-            float(result.omega_peak[i]) / (2 * math.pi),
-            float(y_before[i]),
-            float(y_after[i]),
-            stroke_limit,
-            bool(within[i]),
-            int(result.iterations[i]),
-            bool(result.converged[i]),
-            statuses[i]
-            + ("" if within[i] else "; stroke over limit")
-            + ("" if improved[i] else "; peak above the initial tuning's"),
-        ), strict=True))
-        for i in range(amplitudes.size)
-    ]
+    records = []
+    for i, amplitude in enumerate(amplitudes):
+        k, c = float(result.tid_stiffness[i]), float(result.tid_damping[i])
+        records.append(row(
+            RETUNE_COLUMNS, amplitude=float(amplitude), amplitude_unit="N",
+            k_N_per_m=k, c_N_s_per_m=c, k_over_k_den_hartog=k / k_dh,
+            c_over_c_den_hartog=c / c_dh, peak_unit="m",
+            peak_before=finite(before[i]), peak_after=finite(after[i]),
+            peak_frequency_after_Hz=finite(float(result.omega_peak[i]) / (2 * math.pi)),
+            peak_after_over_before=ratio(after[i], before[i]),
+            peak_after_over_den_hartog=(ratio(after[i], before[i]) if given_is_den_hartog
+                                        else None),
+            peak_after_over_uncontrolled=ratio(after[i], bare[i]),
+            x_peak_before_over_A_K=finite(before[i] / static[i]),
+            x_peak_after_over_A_K=finite(after[i] / static[i]),
+            stroke_before_m=finite(y_before[i]), stroke_after_m=finite(y_after[i]),
+            stroke_limit_m=stroke_limit, within_stroke_limit=bool(y_after[i] <= stroke_limit),
+            converged=bool(result.converged[i]),
+            status=status(bool(result.converged[i]), stroke_problem(y_after[i], stroke_limit),
+                          "" if after[i] <= before[i] else "peak above the initial tuning's",
+                          base=statuses[i])))
+    return records
 
 
 def _save_plots(output, result, system, amplitudes, frequencies_hz, stroke_limit,
@@ -174,6 +146,6 @@ def _table(records, system, stroke_limit) -> str:
     k_dh, c_dh = _den_hartog(system)
     title = (
         f"Retuned TID ({_describe(system)}); Den Hartog k_DH = {k_dh:.5g} N/m, "
-        f"c_DH = {c_dh:.4g} N s/m; peaks x normalised by the static displacement A/K"
+        f"c_DH = {c_dh:.4g} N s/m; peaks in m, and x over the static displacement A/K"
     )
     return title + "\n" + table(RETUNE_TABLE, records, limit_cm=100 * stroke_limit)

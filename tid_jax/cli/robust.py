@@ -20,20 +20,8 @@ from ._common import (
     _inputs,
     _start,
 )
-from ._tables import save_records, shown, table
-
-ROBUST_COLUMNS = (
-    "host_frequency_scale",
-    "amplitude_N",
-    "best_k_N_per_m",
-    "best_c_N_s_per_m",
-    "best_x_peak_m",
-    "robust_x_peak_m",
-    "robust_ratio",
-    "robust_stroke_m",
-    "given_ratio",
-    "given_stroke_m",
-)
+from ._schema import ROBUST_COLUMNS, ROBUST_TABLE, finite, row, status, stroke_problem
+from ._tables import save_records, table
 
 
 def _add_robust_parser(subparsers) -> None:
@@ -98,7 +86,7 @@ def _run_robust(args) -> int:
     given = tuning_performance(system, result.best, settings=settings,
                                map_lanes=args.map_lanes)
     result, given = _on_host((result, given))  # read entry by entry below
-    records = _records(result, given, scales, amplitudes)
+    records = _records(result, given, scales, amplitudes, stroke_limit)
     save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     write_toml(
         output.path("robust_config.toml"), _config_data(inputs), comment=_config_comment("robust")
@@ -113,7 +101,7 @@ def _run_robust(args) -> int:
         system,
         settings,
         frequencies_hz,
-        host_frequency_scales=list(scales),
+        frequency_scales=list(scales),
         robust=summary,
         results=records,
     )
@@ -121,22 +109,28 @@ def _run_robust(args) -> int:
     return output.finish(data, _table(records, summary, system, stroke_limit, tolerance))
 
 
-def _records(result, given, scales, amplitudes) -> list[dict]:
+def _records(result, given, scales, amplitudes, stroke_limit) -> list[dict]:
     """One record per scenario, keyed by `ROBUST_COLUMNS`."""
     robust, best = result.performance, result.best
+    converged = bool(result.converged)
+    base = result.status_messages()[0]
     return [
-        dict(zip(ROBUST_COLUMNS, (
-            float(scale),
-            float(amplitude),
-            float(best.tid_stiffness[i, j]),
-            float(best.tid_damping[i, j]),
-            float(best.host_peak[i, j]),
-            float(robust.host_peak[i, j]),
-            float(robust.ratio[i, j]),
-            float(robust.stroke_peak[i, j]),
-            float(given.ratio[i, j]),
-            float(given.stroke_peak[i, j]),
-        ), strict=True))
+        row(ROBUST_COLUMNS, frequency_scale=float(scale), amplitude=float(amplitude),
+            amplitude_unit="N", k_N_per_m=float(result.tid_stiffness),
+            c_N_s_per_m=float(result.tid_damping),
+            best_k_N_per_m=float(best.tid_stiffness[i, j]),
+            best_c_N_s_per_m=float(best.tid_damping[i, j]), peak_unit="m",
+            peak_best=finite(best.host_peak[i, j]), peak_before=finite(given.host_peak[i, j]),
+            peak_after=finite(robust.host_peak[i, j]),
+            peak_before_over_best=finite(given.ratio[i, j]),
+            peak_after_over_best=finite(robust.ratio[i, j]),
+            stroke_before_m=finite(given.stroke_peak[i, j]),
+            stroke_after_m=finite(robust.stroke_peak[i, j]), stroke_limit_m=stroke_limit,
+            within_stroke_limit=(None if stroke_limit is None
+                                 else bool(robust.stroke_peak[i, j] <= stroke_limit)),
+            converged=converged,
+            status=status(converged, stroke_problem(robust.stroke_peak[i, j], stroke_limit),
+                          base=base))
         for i, scale in enumerate(scales)
         for j, amplitude in enumerate(amplitudes)
     ]
@@ -173,8 +167,8 @@ def _summary(result, given, system, stroke_limit) -> dict:
     k_dh, c_dh = _den_hartog(system)
     k, c = float(result.tid_stiffness), float(result.tid_damping)
     return {
-        "tid_stiffness": k,
-        "tid_damping": c,
+        "k_N_per_m": k,
+        "c_N_s_per_m": c,
         "k_over_k_den_hartog": k / k_dh,
         "c_over_c_den_hartog": c / c_dh,
         "worst_ratio": float(result.worst_ratio),
@@ -193,17 +187,7 @@ def _summary(result, given, system, stroke_limit) -> dict:
 def _table(records, summary, system, stroke_limit, tolerance) -> str:
     """The printed table of the scenarios, with its title."""
     k_dh, c_dh = _den_hartog(system)
-    k, c = summary["tid_stiffness"], summary["tid_damping"]
-    columns = (
-        shown("f_n x", "host_frequency_scale", "g"),
-        shown("A [N]", "amplitude_N", "g"),
-        shown("best k/k_DH", "best_k_N_per_m", ".3f", unit=k_dh),
-        shown("best c/c_DH", "best_c_N_s_per_m", ".3f", unit=c_dh),
-        shown("ratio robust", "robust_ratio", ".3f"),
-        shown("ratio given", "given_ratio", ".3f"),
-        shown("stroke robust [cm]", "robust_stroke_m", ".2f", unit=0.01),
-        shown("stroke given [cm]", "given_stroke_m", ".2f", unit=0.01),
-    )
+    k, c = summary["k_N_per_m"], summary["c_N_s_per_m"]
     limit_text = (
         "no stroke limit"
         if stroke_limit is None
@@ -217,4 +201,4 @@ def _table(records, summary, system, stroke_limit, tolerance) -> str:
         + f" (given tuning: {summary['given_worst_ratio']:.3f} at "
         f"{summary['given_worst_amplitude_N']:g} N); {limit_text}; {summary['status']}"
     )
-    return title + "\n" + table(columns, records)
+    return title + "\n" + table(ROBUST_TABLE, records)

@@ -1,7 +1,5 @@
 """`tid-jax sensitivity`: sensitivities of the peaks, at the tuning and the optimum."""
 
-
-
 from .. import plot
 from .._design import PARAMETER_UNITS
 from .._io import write_json, write_toml
@@ -11,49 +9,8 @@ from .._sensitivity import amplitude_sensitivities, elasticity_series
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import _config_comment, _config_data, _describe, _inputs, _start
-from ._tables import Shown, save_records, shown, table
-
-SENSITIVITY_COLUMNS = (
-    "amplitude_N",
-    "parameter",
-    "value",
-    "unit",
-    "host_peak_m",
-    "host_derivative_m_per_unit",
-    "host_elasticity",
-    "stroke_peak_m",
-    "stroke_derivative_m_per_unit",
-    "stroke_elasticity",
-    "optimum_k_N_per_m",
-    "optimum_c_N_s_per_m",
-    "optimum_host_elasticity",
-    "optimum_stroke_elasticity",
-    "optimum_stiffness_elasticity",
-    "optimum_damping_elasticity",
-    "converged",
-    "optimum_converged",
-    "optimum_damping_at_bound",
-)
-
-
-# The printed table, a row per amplitude and parameter; the optimum's columns where it
-# was found.
-SENSITIVITY_TABLE = (
-    shown("A [N]", "amplitude_N", "g"),
-    shown("parameter", "parameter", "s"),
-    shown("value", "value", ".5g"),
-    shown("unit", "unit", "s"),
-    shown("d x/dp [m/unit]", "host_derivative_m_per_unit", ".3e"),
-    shown("e_x", "host_elasticity", ".4f"),
-    shown("e_y", "stroke_elasticity", ".4f"),
-)
-OPTIMUM_TABLE = (
-    shown("e_x retuned", "optimum_host_elasticity", ".4f"),
-    shown("e_y retuned", "optimum_stroke_elasticity", ".4f"),
-    shown("e_k*", "optimum_stiffness_elasticity", ".4f"),
-    Shown("e_c*", lambda r: "c* at 0" if r["optimum_damping_at_bound"]
-          else f"{r['optimum_damping_elasticity']:.4f}"),
-)
+from ._schema import SENSITIVITY_COLUMNS, finite, row, sensitivity_table, status
+from ._tables import save_records, table
 
 
 def _add_sensitivity_parser(subparsers) -> None:
@@ -101,7 +58,7 @@ def _run_sensitivity(args) -> int:
                                           map_lanes=args.map_lanes)
     results = _on_host(results)  # read entry by entry below: no array operation each
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
-               for record in _records(amplitude, result)]
+               for record in _records(amplitude, result, system)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
     write_toml(
         output.path("sensitivity_config.toml"),
@@ -116,44 +73,34 @@ def _run_sensitivity(args) -> int:
     return output.finish(data, _table(records, results, amplitudes, system, optimum))
 
 
-def _records(amplitude, result) -> list[dict]:
+def _records(amplitude, result, system) -> list[dict]:
     """One record per parameter at one amplitude, keyed by `SENSITIVITY_COLUMNS`."""
     optimum = result.optimum
     at_bound = optimum is not None and bool(optimum.damping_at_bound)
+    ok = bool(result.converged) and (optimum is None or bool(optimum.converged))
     records = []
     for i, name in enumerate(result.parameters):
-        optimal = (
-            [None] * 8
-            if optimum is None
-            else [
-                float(optimum.tid_stiffness),
-                float(optimum.tid_damping),
-                float(optimum.host_elasticity[i]),
-                float(optimum.stroke_elasticity[i]),
-                float(optimum.stiffness_elasticity[i]),
-                # Undefined (c* held at 0 by its bound): left empty.
-                None if at_bound else float(optimum.damping_elasticity[i]),
-                at_bound,
-                bool(optimum.converged),
-            ]
-        )
-        values = [
-            float(amplitude),
-            name,
-            float(result.values[i]),
-            PARAMETER_UNITS[name],
-            float(result.host_peak),
-            float(result.host_derivative[i]),
-            float(result.host_elasticity[i]),
-            float(result.stroke_peak),
-            float(result.stroke_derivative[i]),
-            float(result.stroke_elasticity[i]),
-            *optimal[:6],
-            bool(result.converged),
-            optimal[7],
-            optimal[6],
-        ]
-        records.append(dict(zip(SENSITIVITY_COLUMNS, values, strict=True)))
+        optimal = {} if optimum is None else dict(
+            optimum_k_N_per_m=float(optimum.tid_stiffness),
+            optimum_c_N_s_per_m=float(optimum.tid_damping),
+            optimum_peak=finite(optimum.host_peak),
+            optimum_elasticity=finite(optimum.host_elasticity[i]),
+            optimum_stroke_elasticity=finite(optimum.stroke_elasticity[i]),
+            optimum_stiffness_elasticity=finite(optimum.stiffness_elasticity[i]),
+            # Undefined (c* held at 0 by its bound): left empty.
+            optimum_damping_elasticity=(None if at_bound
+                                        else finite(optimum.damping_elasticity[i])),
+            optimum_damping_at_bound=at_bound, optimum_converged=bool(optimum.converged))
+        records.append(row(
+            SENSITIVITY_COLUMNS, amplitude=float(amplitude), amplitude_unit="N",
+            parameter=name, value=float(result.values[i]), unit=PARAMETER_UNITS[name],
+            k_N_per_m=float(system.tid_stiffness), c_N_s_per_m=float(system.tid_damping),
+            peak_unit="m", peak=finite(result.host_peak),
+            derivative_per_unit=finite(result.host_derivative[i]),
+            elasticity=finite(result.host_elasticity[i]), stroke_m=finite(result.stroke_peak),
+            stroke_derivative_m_per_unit=finite(result.stroke_derivative[i]),
+            stroke_elasticity=finite(result.stroke_elasticity[i]),
+            converged=bool(result.converged), status=status(ok), **optimal))
     return records
 
 
@@ -168,13 +115,13 @@ def _save_plot(output, amplitudes, results) -> None:
 
 
 def _table(records, results, amplitudes, system, optimum: bool) -> str:
-    """The printed table, ranked by |e_x| per amplitude, with its title."""
-    columns = SENSITIVITY_TABLE + (OPTIMUM_TABLE if optimum else ())
+    """The printed table, ranked by |e| per amplitude, with its title."""
+    columns = sensitivity_table(optimum)
     ranked = [
         r
         for amplitude in amplitudes
-        for r in sorted((r for r in records if r["amplitude_N"] == float(amplitude)),
-                        key=lambda r: -abs(r["host_elasticity"]))
+        for r in sorted((r for r in records if r["amplitude"] == float(amplitude)),
+                        key=lambda r: -abs(r["elasticity"] or 0.0))
     ]
     unconverged = [
         f"{a:g} N"
@@ -182,10 +129,10 @@ def _table(records, results, amplitudes, system, optimum: bool) -> str:
         if not bool(r.converged) or (r.optimum is not None and not bool(r.optimum.converged))
     ]
     title = (
-        f"Sensitivities of the peak responses ({_describe(system)}); e_x, e_y: elasticities "
+        f"Sensitivities of the peak responses ({_describe(system)}); e, e_stroke: elasticities "
         f"d ln(peak) / d ln(p) of the host peak and the inerter stroke; 'retuned': at the "
         f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c ('c* at 0': the "
-        f"optimal damping is at its bound 0, where it stays); ranked by |e_x|"
+        f"optimal damping is at its bound 0, where it stays); ranked by |e|"
         + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
     )
     return title + "\n" + table(columns, ranked)
