@@ -340,14 +340,17 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
     """One tuning for every amplitude and, with `tolerance` f, the structure's natural
     frequencies (1 +- f) times the nominal (its stiffness (1 +- f)^2 times)."""
     scales = [1.0] if tolerance == 0 else [(1 - tolerance) ** 2, 1.0, (1 + tolerance) ** 2]
+    stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
+    limited = "not limited" if stroke_limit is None else f"within {stroke_limit:g} m"
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "robust tuning over {amplitudes} amplitude(s) x "
-        f"{len(scales)} structure frequencies, the stroke not limited for a [structure]")
+        f"{len(scales)} structure frequencies, the stroke {limited}")
     band = omegas if "band_hz" in inputs else None
     settings = SolverSettings(**inputs[SOLVER_TABLE])
     with output.steps(len(scales) + 2) as step:
         result = robust_building(system, amplitudes, quantity, stiffness_scales=scales,
-                                 omegas=band, settings=settings, progress=step)
+                                 omegas=band, stroke_limit=stroke_limit, settings=settings,
+                                 progress=step)
     given = np.stack([np.asarray(building_peaks(
         system.replace(structure=scaled_structure(system.structure, scale)), amplitudes,
         quantity, omegas=band, settings=settings).value) for scale in scales], axis=1)
@@ -355,7 +358,8 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
     records = [{"structure_frequency_scale": math.sqrt(scale), "amplitude": float(a),
                 "best_peak": float(result.best[i, j]), "robust_peak": float(result.peak[i, j]),
                 "robust_ratio": float(result.ratio[i, j]), "given_peak": float(given[i, j]),
-                "given_ratio": float(given_ratio[i, j])}
+                "given_ratio": float(given_ratio[i, j]),
+                "robust_stroke_m": float(result.stroke_peak[i, j])}
                for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
     save_records(output, "robust.csv", list(records[0]), records)
     save_config(inputs, output, "robust")
@@ -369,7 +373,10 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                "worst_ratio": float(result.worst_ratio), "converged": bool(result.converged),
                "given_k_N_per_m": float(system.tid_stiffness),
                "given_c_N_s_per_m": float(system.tid_damping),
-               "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False}
+               "given_worst_ratio": float(np.max(given_ratio)),
+               "stroke_limited": bool(result.stroke_limited),
+               "stroke_limit_m": stroke_limit,
+               "within_stroke_limit": bool(result.within_stroke_limit)}
     data = document("robust", inputs, system, quantity, frequencies_hz, output,
                      structure_frequency_scales=[math.sqrt(s) for s in scales],
                      robust=summary, results=records)
