@@ -230,11 +230,17 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
     assert status == 0, stderr
     data = json.loads(stdout)
     robust, records = data["robust"], data["results"]
-    assert robust["converged"] and not robust["stroke_limited"]
+    # the default 0.07 m limit is active at 2 m/s2 and every scenario's stroke keeps it
+    assert robust["converged"] and robust["stroke_limited"] and robust["within_stroke_limit"]
+    assert robust["stroke_limit_m"] == 0.07
+    assert all(r["stroke_after_m"] <= 0.07 for r in records)
+    assert max(r["stroke_after_m"] for r in records) == pytest.approx(0.07, rel=3e-3)
     assert [r["frequency_scale"] for r in records] == pytest.approx([0.95, 1.0, 1.05])
     ratios = [r["peak_after_over_best"] for r in records]
     assert min(ratios) >= 1 - 1e-6 and robust["worst_ratio"] == pytest.approx(max(ratios))
-    assert robust["worst_ratio"] <= robust["given_worst_ratio"] * (1 + 1e-6)
+    # (the given tuning's strokes are not limited: its worst ratio, 1.44, is no bound on
+    # the limited design's, 2.59)
+    assert robust["worst_ratio"] > 1.0
     for r in records:
         assert r["peak_after"] == pytest.approx(r["peak_after_over_best"] * r["peak_best"])
         assert r["stroke_after_m"] > 0 and r["status"].startswith("ok")

@@ -43,9 +43,9 @@ def _same(value, expected):
 @pytest.fixture(scope="module")
 def random_run(tmp_path_factory):
     """The paper's host under a white-noise force, with its friction, at one S0 where the
-    statistical linearisation finds no design (its values null)."""
+    statistical linearisation has no solution (its values null, its status says why)."""
     out = tmp_path_factory.mktemp("random")
-    status, stdout, stderr = run(["random", "--psd", "300", *MONTE_CARLO, "--out", out,
+    status, stdout, stderr = run(["random", "--psd", "30", *MONTE_CARLO, "--out", out,
                                   "--json"])
     assert status == 0, stderr
     return json.loads(stdout), stderr, out
@@ -54,15 +54,21 @@ def random_run(tmp_path_factory):
 def test_random_json_is_the_library_s_retune(random_run):
     data, _, _ = random_run
     system = tj.as_building(tj.paper_system(), load="force")
-    mine = tj.retune_random(system, tj.StationaryLoad("white_noise", 300.0), [300.0],
+    mine = tj.retune_random(system, tj.StationaryLoad("white_noise", 30.0), [30.0],
                             tj.Quantity(), settings=SETTINGS)
     (result,) = data["results"]
     assert set(RESULT_KEYS) <= set(result)
     for key, name in RESULT_KEYS.items():
         assert _same(result[key], np.asarray(getattr(mine, name))[0]), key
     assert result["rms_linearised"] is None and result["rms_before_se"] > 0
+    # why there is no linearised design: its outcome's text, the library's
+    assert result["linearised_status"] == mine.linearised_messages()[0]
+    assert "no statistical linearisation" in result["linearised_status"]
+    assert result["stroke_rms_after"] == pytest.approx(float(mine.stroke_rms_after[0]),
+                                                       rel=1e-10)
+    assert result["at_bound"] is bool(mine.at_bound[0]) and result["stroke_limited"] is False
     assert result["rms_frictionless"] == pytest.approx(
-        float(tj.rms_response(system, tj.StationaryLoad("white_noise", 300.0))), rel=1e-10)
+        float(tj.rms_response(system, tj.StationaryLoad("white_noise", 30.0))), rel=1e-10)
     # the paper's host with Den Hartog's tuning and exact friction, its displacement
     assert data["given_tuning"]["tid_stiffness"] == pytest.approx(float(system.tid_stiffness))
     assert data["friction_width"] == 0.0 and data["system"]["friction_force"] == 20.0
@@ -88,9 +94,10 @@ def test_random_writes_its_files_and_says_what_it_does(random_run):
     header, rows = read_csv(out / "random.csv")
     assert set(RESULT_KEYS) <= set(header) and len(rows) == 1
     assert rows[0][header.index("rms_linearised")] == ""  # no linearised design: empty
-    assert "S0 = 300 N^2 s/rad: retuned (1/1)" in stderr and "done in" in stderr
+    assert rows[0][header.index("linearised_status")] == data["results"][0]["linearised_status"]
+    assert "S0 = 30 N^2 s/rad: retuned (1/1)" in stderr and "done in" in stderr
     config = (out / "random_config.toml").read_text()
-    assert 'kind = "white_noise"' in config and "300.0" in config
+    assert 'kind = "white_noise"' in config and "30.0" in config
 
 
 BUILDING = """

@@ -17,7 +17,8 @@ from scipy.optimize import minimize
 
 import tid_jax as tj
 from tid_jax._monte_carlo import first_period, plan
-from tid_jax._random_design import _linearised_log_rms, log_mean_square
+from tid_jax._outcomes import outcome_code
+from tid_jax._random_design import _linearised_log_rms, log_mean_square, log_mean_squares
 
 LOAD = tj.StationaryLoad("white_noise", 700.0)
 # a fixed time step: the same steps whatever the inertance (its first period)
@@ -246,3 +247,102 @@ def test_record_design_with_friction_lowers_the_mean_peak():
         tj.design_for_records(_paper(), motions)
     with pytest.raises(ValueError, match="GroundMotion"):
         tj.design_for_records(system, [])
+
+
+def _exact_log_squares(system, load, x):
+    """ln of the exact mean squares of the top floor and the stroke at (ln k, ln c), by
+    the Lyapunov covariance read directly."""
+    tuned = system.replace(tid_stiffness=float(np.exp(x[0])), tid_damping=float(np.exp(x[1])))
+    P = np.asarray(tj.stationary_covariance(tuned, load))
+    return np.log([P[0, 0], P[tuned.floors, tuned.floors]])
+
+
+def test_bounded_stroke_limited_frictionless_design_is_scipy_s():
+    # Without friction: the H2 optimum (k 43.9 kN/m, stroke RMS 2.11 mm at S0 = 700)
+    # against an upper bound on k of 40 kN/m (stroke 1.90 mm there) and a stroke limit
+    # of 1.79 mm, both active.
+    # scipy's trust-constr on the exact covariance (difference quotients) is the reference.
+    system = _paper(0.0)
+    free = tj.retune_random(system, LOAD, [700.0])
+    limit = 0.85 * float(free.stroke_rms_after[0])
+    bounds = ((1e3, 4e4), (10.0, 5e3))
+    result = tj.retune_random(system, LOAD, [700.0], bounds=bounds, stroke_limit=limit)
+    assert float(free.tid_stiffness[0]) > 4e4 and not bool(free.at_bound[0])
+    assert bool(result.converged[0]) and bool(result.at_bound[0])
+    assert bool(result.stroke_limited[0]) and bool(result.within_stroke_limit[0])
+    x = np.log([float(result.tid_stiffness[0]), float(result.tid_damping[0])])
+    ours = _exact_log_squares(system, LOAD, x)
+    assert 0.5 * ours[1] <= math.log(limit) + 1e-9
+    assert float(np.exp(0.5 * ours[1])) == pytest.approx(float(result.stroke_rms_after[0]),
+                                                         rel=1e-9)
+    found = minimize(lambda v: _exact_log_squares(system, LOAD, v)[0], np.log([3e4, 400.0]),
+                     method="trust-constr", bounds=np.log(bounds),
+                     constraints=[{"type": "ineq", "fun": lambda v: math.log(limit) - 0.5 *
+                                   _exact_log_squares(system, LOAD, v)[1]}],
+                     options=dict(xtol=1e-10, gtol=1e-10, maxiter=2000))
+    assert 0.5 * _exact_log_squares(system, LOAD, found.x)[1] <= math.log(limit) + 1e-6
+    # the same mean square within 0.2% (ours aims 0.1% inside the limit)
+    assert ours[0] <= found.fun + 2e-3
+    assert float(result.rms_after[0]) > float(free.rms_after[0])
+    np.testing.assert_allclose(result.stiffness_bounds, bounds[0])
+    np.testing.assert_allclose(result.damping_bounds, bounds[1])
+
+
+# Shorter runs for the designs at a low intensity: the design against an optimiser on the
+# same estimate, not a converged one.
+SHORT = tj.MonteCarloSettings(samples=8, duration=6.0, transient=2.0, time_step=1.4e-3,
+                              seed=4)
+
+
+def test_low_intensity_design_is_bounded_and_stroke_limited_as_scipy_s():
+    # At S0 = 30 the free optimum braces the host through the stuck inerter; the default
+    # bounds (10x Den Hartog) hold c, and a stroke limit of 0.1 mm RMS (below the
+    # bounded design's, about 0.12 mm) is active too. scipy's trust-constr on the same
+    # estimate (common random numbers, its exact gradient) is the reference: it ends on
+    # the limit as well.
+    system, low, limit = _smooth(), tj.StationaryLoad("white_noise", 30.0), 1e-4
+    result = tj.retune_random(system, low, [30.0], settings=SHORT, stroke_limit=limit)
+    assert bool(result.converged[0]) and bool(result.at_bound[0])
+    assert bool(result.stroke_limited[0]) and bool(result.within_stroke_limit[0])
+    box = np.log(np.asarray(tj.default_bounds(system)))
+    run_plan, key = plan(system, SHORT), jax.random.key(SHORT.seed)
+    f = jax.jit(lambda x: log_mean_squares(x, system, low, tj.Quantity(), run_plan, key,
+                                           SHORT.samples))
+    jac = jax.jit(jax.jacfwd(f))
+    x = np.log([float(result.tid_stiffness[0]), float(result.tid_damping[0])])
+    ours = np.asarray(f(jnp.asarray(x)))
+    assert np.all((x >= box[:, 0] - 1e-12) & (x <= box[:, 1] + 1e-12))
+    assert 0.5 * ours[1] <= math.log(limit)
+    found = minimize(lambda v: float(f(jnp.asarray(v))[0]), np.asarray(_log_tuning(system)),
+                     jac=lambda v: np.asarray(jac(jnp.asarray(v)))[0], method="trust-constr",
+                     bounds=box, constraints=[{
+                         "type": "ineq",
+                         "fun": lambda v: math.log(limit) - 0.5 * float(f(jnp.asarray(v))[1]),
+                         "jac": lambda v: -0.5 * np.asarray(jac(jnp.asarray(v)))[1]}],
+                     options=dict(xtol=1e-10, gtol=1e-9, maxiter=500))
+    theirs = 0.5 * float(f(jnp.asarray(found.x))[1])
+    assert math.log(limit) - 2e-3 <= theirs <= math.log(limit) + 1e-6  # on the limit
+    assert ours[0] <= found.fun + 3e-3  # ln mean square; ours aims 0.1% inside the limit
+
+
+def test_locked_linearisation_is_flagged():
+    # At S0 = 30 the spring and damper's RMS force is below what the friction holds: the
+    # linearisation has no self-consistent solution (the scan of statistical_linearisation
+    # finds none) and the design says so.
+    system, low = _paper(), tj.StationaryLoad("white_noise", 30.0)
+    assert tj.statistical_linearisation(system, low).locked
+    result = tj.retune_random(system, low, [30.0], settings=SHORT)
+    assert int(result.linearised_status[0]) == outcome_code(tj.Outcome.locked)
+    assert "no statistical linearisation" in result.linearised_messages()[0]
+    assert np.isnan(float(result.linearised_stiffness[0]))
+    assert np.isnan(float(result.rms_linearised[0]))
+    assert np.isfinite(float(result.rms_after[0]))
+
+
+def test_bad_bounds_and_stroke_limit_are_refused():
+    system = _paper(0.0)
+    for bounds in (((2e4, 1e4), (10.0, 100.0)), ((1e4, 2e4),), ((-1.0, 2e4), (1.0, 2.0))):
+        with pytest.raises(ValueError, match="bounds"):
+            tj.retune_random(system, LOAD, [700.0], bounds=bounds)
+    with pytest.raises(ValueError, match="stroke_limit"):
+        tj.retune_random(system, LOAD, [700.0], stroke_limit=-0.01)

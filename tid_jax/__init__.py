@@ -37,8 +37,8 @@ _API = {
     "_sensitivity": ("OptimumSensitivities", "SensitivitySettings", "Sensitivities",
                      "amplitude_sensitivities", "sensitivities"),
     "_settings": ("SolverSettings",),
-    "_random_design": ("RandomDesign", "RandomSensitivities", "random_sensitivities",
-                       "retune_random"),
+    "_random_design": ("RandomDesign", "RandomSensitivities", "default_bounds",
+                       "random_sensitivities", "retune_random"),
     "_record_design": ("RecordDesign", "design_for_records"),
     "_records": ("GroundMotion", "History", "jennings_envelope", "linear_history", "read_at2",
                  "read_csv_record", "synthetic_motion"),
@@ -121,6 +121,7 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
     from ._random_design import (
         RandomDesign as RandomDesign,
         RandomSensitivities as RandomSensitivities,
+        default_bounds as default_bounds,
         random_sensitivities as random_sensitivities,
         retune_random as retune_random,
     )

@@ -302,13 +302,32 @@ class BandSearch:
 
 class _Minimax:
     """The highest of the scenarios' log peaks less their `offsets`, as SLSQP's
-    constraints, with the best design so far; a search that gains less than `rtol` in
-    `_STALL` evaluations is stopped (`_Stalled`)."""
+    constraints, with the best feasible design so far; a search that gains less than
+    `rtol` in `_STALL` evaluations is stopped (`_Stalled`). `limits(x) -> (values,
+    gradients)` (and `limits.values(x)`, the values alone): further constraints,
+    values <= 0, a design feasible where each is within `slack`."""
 
-    def __init__(self, searches, offsets, rtol):
+    def __init__(self, searches, offsets, rtol, limits=None, slack=0.0):
         self.searches, self.offsets, self.rtol = searches, np.asarray(offsets, float), rtol
+        self.limits, self.slack = limits, slack
         self.stalled, self.seen = 0, set()
         self.best = None  # (worst, x, log peaks less offsets, gradients)
+
+    def limit_rows(self, v):
+        """The further constraints' values and gradients at `v`, `_PENALTY` (flat) where
+        one was not found."""
+        values, gradients = self.limits(v[:2])
+        values, gradients = np.asarray(values, float), np.asarray(gradients, float)
+        found = np.isfinite(values) & np.all(np.isfinite(gradients), axis=1)
+        return (np.where(found, values, _PENALTY),
+                np.where(found[:, None], gradients, 0.0))
+
+    def feasible(self, x) -> bool:
+        """Whether every further constraint (`limits.values`) is within `slack` at x."""
+        if self.limits is None:
+            return True
+        values = np.asarray(self.limits.values(x[:2]), float)
+        return bool(np.all(np.isfinite(values) & (values <= self.slack)))
 
     def __call__(self, x):
         found = [search(x) for search in self.searches]
@@ -319,8 +338,8 @@ class _Minimax:
         key = tuple(np.asarray(x[:2], float))
         if key not in self.seen:
             self.seen.add(key)
-            self.stalled += 1
-            if ok and (self.best is None or logs.max() < self.best[0]):
+            self.stalled += self.best is not None  # (none yet: still looking for one)
+            if ok and (self.best is None or logs.max() < self.best[0]) and self.feasible(x):
                 if self.best is None or logs.max() < self.best[0] - self.rtol:
                     self.stalled = 0
                 self.best = (logs.max(), np.asarray(key), logs, slopes)
@@ -334,9 +353,13 @@ class _Minimax:
         in the peaks' linear model (a linear program)."""
         top, _, logs, slopes = self.best
         # min t over (dlog k, dlog c, t) subject to logs + slopes . d <= t
-        model = scipy.optimize.linprog(
-            [0.0, 0.0, 1.0], A_ub=np.column_stack([slopes, -np.ones(len(logs))]),
-            b_ub=-logs, bounds=[(-_REACH, _REACH)] * 2 + [(None, None)])
+        rows, bounds = np.column_stack([slopes, -np.ones(len(logs))]), -logs
+        if self.limits is not None:  # and the further constraints' linear models
+            values, gradients = self.limit_rows(self.best[1])
+            rows = np.vstack([rows, np.column_stack([gradients, np.zeros(len(values))])])
+            bounds = np.concatenate([bounds, np.maximum(-values, 0.0)])
+        model = scipy.optimize.linprog([0.0, 0.0, 1.0], A_ub=rows, b_ub=bounds,
+                                       bounds=[(-_REACH, _REACH)] * 2 + [(None, None)])
         return bool(model.status == 0 and top - model.fun <= _GAIN)
 
     def constraints(self, v):
@@ -353,28 +376,36 @@ class _Minimax:
         return rows
 
 
-def minimax(searches, offsets, x0, centre, rtol: float, max_steps: int):
+def minimax(searches, offsets, x0, centre, rtol: float, max_steps: int, limits=None,
+            slack: float = 0.0):
     """The design (log k, log c) that minimises the highest over the `searches`
     (`BandSearch`) of their log peaks less `offsets`: SLSQP (scipy) on the epigraph form,
-    min t subject to every log peak less its offset <= t, from `x0` and within `_RANGE`
-    of `centre`. Returns the best design, its worst value and whether the search
-    converged (SLSQP's test, or a stall at a first-order minimax point); None where the
-    start was not found."""
-    problem = _Minimax(searches, offsets, rtol)
+    min t subject to every log peak less its offset <= t and, if given, `limits(x) ->
+    (values, gradients)` <= 0 (see `_Minimax`), from `x0` and within `_RANGE` of
+    `centre`. Returns the best design (feasible: each limit within `slack`), its worst
+    value and whether the search converged (SLSQP's test, or a stall at a first-order
+    minimax point); None where the start was not found, or no feasible design was."""
+    problem = _Minimax(searches, offsets, rtol, limits, slack)
     logs, _, ok = problem(x0)
     if not ok:
         return None
     bounds = [(x - np.log(r), x + np.log(r)) for x, r in zip(centre, _RANGE, strict=True)]
+    constraints = [{"type": "ineq", "fun": problem.constraints, "jac": problem.jacobian}]
+    if limits is not None:
+        constraints.append({
+            "type": "ineq", "fun": lambda v: -problem.limit_rows(v)[0],
+            "jac": lambda v: np.column_stack([-problem.limit_rows(v)[1],
+                                              np.zeros(len(problem.limit_rows(v)[0]))])})
     try:
         solution = scipy.optimize.minimize(
             lambda v: v[2], np.append(x0, logs.max()), jac=lambda v: np.eye(3)[2],
             method="SLSQP", bounds=bounds + [(None, None)],
-            options={"ftol": rtol, "maxiter": max_steps},
-            constraints=[{"type": "ineq", "fun": problem.constraints,
-                          "jac": problem.jacobian}])
+            options={"ftol": rtol, "maxiter": max_steps}, constraints=constraints)
         success = solution.success
     except _Stalled:
         success = False
+    if problem.best is None:
+        return None
     return problem.best[1], problem.best[0], success or problem.stationary()
 
 

@@ -36,3 +36,6 @@ class Outcome(eqx.Enumeration):
     stuck = ("below the breakaway amplitude: the inerter never slips and the TID is a spring "
              "and damper to ground, which retuning would only stiffen; initial tuning kept")
     stroke_over_limit = "stroke over the limit on the check grid"
+    locked = ("no statistical linearisation: the spring and damper's RMS force stays below "
+              "what the friction holds (about 1.4 ff), the inerter locks and no viscous "
+              "equivalent is self-consistent; no linearised design")

@@ -454,14 +454,17 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
     """One tuning for every amplitude and, with `tolerance` f, the structure's natural
     frequencies (1 +- f) times the nominal (its stiffness (1 +- f)^2 times)."""
     scales = [1.0] if tolerance == 0 else [(1 - tolerance) ** 2, 1.0, (1 + tolerance) ** 2]
+    stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
+    limited = "not limited" if stroke_limit is None else f"within {stroke_limit:g} m"
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "robust tuning over {amplitudes} amplitude(s) x "
-        f"{len(scales)} structure frequencies, the stroke not limited for a [structure]")
+        f"{len(scales)} structure frequencies, the stroke {limited}")
     band = omegas if "band_hz" in inputs else None
     settings = SolverSettings(**inputs[SOLVER_TABLE])
     with output.steps(len(scales) + 3) as step:
         result = robust_building(system, amplitudes, quantity, stiffness_scales=scales,
-                                 omegas=band, settings=settings, progress=step)
+                                 omegas=band, stroke_limit=stroke_limit,
+                                 settings=settings, progress=step)
         robust = tuned(system, result.tid_stiffness, result.tid_damping)
         given = np.stack([np.asarray(building_peaks(
             scaled(system, scale), amplitudes, quantity, omegas=band,
@@ -470,7 +473,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                                           settings)[0] for scale in scales], axis=1)
                   for name, s in (("before", system), ("after", robust))}
         step("the given tuning's peaks, and the strokes over the band")
-    limit = inputs["stroke_limit"]
+    limit = stroke_limit
     records = [row(ROBUST_COLUMNS, frequency_scale=math.sqrt(scale), amplitude=float(a),
                    amplitude_unit=amplitude_unit(system.load),
                    k_N_per_m=float(result.tid_stiffness), c_N_s_per_m=float(result.tid_damping),
@@ -479,11 +482,12 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                    peak_before_over_best=ratio(given[i, j], result.best[i, j]),
                    peak_after_over_best=finite(result.ratio[i, j]),
                    stroke_before_m=finite(stroke["before"][i, j]),
-                   stroke_after_m=finite(stroke["after"][i, j]), stroke_limit_m=limit,
-                   within_stroke_limit=bool(stroke["after"][i, j] <= limit),
+                   stroke_after_m=finite(result.stroke_peak[i, j]), stroke_limit_m=limit,
+                   within_stroke_limit=None if limit is None else bool(
+                       result.stroke_peak[i, j] <= limit),
                    converged=bool(result.converged),
                    status=status(bool(result.converged),
-                                 stroke_problem(stroke["after"][i, j], limit)))
+                                 stroke_problem(result.stroke_peak[i, j], limit)))
                for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
     save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     save_config(inputs, output, "robust")
@@ -505,7 +509,9 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                "worst_ratio": float(result.worst_ratio), "converged": bool(result.converged),
                "given_k_N_per_m": float(system.tid_stiffness),
                "given_c_N_s_per_m": float(system.tid_damping),
-               "given_worst_ratio": float(np.max(given_ratio)), "stroke_limited": False,
+               "given_worst_ratio": float(np.max(given_ratio)),
+               "stroke_limited": bool(result.stroke_limited), "stroke_limit_m": stroke_limit,
+               "within_stroke_limit": bool(result.within_stroke_limit),
                "max_stroke_m": finite(np.nanmax(stroke["after"])),
                "status": status(bool(result.converged))}
     data = document("robust", inputs, system, quantity, frequencies_hz, output,
@@ -514,8 +520,8 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
     write_json(output.path("robust.json"), data)
     title = (f"Robust tuning k = {summary['k_N_per_m']:.5g} N/m, c = "
              f"{summary['c_N_s_per_m']:.5g} N s/m: worst {summary['worst_ratio']:.4f} of "
-             f"the best (given tuning: {summary['given_worst_ratio']:.4f}), the stroke not "
-             f"limited; {summary['status']}; {describe(system, quantity)}")
+             f"the best (given tuning: {summary['given_worst_ratio']:.4f}), the stroke "
+             f"{limited}; {summary['status']}; {describe(system, quantity)}")
     return output.finish(data, title + "\n" + table(ROBUST_TABLE, records))
 
 

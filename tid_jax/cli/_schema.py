@@ -58,8 +58,9 @@ RANDOM_COLUMNS = (
     "psd", "psd_unit", "k_N_per_m", "c_N_s_per_m",
     "rms_unit", "rms_before", "rms_before_se", "rms_after", "rms_after_se",
     "rms_after_over_before", "linearised_k_N_per_m", "linearised_c_N_s_per_m",
-    "rms_linearised", "rms_linearised_se", "rms_frictionless",
-    "stroke_before_m", "stroke_after_m", "converged", "status",
+    "rms_linearised", "rms_linearised_se", "rms_frictionless", "linearised_status",
+    "stroke_before_m", "stroke_after_m", "stroke_rms_before_m", "stroke_rms_after_m",
+    "at_bound", "stroke_limited", "converged", "status",
 )
 RECORDS_COLUMNS = (
     "name", "file", "amplitude", "amplitude_unit", "duration_s", "k_N_per_m", "c_N_s_per_m",

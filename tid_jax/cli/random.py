@@ -15,7 +15,7 @@ from .. import __version__, plot
 from .._building import BuildingTID, Quantity, as_building, linear_building_response
 from .._io import write_json
 from .._monte_carlo import MonteCarloSettings, first_period, plan, random_history
-from .._random_design import retune_random
+from .._random_design import default_bounds, retune_random
 from .._stationary import StationaryLoad, rms_response
 from .._system import TIDSystem
 from . import _building
@@ -64,6 +64,17 @@ def _add_random_parser(subparsers) -> None:
         f"{' '.join(f'{s:g}' for s in DEFAULT_PSD_LEVELS)})",
     )
     _add_monte_carlo_arguments(parser.add_argument_group("Monte Carlo"))
+    limits = parser.add_argument_group("design limits")
+    limits.add_argument(
+        "--stiffness-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
+        help="bounds on k [N/m] (default: 1/10 and 10 times the first mode's Den Hartog k)")
+    limits.add_argument(
+        "--damping-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
+        help="bounds on c [N s/m] (default: 1/10 and 10 times the first mode's Den "
+        "Hartog c)")
+    limits.add_argument(
+        "--stroke-rms-limit", type=float, metavar="M",
+        help="limit on the Monte Carlo design's stroke RMS [m] (default: none)")
     _add_output_arguments(parser)
     parser.set_defaults(amplitudes=None, band_hz=None, n_frequencies=None)
 
@@ -217,6 +228,7 @@ def _run_random(args) -> int:
     with output.steps(levels.size + 1) as step:
         design = retune_random(
             system, load(levels[0]), levels, quantity, settings=settings,
+            bounds=_bounds(args, system), stroke_limit=args.stroke_rms_limit,
             progress=lambda done, total: step(
                 f"S0 = {levels[done - 1]:g} {unit}: retuned ({done}/{total})"))
         retuned = tuned(system, design.tid_stiffness[top], design.tid_damping[top])
@@ -245,7 +257,31 @@ def _run_random(args) -> int:
                              "peak_after": float(histories[1].peak)},
                     results=records)
     write_json(json_path, data)
-    return output.finish(data, _table(records, case, parameters["kind"], unit))
+    notes = "".join(f"\nS0 = {r['psd']:g} {unit}: {r['linearised_status']}" for r in records
+                    if r["linearised_status"] != "ok")
+    return output.finish(data, _table(records, case, parameters["kind"], unit) + notes)
+
+
+def _bounds(args, system: BuildingTID):
+    """The bounds on (k, c) of --stiffness-bounds and --damping-bounds, the default for
+    one not given; None where neither is."""
+    if args.stiffness_bounds is None and args.damping_bounds is None:
+        return None
+    default = default_bounds(system)
+    return (default[0] if args.stiffness_bounds is None else tuple(args.stiffness_bounds),
+            default[1] if args.damping_bounds is None else tuple(args.damping_bounds))
+
+
+def _limit_records(design) -> list[dict]:
+    """Per level: the linearisation's outcome (its text), the stroke RMS before and
+    after (m), and whether a bound and the stroke limit are active."""
+    columns = {name: np.asarray(getattr(design, name)) for name in (
+        "stroke_rms_before", "stroke_rms_after", "at_bound", "stroke_limited")}
+    return [{"linearised_status": message,
+             **{name + ("_m" if name.startswith("stroke_rms") else ""):
+                (bool(c[i]) if c.dtype == bool else finite(c[i]))
+                for name, c in columns.items()}}
+            for i, message in enumerate(design.linearised_messages())]
 
 
 def _cost(system: BuildingTID) -> str:
@@ -262,6 +298,7 @@ def _records(design, frictionless, histories, top, psd_unit, rms_unit,
         return np.asarray(getattr(design, name))
 
     records = []
+    limits = _limit_records(design)
     for i, s0 in enumerate(column("psd_levels")):
         stroke = ({} if i != top else {
             f"stroke_{when}_m": float(np.max(np.abs(np.asarray(h.stroke))))
@@ -283,7 +320,7 @@ def _records(design, frictionless, histories, top, psd_unit, rms_unit,
             rms_frictionless=finite(frictionless[i]), converged=converged,
             status=status(converged, stroke_problem(stroke.get("stroke_after_m"),
                                                     stroke_limit)),
-            **stroke))
+            **stroke, **limits[i]))
     return records
 
 
