@@ -49,7 +49,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
-from tid_jax._system import FRICTION_WIDTH_RATIO  # noqa: E402
+from tid_jax._model._system import FRICTION_WIDTH_RATIO  # noqa: E402
 
 STOREY_MASS = 3.0e5  # kg
 FIRST_MODE_HZ = 1.0

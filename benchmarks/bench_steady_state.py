@@ -43,7 +43,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
 from benchmarks import baselines  # noqa: E402
-from tid_jax._band import DEFAULT_FREQUENCIES  # noqa: E402
+from tid_jax._peaks import DEFAULT_FREQUENCIES  # noqa: E402
 
 WIDTH = 1e-4  # m/s, the friction width of every method here
 MATCH = 1e-4  # peaks within this of the reference count as matched

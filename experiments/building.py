@@ -46,7 +46,7 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     shape = np.linspace(1.0, 0.5, STOREYS)
     masses = np.full(STOREYS, STOREY_MASS)

@@ -48,7 +48,7 @@ def main() -> None:
     out = parser.parse_args().out
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     paper = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     k_dh, c_dh = float(paper.tid_stiffness), float(paper.tid_damping)

@@ -36,7 +36,7 @@ def main() -> None:
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     system = tj.paper_system(friction_width=None)  # the real-time test smooths the friction
     frequencies_hz = np.linspace(3.0, 5.0, args.n_frequencies)

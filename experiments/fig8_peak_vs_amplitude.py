@@ -38,7 +38,7 @@ def main() -> None:
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     system = tj.paper_system(friction_width=None)  # the relative width of docs/figures
     amplitudes = np.asarray(tj.PAPER_AMPLITUDES)

@@ -30,7 +30,7 @@ def main() -> None:
     jax.config.update("jax_enable_x64", True)
     os.environ.setdefault("EQX_ON_ERROR", "nan")
     import tid_jax as tj
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     tj.enable_compilation_cache()
     load = tj.StationaryLoad("white_noise", PSD)

@@ -42,7 +42,7 @@ def main() -> None:
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     start = time.perf_counter()
 

@@ -43,7 +43,7 @@ def main() -> None:
 
     tj.enable_compilation_cache()  # $TID_JAX_CACHE_DIR=off turns it off
     from tid_jax import plot
-    from tid_jax._io import write_csv
+    from tid_jax._runtime._io import write_csv
 
     system = tj.paper_system(friction_width=None)  # the real-time test smooths the friction
     ratios = np.round(np.arange(0.3, 2.001, 0.1), 10)

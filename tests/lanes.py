@@ -4,7 +4,7 @@ import jax
 import numpy as np
 
 import tid_jax as tj
-from tid_jax._band import response_peaks
+from tid_jax._peaks import response_peaks
 from tid_jax._response import lane_response
 
 

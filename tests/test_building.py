@@ -174,8 +174,8 @@ def test_exact_coulomb_matches_the_event_driven_reference(building):
 def test_peak_derivatives_are_differences_of_steady_states(building, friction, ratio):
     import jax.numpy as jnp
 
-    from tid_jax._building_design import peak_gradient
-    from tid_jax._building_orbit import building_settings, solve_orbits
+    from tid_jax._optimise._building_design import peak_gradient
+    from tid_jax._orbit._building_orbit import building_settings, solve_orbits
 
     system = tj.BuildingTID(building, B, friction * B * 9.81, 4e4, 500.0, load="ground")
     omega = ratio * building.modes()[0][0]

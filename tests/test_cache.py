@@ -20,7 +20,7 @@ SCRIPT = textwrap.dedent(
     import jax.numpy as jnp
     import numpy as np
     import tid_jax as tj
-    from tid_jax._cache import compiled
+    from tid_jax._runtime._cache import compiled
 
     traces = {"plain": 0, "callback": 0, "optioned": 0}
     events = []

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax import _io
+from tid_jax._runtime import _io
 from tid_jax.cli import main
 from tid_jax.cli.frf import FRF_COLUMNS
 from tid_jax.cli.retune import RETUNE_COLUMNS

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax._system import compiler_options
+from tid_jax._model._system import compiler_options
 
 try:
     from lanes import peaks_of
@@ -186,7 +186,7 @@ def test_gradients_match_finite_differences():
 def test_stuck_stroke_is_no_candidate_of_the_worst_case():
     # with exact friction a terminal stuck at a band end has stroke 0: its log is no
     # candidate of the smooth worst case (nor a NaN in its gradient)
-    from tid_jax._design import _log_candidates
+    from tid_jax._optimise._design import _log_candidates
 
     omegas = np.linspace(20.0, 30.0, 6)
     stroke = np.array([0.0, 1e-3, 2e-3, 3e-3, 2e-3, 1e-3])

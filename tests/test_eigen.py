@@ -1,4 +1,4 @@
-"""Eigen-decompositions of batches that hold non-finite matrices (`tid_jax._eigen`): LAPACK
+"""Eigen-decompositions of batches that hold non-finite matrices (`tid_jax._orbit._eigen`): LAPACK
 (`geev`) is never handed a NaN or inf entry, whose results are NaN; the finite matrices'
 results are those of numpy's own LAPACK binding."""
 
@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tid_jax import _eigen
+from tid_jax._orbit import _eigen
 
 
 def _batch():

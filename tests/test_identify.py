@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax import _identify
-from tid_jax._device import ForceSettings, Motion, friction_width
+from tid_jax._identify import _fit as _identify
+from tid_jax._identify._device import ForceSettings, Motion, friction_width
 from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
 
 try:

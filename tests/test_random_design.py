@@ -16,9 +16,9 @@ import pytest
 from scipy.optimize import minimize
 
 import tid_jax as tj
-from tid_jax._monte_carlo import first_period, plan
-from tid_jax._outcomes import outcome_code
-from tid_jax._random_design import _linearised_log_rms, log_mean_square, log_mean_squares
+from tid_jax._loads._monte_carlo import first_period, plan
+from tid_jax._runtime._outcomes import outcome_code
+from tid_jax._loads._random_design import _linearised_log_rms, log_mean_square, log_mean_squares
 
 LOAD = tj.StationaryLoad("white_noise", 700.0)
 # a fixed time step: the same steps whatever the inertance (its first period)

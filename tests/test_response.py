@@ -289,8 +289,8 @@ def _orbit_at(system, amplitude, omega, directions=()):
     """Jitted (k, c) -> the orbit of `system` tuned to (k, c), at one forcing point."""
     import jax
 
-    from tid_jax._dynamics import parameter_vector
-    from tid_jax._steady_state import SolverSettings, solve_orbit
+    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._steady_state import SolverSettings, solve_orbit
 
     def orbit(k, c):
         tuned = system.replace(tid_stiffness=k, tid_damping=c)
@@ -323,8 +323,8 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     # tangents reach the orbit that Newton's method finds from the linear guess.
     import jax
 
-    from tid_jax._dynamics import parameter_vector
-    from tid_jax._steady_state import SolverSettings, refined_peak, settled_state
+    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._steady_state import SolverSettings, refined_peak, settled_state
 
     omega, k, c = float(system.host_frequency), float(system.tid_stiffness), float(
         system.tid_damping)
@@ -467,8 +467,8 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
     # the returned state, integrated at rtol 1e-12 (stick-slip at 100 and 200 N).
     import jax
 
-    from tid_jax._dynamics import parameter_vector
-    from tid_jax._period import period_samples
+    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._period import period_samples
 
     omega = ratio * float(system.host_frequency)
     response = tj.frequency_response(system, omega, amplitude)
@@ -484,8 +484,8 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
 
 
 def _period_end(system, amplitude, omega, z, settings):
-    from tid_jax._dynamics import parameter_vector
-    from tid_jax._period import period_samples
+    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._period import period_samples
 
     settings = settings.for_system(system)
     p = parameter_vector(system, amplitude, omega)
@@ -493,8 +493,8 @@ def _period_end(system, amplitude, omega, z, settings):
 
 
 def _initial_state(system, amplitude, omega):
-    from tid_jax._dynamics import parameter_vector
-    from tid_jax._period import initial_state
+    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._period import initial_state
 
     p = parameter_vector(system, amplitude, omega)
     return np.asarray(initial_state(p, system.compliant))

@@ -10,8 +10,8 @@ import pytest
 
 import tid_jax as tj
 from tests.lanes import peaks_of
-from tid_jax._design_variables import DESIGN_SCALE, design_of_tuning
-from tid_jax._system import compiler_options
+from tid_jax._optimise._design_variables import DESIGN_SCALE, design_of_tuning
+from tid_jax._model._system import compiler_options
 
 SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there
 
@@ -78,9 +78,9 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     # The kernel takes derivatives at the samples of each response's highest candidates
     # only; against the derivatives of every sample (jacfwd through the whole sweep), at
     # 200 N (the stroke sticks over part of the band) and 700 N.
-    from tid_jax._band import sweep
-    from tid_jax._design import _TANGENT_CANDIDATES, _log_candidates, changed_system
-    from tid_jax._design_evaluation import Context
+    from tid_jax._peaks import sweep
+    from tid_jax._optimise._design import _TANGENT_CANDIDATES, _log_candidates, changed_system
+    from tid_jax._optimise._design_evaluation import Context
 
     # (the default settings, as `sensitivities` passes them)
     settings = tj.SolverSettings()

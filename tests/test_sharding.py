@@ -24,7 +24,7 @@ import tid_jax as tj
 def measure(chunk: int | None = None) -> dict:
     """The batch and retune computed on every device of this process, as a dict."""
     import tid_jax._response
-    from tid_jax._sharding import batch_sharding, per_device, sharded_batch
+    from tid_jax._runtime._sharding import batch_sharding, per_device, sharded_batch
 
     # Where do the solve's outputs live (before they are trimmed and gathered)? Recorded on
     # the way out of the solve that `frequency_response` shards.
@@ -57,7 +57,7 @@ def measure(chunk: int | None = None) -> dict:
     sharding = batch_sharding()
     # The package's programs are compiled with their XLA options on any number of
     # devices: one that XLA does not know fails the compilation.
-    from tid_jax._cache import compiled
+    from tid_jax._runtime._cache import compiled
 
     @compiled(options=lambda a: {"xla_no_such_option": True})
     def unknown(a):
@@ -159,7 +159,7 @@ def test_retune_on_four_devices_matches_one(runs):
 
 
 def test_map_batch_matches_vmap_and_skips_chunks_without_valid_entries():
-    from tid_jax._sharding import map_batch
+    from tid_jax._runtime._sharding import map_batch
 
     x = jax.numpy.arange(23.0)
     valid = x < 9  # chunks of 4: entries 0-8 valid, chunks from the fourth on all padding

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from tid_jax._sqp import Model, minimise_stage, trust_step
+from tid_jax._optimise._sqp import Model, minimise_stage, trust_step
 
 Q = np.array([[3.0, 1.0], [1.0, 2.0]])
 A = np.array([1.0, -0.5])

@@ -13,7 +13,7 @@ from scipy.integrate import quad
 import tid_jax as tj
 from tests.reference import building_linear
 from tests.test_building import MASSES, STIFFNESSES, B, _matrices
-from tid_jax._stationary import lyapunov
+from tid_jax._loads._stationary import lyapunov
 
 STRUCTURE = tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)
 FIRST = float(STRUCTURE.modes()[0][0])

@@ -5,7 +5,7 @@ import equinox as eqx
 import numpy as np
 import pytest
 
-from tid_jax._outcomes import Outcome, outcome_code, outcome_message
+from tid_jax._runtime._outcomes import Outcome, outcome_code, outcome_message
 
 
 class _Outcome(eqx.Enumeration):

@@ -11,23 +11,23 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _API = {
-    "_band": ("Peaks", "default_omegas", "peak_response", "peaks"),
-    "_best_tunings": ("BestTunings", "best_tunings"),
-    "_building": ("BuildingTID", "Quantity", "as_building", "first_mode_tunings"),
-    "_building_design": ("BuildingRetune", "Peak"),
-    "_building_orbit": ("BuildingResponse",),
-    "_building_robust": ("BuildingRobust",),
-    "_building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
-    "_cache": ("enable_compilation_cache",),
-    "_cache_folder": ("default_cache_dir",),
-    "_device": ("ForceSettings", "InerterDevice"),
-    "_identify": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
+    "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
+    "_optimise._best_tunings": ("BestTunings", "best_tunings"),
+    "_model._building": ("BuildingTID", "Quantity", "as_building", "first_mode_tunings"),
+    "_optimise._building_design": ("BuildingRetune", "Peak"),
+    "_orbit._building_orbit": ("BuildingResponse",),
+    "_optimise._building_robust": ("BuildingRobust",),
+    "_optimise._building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
+    "_runtime._cache": ("enable_compilation_cache",),
+    "_runtime._cache_folder": ("default_cache_dir",),
+    "_identify._device": ("ForceSettings", "InerterDevice"),
+    "_identify._fit": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
                   "identify_inerter"),
-    "_monte_carlo": ("MonteCarlo", "MonteCarloSettings", "friction_history", "monte_carlo",
+    "_loads._monte_carlo": ("MonteCarlo", "MonteCarloSettings", "friction_history", "monte_carlo",
                      "random_history"),
-    "_outcomes": ("Outcome",),
-    "_parallel": ("ProcessMap",),
-    "_linear": ("Breakaway", "LinearReceptance", "den_hartog", "den_hartog_tuning",
+    "_runtime._outcomes": ("Outcome",),
+    "_runtime._parallel": ("ProcessMap",),
+    "_model._linear": ("Breakaway", "LinearReceptance", "den_hartog", "den_hartog_tuning",
                 "paper_system", "stuck_receptance"),
     "_receptance": ("breakaway_amplitude", "linear_receptance"),
     "_response": ("FrequencyResponse", "frequency_response"),
@@ -36,68 +36,68 @@ _API = {
                 "tuning_performance"),
     "_sensitivity": ("OptimumSensitivities", "SensitivitySettings", "Sensitivities",
                      "amplitude_sensitivities", "sensitivities"),
-    "_settings": ("SolverSettings",),
-    "_random_design": ("RandomDesign", "RandomSensitivities", "default_bounds",
+    "_orbit._settings": ("SolverSettings",),
+    "_loads._random_design": ("RandomDesign", "RandomSensitivities", "default_bounds",
                        "random_sensitivities", "retune_random"),
-    "_record_design": ("RecordDesign", "design_for_records"),
-    "_records": ("GroundMotion", "History", "jennings_envelope", "linear_history", "read_at2",
+    "_loads._record_design": ("RecordDesign", "design_for_records"),
+    "_loads._records": ("GroundMotion", "History", "jennings_envelope", "linear_history", "read_at2",
                  "read_csv_record", "synthetic_motion"),
-    "_stationary": ("Linearisation", "StationaryLoad", "h2_tuning", "rms_response",
+    "_loads._stationary": ("Linearisation", "StationaryLoad", "h2_tuning", "rms_response",
                     "stationary_covariance", "statistical_linearisation"),
-    "_structure": ("Structure",),
-    "_substructuring": ("Substructuring", "SubstructuringStability",
+    "_model._structure": ("Structure",),
+    "_substructuring._simulate": ("Substructuring", "SubstructuringStability",
                         "simulate_substructuring", "substructuring_stability"),
-    "_system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
+    "_model._system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
 }
 if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily below
-    from ._band import (
+    from ._peaks import (
         Peaks as Peaks,
         default_omegas as default_omegas,
         peak_response as peak_response,
         peaks as peaks,
     )
-    from ._best_tunings import (
+    from ._optimise._best_tunings import (
         BestTunings as BestTunings,
         best_tunings as best_tunings,
     )
-    from ._building import (
+    from ._model._building import (
         BuildingTID as BuildingTID,
         Quantity as Quantity,
         as_building as as_building,
         first_mode_tunings as first_mode_tunings,
     )
-    from ._building_design import (
+    from ._optimise._building_design import (
         BuildingRetune as BuildingRetune,
         Peak as Peak,
     )
-    from ._building_orbit import (
+    from ._orbit._building_orbit import (
         BuildingResponse as BuildingResponse,
     )
-    from ._building_robust import (
+    from ._optimise._building_robust import (
         BuildingRobust as BuildingRobust,
     )
-    from ._building_sensitivity import (
+    from ._optimise._building_sensitivity import (
         BuildingOptimum as BuildingOptimum,
         BuildingSensitivities as BuildingSensitivities,
     )
-    from ._cache import (
+    from ._runtime._cache import (
         enable_compilation_cache as enable_compilation_cache,
     )
-    from ._cache_folder import (
+    from ._runtime._cache_folder import (
         default_cache_dir as default_cache_dir,
     )
-    from ._device import (
+    from ._identify._device import (
         ForceSettings as ForceSettings,
         InerterDevice as InerterDevice,
     )
-    from ._identify import (
+    from ._identify._fit import (
         IdentifySettings as IdentifySettings,
         InerterFit as InerterFit,
         InerterRecord as InerterRecord,
         ModelComparison as ModelComparison,
         identify_inerter as identify_inerter,
     )
-    from ._linear import (
+    from ._model._linear import (
         Breakaway as Breakaway,
         LinearReceptance as LinearReceptance,
         den_hartog as den_hartog,
@@ -105,20 +105,20 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         paper_system as paper_system,
         stuck_receptance as stuck_receptance,
     )
-    from ._monte_carlo import (
+    from ._loads._monte_carlo import (
         MonteCarlo as MonteCarlo,
         MonteCarloSettings as MonteCarloSettings,
         friction_history as friction_history,
         monte_carlo as monte_carlo,
         random_history as random_history,
     )
-    from ._outcomes import (
+    from ._runtime._outcomes import (
         Outcome as Outcome,
     )
-    from ._parallel import (
+    from ._runtime._parallel import (
         ProcessMap as ProcessMap,
     )
-    from ._random_design import (
+    from ._loads._random_design import (
         RandomDesign as RandomDesign,
         RandomSensitivities as RandomSensitivities,
         default_bounds as default_bounds,
@@ -129,11 +129,11 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         breakaway_amplitude as breakaway_amplitude,
         linear_receptance as linear_receptance,
     )
-    from ._record_design import (
+    from ._loads._record_design import (
         RecordDesign as RecordDesign,
         design_for_records as design_for_records,
     )
-    from ._records import (
+    from ._loads._records import (
         GroundMotion as GroundMotion,
         History as History,
         jennings_envelope as jennings_envelope,
@@ -165,10 +165,10 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         amplitude_sensitivities as amplitude_sensitivities,
         sensitivities as sensitivities,
     )
-    from ._settings import (
+    from ._orbit._settings import (
         SolverSettings as SolverSettings,
     )
-    from ._stationary import (
+    from ._loads._stationary import (
         Linearisation as Linearisation,
         StationaryLoad as StationaryLoad,
         h2_tuning as h2_tuning,
@@ -176,16 +176,16 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         stationary_covariance as stationary_covariance,
         statistical_linearisation as statistical_linearisation,
     )
-    from ._structure import (
+    from ._model._structure import (
         Structure as Structure,
     )
-    from ._substructuring import (
+    from ._substructuring._simulate import (
         Substructuring as Substructuring,
         SubstructuringStability as SubstructuringStability,
         simulate_substructuring as simulate_substructuring,
         substructuring_stability as substructuring_stability,
     )
-    from ._system import (
+    from ._model._system import (
         DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
         PAPER_AMPLITUDES as PAPER_AMPLITUDES,
         PAPER_STROKE as PAPER_STROKE,

@@ -1,234 +1,371 @@
+"""The frequency band and the peaks of the steady-state response over it: the default
+band, a sweep over it, and the peaks of the host (true maxima over frequency) and of
+the inerter terminal (`peaks`, `peak_response`)."""
+
+import functools as ft
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
-# The peak of a response over frequency is the maximum of a smooth function sampled on a
-# grid. A grid peak is refined by the parabola through the largest sample and its
-# neighbours; the true peak (the maximum in continuous frequency) by Newton steps on the
-# slope of the response, each from a stencil of STENCIL_POINTS frequencies PEAK_STEP
-# (relative) apart around the last estimate (the slope and curvature by central
-# differences, the slope's error fourth order in the step), and is the response at the
-# last iterate, which differs from the peak by the square of the iterate's distance from
-# it. Only that response needs derivatives: those of the peak are the response's at its
-# frequency (the envelope theorem), so the stencils are solved without them. Every step
-# has the same stencil, so that a compiled program holds one copy of its solves (a loop).
-PEAK_STEP = 2e-3
-STENCIL_POINTS = 5
-# Newton steps from the grid's parabola vertex: each squares the relative distance to the
-# peak (in units of the peak's width). The peak's derivatives are first order in that
-# distance: after two steps they were 1e-3 off differences of re-located peaks on the
-# paper's system (21 frequencies), after three within 1e-4.
-PEAK_NEWTON_STEPS = 3
+from ._model._building import BuildingTID, Quantity
+from ._optimise._building_design import BAND_POINTS, Peak, building_peaks, first_mode_band
+from ._runtime._cache import compiled
+from ._model._checks import check_grid, check_single_storey_quantity, check_system
+from ._orbit._sampled_peaks import (
+    PEAK_NEWTON_STEPS,
+    REFINED_PEAKS,
+    STENCIL_POINTS,
+    bracket,
+    grid_peak,
+    interpolated,
+    lane_grid_peaks,
+    located_peak,
+    newton_peak,
+    stencil,
+    top_peaks,
+    true_peaks,
+)
+from ._response import (
+    FrequencyResponse,
+    batched,
+    lane_response,
+    point_response,
+    scaled_states,
+)
+from ._orbit._settings import SolverSettings
+from ._model._system import TIDSystem, compiler_options
 
-
-# Local maxima located in continuous frequency per response: the two resonance peaks of a
-# TID and one more (a band end, or a third local maximum).
-REFINED_PEAKS = 3
-
-
-def parabola_top(left, mid, right):
-    """The vertex of the parabola through three equally spaced samples where `mid` is a
-    local maximum of them and they are concave, else `mid` (elementwise)."""
-    curvature = left - 2 * mid + right
-    is_top = (mid >= left) & (mid >= right) & (curvature < 0)
-    safe = jnp.where(is_top, curvature, -1.0)
-    return jnp.where(is_top, mid - (right - left) ** 2 / (8 * safe), mid)
-
-
-def parabola_vertices(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """At every interior sample of `values` on the (possibly non-uniform) grid `omegas`
-    where the samples are concave, the vertex of the parabola through it and its
-    neighbours: its value (no less than the sample's) and frequency (between the
-    neighbours'); elsewhere the sample itself. Returns `(value, omega, is_peak)` for the
-    interior points, `is_peak` marking the local maxima."""
-    v0, v1, v2 = values[:-2], values[1:-1], values[2:]
-    w0, w1, w2 = omegas[:-2], omegas[1:-1], omegas[2:]
-    h0, h1 = w1 - w0, w2 - w1
-    d0, d1 = (v1 - v0) / h0, (v2 - v1) / h1
-    curvature = (d1 - d0) / (h0 + h1)  # half the second derivative
-    concave = curvature < 0
-    safe = jnp.where(concave, curvature, -1.0)
-    slope = d0 + curvature * h0  # first derivative at w1
-    shift = jnp.clip(-slope / (2 * safe), -h0, h1)
-    vertex = v1 + slope * shift + safe * shift**2
-    value = jnp.where(concave, jnp.maximum(vertex, v1), v1)
-    omega = jnp.where(concave, w1 + shift, w1)
-    return value, omega, (v1 >= v0) & (v1 >= v2) & concave
+# Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
+# for TID frequencies from well below to 25% above Den Hartog's.
+BAND = (0.65, 1.4)
+DEFAULT_FREQUENCIES = 61
+# The peaks' programs (`_selection`, `_stencils`, `_newton_steps`, `_peaks_found`) run on
+# chunks of this many lanes (`_in_chunks`), so that one compiled program serves any
+# number of lanes: a run meets many (a retune's checks, a design's stencils, their
+# shares among the processes), each of which compiled a program of its own.
+LANE_CHUNK = 16
 
 
-def local_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """Parabolic refinement of every interior local maximum of `values` on the (possibly
-    non-uniform) grid `omegas`. Returns `(peak, omega_peak, is_peak)` per grid point: at
-    local maxima the vertex of the parabola through the point and its neighbours, else the
-    value itself with `is_peak` False."""
-    vertex, omega_vertex, is_peak = parabola_vertices(values, omegas)
-    peak = jnp.where(is_peak, vertex, values[1:-1])
-    omega_peak = jnp.where(is_peak, omega_vertex, omegas[1:-1])
-    edge = lambda a, i: jnp.concatenate([a[:1], i, a[-1:]])
-    false = jnp.zeros(1, dtype=bool)
-    return edge(values, peak), edge(omegas, omega_peak), jnp.concatenate([false, is_peak, false])
+def default_omegas(system: TIDSystem | BuildingTID,
+                   n: int | None = None) -> Float[Array, " freqs"]:
+    """The default frequency band: 0.65-1.4 times the host frequency of a `TIDSystem`
+    (`n` default `DEFAULT_FREQUENCIES`), or 0.5-1.6 times a `BuildingTID`'s first
+    natural frequency (`n` default `BAND_POINTS`).
+
+    **Arguments:**
+
+    - `system`: a `TIDSystem` or a `BuildingTID`.
+    - `n`: the number of frequencies, an integer >= 5.
+
+    **Returns:** `n` evenly spaced circular frequencies, rad/s.
+    """
+    if n is not None and not (isinstance(n, int) and n >= 5):
+        raise ValueError(f"n must be an integer >= 5, got {n!r}")
+    if isinstance(system, BuildingTID):
+        return jnp.asarray(first_mode_band(system, BAND_POINTS if n is None else n))
+    n = DEFAULT_FREQUENCIES if n is None else n
+    return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 
-def grid_peak(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
-    """The maximum over frequency of `values` sampled on `omegas`, refined by a parabola
-    through the largest sample and its neighbours. Returns `(peak, omega_peak, at_edge)`."""
-    peaks, omega_peaks, _ = local_peaks(values, omegas)
-    i = jnp.argmax(peaks)
-    return peaks[i], omega_peaks[i], (i == 0) | (i == values.shape[0] - 1)
+def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
+    """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
+    one amplitude, shooting from `z_init` (one state per frequency) if given."""
+
+    def one(omega, z0):
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z0)
+        return x_max, y_max, orbit.converged, orbit.state
+
+    if z_init is None:
+        return jax.vmap(lambda omega: one(omega, None))(omegas)
+    return jax.vmap(one)(omegas, z_init)
 
 
-@jax.jit
-def lane_grid_peaks(values: Float[Array, "lanes freqs"], omegas: Float[Array, "lanes freqs"]):
-    """`grid_peak` of each lane of `values` on its grid `omegas`, in one compiled program
-    (not an array operation at a time)."""
-    return jax.vmap(grid_peak)(values, omegas)
+class Peaks(eqx.Module):
+    """Peak steady-state responses over a frequency band, per amplitude (SI): of the host,
+    the maximum in continuous frequency; of the inerter terminal (the stroke), the grid's
+    refined by a parabola (see `response_peaks`)."""
+
+    amplitudes: Float[Array, " amps"]
+    x_peak: Float[Array, " amps"]  # m, NaN where a steady state in the band did not converge
+    y_peak: Float[Array, " amps"]  # m
+    omega_x: Float[Array, " amps"]  # rad/s where the host peak occurs
+    omega_y: Float[Array, " amps"]
+    at_edge: Bool[Array, " amps"]  # host peak at an end of the band
+    converged: Bool[Array, " amps"]  # every steady state in the band converged
 
 
-def _candidates(values, omegas):
-    """Refined local maxima of `values` with the band ends: (peak, omega, is_candidate)."""
-    peaks, omega_peaks, is_peak = local_peaks(values, omegas)
-    return peaks, omega_peaks, is_peak.at[0].set(True).at[-1].set(True)
+class Located(NamedTuple):
+    """The host's highest peaks of each lane of a `lane_response`, located in continuous
+    frequency (`locate_peaks`), as NumPy arrays: the lanes' frequencies and scaled states,
+    and per peak (lanes x `REFINED_PEAKS`) its grid index, the last Newton step's estimate,
+    its frequency, whether it is a local maximum and whether its bracket is interior;
+    `converged`: every steady state of the lane, grid and stencils, converged."""
+
+    omegas: np.ndarray
+    states: np.ndarray
+    index: np.ndarray
+    estimate: np.ndarray
+    centre: np.ndarray
+    valid: np.ndarray
+    interior: np.ndarray
+    converged: np.ndarray
 
 
-def smooth_log_peak(values: Float[Array, " freqs"], omegas, sharpness, true=None
-                    ) -> Float[Array, ""]:
-    """Smooth maximum (log-sum-exp with `sharpness`) of the logarithms of the refined local
-    peaks of `values` (and of the band ends): it tends to log of `grid_peak` as the
-    sharpness grows, and stays differentiable where two peaks are equal. With
-    `true = (index, peaks)`, the local maxima at the grid indices `index` (from
-    `top_peaks`) are the true `peaks` instead (-inf where the index holds no maximum)."""
-    peaks, _, candidates = _candidates(values, omegas)
-    logs = jnp.where(candidates, jnp.log(peaks), -jnp.inf)
-    if true is not None:
-        index, true_peaks = true
-        logs = logs.at[index].set(jnp.where(candidates[index], jnp.log(true_peaks), -jnp.inf))
-    return jax.nn.logsumexp(sharpness * logs) / sharpness
+def locate_peaks(systems: TIDSystem, response: FrequencyResponse,
+                 settings: SolverSettings) -> Located:
+    """The `REFINED_PEAKS` highest local maxima of |x| of each lane of a `lane_response` of
+    the systems `systems` (lanes x frequencies), each located in continuous frequency by
+    `PEAK_NEWTON_STEPS` Newton steps on its slope (`_peaks.newton_peak`): every step's
+    stencils of every lane solved in one batch, each steady state shot from the grid's
+    orbits, interpolated."""
+    response = _lane_grids(response)
+    omegas, states, converged, index, centre, valid, lower, upper, interior = _in_chunks(
+        _selection, response, np.asarray(systems.host_stiffness))
+    estimate = np.full(centre.shape, np.nan)
+    for _ in range(PEAK_NEWTON_STEPS):
+        at, warm = _in_chunks(_stencils, centre, interior, states, omegas, STENCIL_POINTS)
+        values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
+        converged &= ok
+        estimate, centre = _in_chunks(_newton_steps, values, at, lower, upper, interior)
+    return Located(omegas, states, index, estimate, centre, valid, interior, converged)
 
 
-def top_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], count: int):
-    """The `count` highest local maxima of `values` on the grid `omegas` (band ends
-    included): their grid indices, the frequencies of their parabola vertices, and which of
-    them are local maxima (fewer than `count` leave repeats marked False)."""
-    peaks, omega_peaks, candidates = _candidates(jax.lax.stop_gradient(values), omegas)
-    count = min(count, values.shape[0])
-    _, index = jax.lax.top_k(jnp.where(candidates, peaks, -jnp.inf), count)
-    return index, omega_peaks[index], candidates[index]
+def _lane_grids(response: FrequencyResponse) -> FrequencyResponse:
+    """`response` (lanes x frequencies) with its frequencies as one row per lane, on the
+    host: every array of it then has a leading axis of lanes (`_in_chunks`)."""
+    omegas = np.broadcast_to(np.asarray(response.omegas), np.shape(response.x_max))
+    return eqx.tree_at(lambda r: r.omegas, response, omegas)
 
 
-def bracket(index: Int[Array, " peaks"], omegas: Float[Array, " freqs"]):
-    """The grid frequencies either side of each grid index (the ends' own at the ends):
-    the interval a peak found at that index lies in; and whether the index is interior."""
-    n = omegas.shape[0]
-    lower = omegas[jnp.maximum(index - 1, 0)]
-    upper = omegas[jnp.minimum(index + 1, n - 1)]
-    return lower, upper, (index > 0) & (index < n - 1)
+def _in_chunks(program, *args):
+    """`program(*args)` (each array of `args` and of its results has a leading axis of
+    lanes) run on `LANE_CHUNK` lanes at a time, the last chunk padded with copies of the
+    last lane (as `_response` pads its blocks); the results put back together as NumPy
+    arrays."""
+    args = jax.tree.map(lambda a: np.asarray(a) if eqx.is_array(a) else a, args)
+    lanes = len(next(leaf for leaf in jax.tree.leaves(args) if eqx.is_array(leaf)))
+    if lanes == 0:
+        return jax.tree.map(np.asarray, program(*args))
+
+    def chunk(start):
+        index = np.minimum(np.arange(start, start + LANE_CHUNK), lanes - 1)
+        return jax.tree.map(lambda a: a[index] if eqx.is_array(a) else a, args)
+
+    parts = [program(*chunk(start)) for start in range(0, lanes, LANE_CHUNK)]
+    return jax.tree.map(lambda *chunks: np.concatenate(chunks)[:lanes], *parts)
 
 
-# Central-difference weights of the slope (times the step) and the curvature (times the
-# step squared) on stencils of three and five frequencies.
-_DIFFERENCES = {
-    3: ((-0.5, 0.0, 0.5), (1.0, -2.0, 1.0)),
-    5: ((1 / 12, -8 / 12, 0.0, 8 / 12, -1 / 12), (-1 / 12, 16 / 12, -30 / 12, 16 / 12, -1 / 12)),
-}
+def _solve_at(systems, amplitudes, at, settings, warm):
+    """|x| (m) at the frequencies `at` (lanes x ...) of each lane, shot from `warm`, and
+    whether every one of a lane converged."""
+    at = np.asarray(at)
+    solved = lane_response(systems, amplitudes, at.reshape(at.shape[0], -1), settings, warm)
+    return (np.asarray(solved.x_max).reshape(at.shape),
+            np.all(np.asarray(solved.converged), axis=-1))
 
 
-def stencil(centre: Float[Array, " peaks"], interior: Bool[Array, " peaks"],
-            points: int = STENCIL_POINTS):
-    """`points` (3 or 5) frequencies `PEAK_STEP` (relative) apart around each `centre`;
-    the centre repeated where the peak is at a band end (not `interior`)."""
-    step = jnp.where(interior, PEAK_STEP * centre, 0.0)
-    offsets = jnp.arange(points, dtype=centre.dtype) - points // 2
-    return centre[:, None] + step[:, None] * offsets
+def response_peaks(systems: TIDSystem, response: FrequencyResponse,
+                   settings: SolverSettings) -> Peaks:
+    """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
+    true maxima over frequency of |x| (`locate_peaks`, then the response at each located
+    frequency), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
+    can have corners, where the highest of the terminal's excursions within a period
+    changes, which Newton steps on its slope would miss). NaN where a steady state in the
+    band, or of a stencil, did not converge."""
+    found = locate_peaks(systems, response, settings)
+    at, warm = _in_chunks(_stencils, found.centre, found.interior, found.states,
+                          found.omegas, 1)
+    values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
+    peaks_found = _in_chunks(_peaks_found, _lane_grids(response), found.omegas, found.index,
+                             found.valid, found.centre, found.estimate, values[..., 0],
+                             found.converged & ok)
+    # (placed on the device as they are: `jnp.asarray` would compile a program per shape)
+    return jax.tree.map(jax.device_put, peaks_found)
 
 
-def newton_peak(values: Float[Array, "peaks points"], omegas: Float[Array, "peaks points"],
-                lower, upper, interior):
-    """One Newton step on the slope of a response towards its maximum, from the values at
-    the `stencil` frequencies `omegas` (central differences, second order on three
-    frequencies, fourth order on five), kept within [`lower`, `upper`]: the maximum of the
-    stencil's Taylor polynomial there, and its frequency. At a band end (not `interior`),
-    or where the stencil is not concave, the largest of the values and its frequency;
-    where a value is not finite, the largest (inf or NaN) and the stencil's centre.
-    Differentiable in `values`."""
-    points = values.shape[1]
-    slope_weights, curvature_weights = (jnp.asarray(w, values.dtype)
-                                        for w in _DIFFERENCES[points])
-    mid = values[:, points // 2]
-    h = jnp.where(interior, omegas[:, points // 2 + 1] - omegas[:, points // 2], 1.0)
-    slope = values @ slope_weights / h
-    curvature = values @ curvature_weights / h**2
-    concave = interior & (curvature < 0)
-    safe = jnp.where(concave, curvature, -1.0)
-    centre = omegas[:, points // 2]
-    shift = jnp.clip(-slope / safe, lower - centre, upper - centre)
-    vertex = mid + slope * shift + safe * shift**2 / 2
-    best = jnp.argmax(values, axis=1)
-    largest = jnp.take_along_axis(values, best[:, None], axis=1)[:, 0]
-    at_largest = jnp.take_along_axis(omegas, best[:, None], axis=1)[:, 0]
-    # A value that is not finite (a steady state not found) is passed on: inf or NaN.
-    finite = jnp.all(jnp.isfinite(values), axis=1)
-    return (jnp.where(finite, jnp.where(concave, vertex, largest), jnp.max(values, axis=1)),
-            jnp.where(finite, jnp.where(concave, centre + shift, at_largest), centre))
+@compiled
+def _selection(response: FrequencyResponse, host_stiffness):
+    """The grid's part of `response_peaks`, one program: the lanes' frequencies and scaled
+    states, whether every steady state converged, and the `REFINED_PEAKS` highest local
+    maxima of each lane with their brackets."""
+    omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
+    states = scaled_states(response, host_stiffness)
+    converged = jnp.all(response.converged, axis=-1)
+    # Selection only: an orbit that was not found makes the lane's peaks NaN below.
+    grid = jnp.where(response.converged, response.x_max, 0.0)
+    index, centre, valid = jax.vmap(lambda v, w: top_peaks(v, w, REFINED_PEAKS))(grid, omegas)
+    lower, upper, interior = jax.vmap(bracket)(index, omegas)
+    return omegas, states, converged, index, centre, valid, lower, upper, interior
 
 
-def interpolated(states: Float[Array, "freqs ..."], omegas: Float[Array, " freqs"], at):
-    """`states` (one per grid frequency) interpolated linearly to the frequencies `at`."""
-    flat = states.reshape(states.shape[0], -1)
-    out = jax.vmap(lambda column: jnp.interp(at.reshape(-1), omegas, column), 1, -1)(flat)
-    return out.reshape(at.shape + states.shape[1:])
+@compiled
+def _stencils(centre, interior, states, omegas, points: int):
+    """The stencils of `points` frequencies around each lane's peaks (lanes x peaks x
+    points; one point: the centres) and the grid's states interpolated to them (lanes x
+    frequencies of the stencils, flat)."""
+    at = jax.vmap(ft.partial(stencil, points=points))(centre, interior)
+    return at, jax.vmap(interpolated)(states, omegas, at.reshape(at.shape[0], -1))
 
 
-def located_peak(estimate: Float[Array, " peaks"], value: Float[Array, " peaks"]):
-    """The peak from the last Newton step's `estimate` (`newton_peak`) and the response
-    `value` at its frequency: the value, unless the estimate is not finite (a stencil's
-    steady state was not found), which is then passed on."""
-    return jnp.where(jnp.isfinite(estimate), value, estimate)
+@compiled
+def _newton_steps(values, at, lower, upper, interior):
+    """`_peaks.newton_peak` on every lane."""
+    return jax.vmap(newton_peak)(values, at, lower, upper, interior)
 
 
-def newton_iterates(solve, centre: Float[Array, " peaks"], interior: Bool[Array, " peaks"],
-                    lower, upper, aux=()):
-    """`PEAK_NEWTON_STEPS` Newton steps (`newton_peak`, a loop) from the frequencies
-    `centre` towards the peaks, kept within [`lower`, `upper`]: `solve(at)` gives the
-    response at each step's `stencil` frequencies `at` (peaks x points; no derivatives
-    needed) and whatever else its solves give, `aux` (a pytree of arrays of the shapes of
-    the one given, which stands before the first step). Returns the last step's estimate
-    of each peak and its frequency, that step's stencil and its `aux`."""
+@compiled
+def _peaks_found(response: FrequencyResponse, omegas, index, valid, centre, estimate, values,
+                 converged) -> Peaks:
+    """`Peaks` from the located maxima of `response_peaks` (the last Newton step's
+    `estimate`, the response `values` at their frequencies `centre`) and the grid's
+    stroke."""
+    peak = located_peak(estimate, values)
+    best = jnp.argmax(jnp.where(valid, peak, -jnp.inf), axis=1)
 
-    def step(_, carry):
-        at = stencil(jax.lax.stop_gradient(carry[1]), interior)
-        values, aux = solve(at)
-        return *newton_peak(values, at, lower, upper, interior), at, aux
+    def take(a):
+        return jnp.take_along_axis(a, best[:, None], axis=1)[:, 0]
 
-    start = (jnp.full_like(centre, jnp.nan), jax.lax.stop_gradient(centre),
-             stencil(jax.lax.stop_gradient(centre), interior), aux)
-    return jax.lax.fori_loop(0, PEAK_NEWTON_STEPS, step, start)
-
-
-def peak_frequencies(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], solve,
-                     count: int):
-    """The `count` highest local maxima of a response sampled as `values` on the grid
-    `omegas` (`top_peaks`), each located in continuous frequency by `PEAK_NEWTON_STEPS`
-    Newton steps (`newton_iterates`): `solve(at)` gives the response at a step's stencil
-    frequencies `at` (peaks x points; no derivatives needed). Returns the grid indices,
-    the last step's estimates, the frequencies of the peaks (a fixed point of the
-    derivatives: the envelope theorem) and which are local maxima (band ends included).
-    Each peak is the response at its frequency (`located_peak`)."""
-    index, centre, valid = top_peaks(values, omegas, count)
-    lower, upper, interior = bracket(index, omegas)
-    estimate, centre, _, _ = newton_iterates(lambda at: (solve(at), ()), centre, interior,
-                                             lower, upper)
-    return index, estimate, jax.lax.stop_gradient(centre), valid
+    y, omega_y, _ = lane_grid_peaks(response.y_max, omegas)
+    return Peaks(
+        amplitudes=response.amplitudes,
+        x_peak=jnp.where(converged, take(peak), jnp.nan),
+        y_peak=jnp.where(converged, y, jnp.nan),
+        omega_x=take(centre),
+        omega_y=omega_y,
+        at_edge=(take(index) == 0) | (take(index) == omegas.shape[-1] - 1),
+        converged=converged,
+    )
 
 
-def true_peaks(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"], solve,
-               count: int):
-    """The `count` highest local maxima of a response sampled as `values` on the grid
-    `omegas`, located in continuous frequency (`peak_frequencies`): `solve(at, last)`
-    gives the response at the frequencies `at` (peaks x points): for `last` False a
-    step's stencil (no derivatives needed), for `last` True the last iterate (one point:
-    the peak, with derivatives). Returns the grid indices, the peaks, their frequencies
-    and which are local maxima (band ends included)."""
-    index, estimate, centre, valid = peak_frequencies(
-        values, omegas, lambda at: solve(at, False), count)
-    peak = located_peak(estimate, solve(centre[:, None], True)[:, 0])
-    return index, peak, centre, valid
+def _band(system, omegas):
+    if omegas is None:
+        return default_omegas(system)
+    array = check_grid("omegas", omegas)
+    if array.ndim != 1 or array.size < 5:
+        raise ValueError("omegas must be a band: a 1-d grid of at least 5 frequencies, rad/s "
+                         f"(the order is system, omegas, amplitudes), got {array!r}")
+    if np.any(np.diff(array) <= 0):
+        raise ValueError("omegas must be strictly increasing")
+    return jnp.asarray(array, dtype=jnp.result_type(float))
+
+
+def peaks(
+    system: TIDSystem | BuildingTID,
+    omegas: ArrayLike | None,
+    amplitudes: ArrayLike,
+    *,
+    quantity: Quantity | None = None,
+    settings: SolverSettings | None = None,
+) -> Peaks | Peak:
+    """Peak responses over a frequency band for each amplitude. Of a `TIDSystem`: the
+    host's and the inerter's displacement; the host's the maximum in continuous frequency
+    (each of the highest local maxima on the grid located by Newton steps on the slope of
+    the response, see `_peaks`), the inerter's the grid's refined by a parabola. Of a
+    `BuildingTID`: its `quantity`'s, each of the two highest peaks on the grid refined by
+    the vertices of parabolas through steady states. All amplitudes in one batch.
+
+    **Arguments:**
+
+    - `system`: a `TIDSystem` or a `BuildingTID`.
+    - `omegas`: the band's grid, rad/s, increasing; None: `default_omegas(system)`.
+    - `amplitudes`: load amplitudes A of `A sin(omega t)`, N (a building's ground
+      acceleration: m/s2), scalar or 1-d.
+    - `quantity`: a building's measured response (`Quantity`; default the top floor's
+      displacement).
+    - `settings`: `SolverSettings` of the steady states.
+
+    **Returns:** `Peaks` (a `TIDSystem`) or `Peak` (a `BuildingTID`), one entry per
+    amplitude.
+    """
+    if isinstance(system, BuildingTID):
+        return building_peaks(system, amplitudes, Quantity() if quantity is None else quantity,
+                              omegas, settings)
+    check_single_storey_quantity(quantity)
+    settings = SolverSettings() if settings is None else settings
+    check_system(system)
+    band = _band(system, omegas)
+    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
+    systems = batched(system, amps.size)
+    return response_peaks(systems, lane_response(systems, amps, band, settings), settings)
+
+
+def peak_response(
+    system: TIDSystem,
+    omegas: ArrayLike | None,
+    amplitude: ArrayLike,
+    *,
+    response: str | Sequence[str] = "host",
+    settings: SolverSettings = SolverSettings(),
+) -> Float[Array, ""] | Float[Array, " responses"]:
+    """Peak steady-state displacement over a frequency band at one forcing amplitude, of
+    the host (max |x|), of the inerter terminal (max |y|, the stroke) or both. Differentiable
+    with respect to every field of `system` and `amplitude` (implicit differentiation
+    through the periodic orbits; envelope theorem at the peak). The host's peak is the
+    maximum in continuous frequency, the inerter's the grid's refined by a parabola (see
+    `response_peaks`).
+
+    **Arguments:**
+
+    - `system`: the `TIDSystem`.
+    - `omegas`: the band's grid, rad/s, increasing; None: `default_omegas(system)`.
+    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (scalar; may be traced).
+    - `response`: `"host"` or `"inerter"`, or a tuple (or list) of them: their peaks from
+      one sweep of the band (the steady states and their derivatives shared).
+    - `settings`: `SolverSettings` of the steady states.
+
+    **Returns:** the peak, m (for a tuple of responses, an array of their peaks in its
+    order); NaN where a steady state in the band did not converge.
+    """
+    if isinstance(system, BuildingTID):
+        raise ValueError("peak_response takes a TIDSystem; a building's peaks come from "
+                         "tid_jax.peaks(system, omegas, amplitudes)")
+    check_system(system)
+    responses = (response,) if isinstance(response, str) else (
+        tuple(response) if isinstance(response, tuple | list) else ())
+    if not (responses and all(name in ("host", "inerter") for name in responses)):
+        raise ValueError(
+            f"response must be 'host' or 'inerter', or a tuple of them, got {response!r}")
+    band = _band(system, omegas)
+    if not isinstance(amplitude, jax.core.Tracer):
+        check_grid("amplitude", amplitude)
+        if np.ndim(amplitude) != 0:
+            raise ValueError(f"amplitude must be a scalar, got shape {np.shape(amplitude)}")
+    # An array, traced by the compiled program: a Python number would be one of its
+    # static arguments, compiled anew for every amplitude.
+    amplitude = jnp.asarray(amplitude, band.dtype)
+    # (its tolerances too: one program for any of their values)
+    return _peak_response(system, amplitude, band,
+                          response if isinstance(response, str) else responses,
+                          settings.with_array_tolerances(system))
+
+
+@compiled(options=compiler_options)
+def _peak_response(system, amplitude, omegas, response: str | tuple[str, ...], settings):
+    """The peak of `response` (a scalar), or of each of a tuple of them (an array)."""
+    responses = (response,) if isinstance(response, str) else response
+    xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
+    peaks = {}
+    if "host" in responses:
+        def solve(at, last):
+            del last
+            z0 = interpolated(states, omegas, at)
+            # One sweep over every point of every peak (a sweep per peak would batch the
+            # solves' loops twice over when traced).
+            x, _, ok, _ = sweep(system, amplitude, at.reshape(-1), settings,
+                                z0.reshape((-1,) + z0.shape[2:]))
+            return jnp.where(ok, x, jnp.nan).reshape(at.shape)
+
+        selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)
+        _, located, _, valid = true_peaks(selection, omegas, solve, REFINED_PEAKS)
+        peaks["host"] = jnp.max(jnp.where(valid, located, -jnp.inf))
+    if "inerter" in responses:
+        peaks["inerter"] = grid_peak(ys, omegas)[0]  # see `response_peaks`
+    # The maximum over a band with an orbit that was not found is unknown.
+    found = jnp.stack([peaks[name] for name in responses])
+    found = found[0] if isinstance(response, str) else found
+    return jnp.where(jnp.all(converged), found, jnp.nan)

@@ -5,16 +5,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._building import (
+from ._model._building import (
     BuildingTID,
     Quantity,
     building_breakaway,
     linear_amplitudes,
     quantity_amplitude,
 )
-from ._checks import check_grid, check_single_storey_quantity
-from ._linear import Breakaway, LinearReceptance, host_breakaway, host_receptance
-from ._system import TIDSystem
+from ._model._checks import check_grid, check_single_storey_quantity
+from ._model._linear import Breakaway, LinearReceptance, host_breakaway, host_receptance
+from ._model._system import TIDSystem
 
 # Frequencies over the band on which a building's smallest breakaway amplitude is found.
 BREAKAWAY_GRID = 4001

@@ -6,28 +6,28 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
-from ._building import BuildingTID, Quantity
-from ._building_orbit import BuildingResponse, building_response
-from ._cache import compiled
-from ._checks import (
+from ._model._building import BuildingTID, Quantity
+from ._orbit._building_orbit import BuildingResponse, building_response
+from ._runtime._cache import compiled
+from ._model._checks import (
     check_grid,
     check_single_storey_quantity,
     check_steady_state_device,
     check_system,
 )
-from ._dynamics import parameters
-from ._eigen import eigenvalues
-from ._period import initial_state, transient
-from ._settings import SolverSettings
-from ._sharding import map_batch, per_device, sharded_batch
-from ._steady_state import (
+from ._model._dynamics import parameters
+from ._orbit._eigen import eigenvalues
+from ._orbit._period import initial_state, transient
+from ._orbit._settings import SolverSettings
+from ._runtime._sharding import map_batch, per_device, sharded_batch
+from ._orbit._steady_state import (
     moving_part,
     refined_peak,
     shoot_queue,
     solve_orbit,
     y_peak,
 )
-from ._system import TIDSystem, compiler_options
+from ._model._system import TIDSystem, compiler_options
 
 
 class FrequencyResponse(eqx.Module):

@@ -13,10 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._band import Peaks, _band, response_peaks
-from ._building import BuildingTID, Quantity
-from ._building_design import BuildingRetune, retune_building
-from ._checks import (
+from ._peaks import Peaks, _band, response_peaks
+from ._model._building import BuildingTID, Quantity
+from ._optimise._building_design import BuildingRetune, retune_building
+from ._model._checks import (
     check_grid,
     check_optimiser_options,
     check_single_storey_quantity,
@@ -24,12 +24,12 @@ from ._checks import (
     check_system,
     is_positive,
 )
-from ._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
-from ._dynamics import PARAMETERS
-from ._linear import den_hartog_tuning, host_breakaway
-from ._outcomes import Outcome, outcome_code, outcome_message
-from ._parallel import process_count, serial
-from ._period import initial_state
+from ._optimise._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
+from ._model._dynamics import PARAMETERS
+from ._model._linear import den_hartog_tuning, host_breakaway
+from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._parallel import process_count, serial
+from ._orbit._period import initial_state
 from ._response import (
     FrequencyResponse,
     _on_host,
@@ -38,9 +38,9 @@ from ._response import (
     scaled_states,
     with_tuning,
 )
-from ._retune_stage import compile_stage, stage_lanes
-from ._settings import SolverSettings
-from ._system import TIDSystem
+from ._optimise._retune_stage import compile_stage, stage_lanes
+from ._orbit._settings import SolverSettings
+from ._model._system import TIDSystem
 
 
 class RetuneSettings(eqx.Module):

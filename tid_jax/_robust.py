@@ -9,17 +9,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._best_tunings import BestTunings, check_best, checked_best
-from ._building import BuildingTID, Quantity
-from ._building_robust import BuildingRobust, robust_building
-from ._checks import (
+from ._optimise._best_tunings import BestTunings, check_best, checked_best
+from ._model._building import BuildingTID, Quantity
+from ._optimise._building_robust import BuildingRobust, robust_building
+from ._model._checks import (
     check_distinct,
     check_single_storey_quantity,
     check_steady_state_device,
     check_system,
     is_positive,
 )
-from ._design_evaluation import (
+from ._optimise._design_evaluation import (
     Context,
     Evaluation,
     Scenario,
@@ -27,17 +27,17 @@ from ._design_evaluation import (
     evaluate_design,
     evaluation_of,
 )
-from ._outcomes import Outcome, outcome_code, outcome_message
-from ._parallel import map_shares, serial
-from ._peaks import (
+from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._parallel import map_shares, serial
+from ._orbit._sampled_peaks import (
     lane_grid_peaks,
 )
 from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
-from ._settings import SolverSettings
-from ._smooth_max import Terms, smooth_max, term_weights
-from ._sqp import Model, finite, minimise_stage, stationary
-from ._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
+from ._orbit._settings import SolverSettings
+from ._optimise._smooth_max import Terms, smooth_max, term_weights
+from ._optimise._sqp import Model, finite, minimise_stage, stationary
+from ._model._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 
 
 class RobustSettings(eqx.Module):

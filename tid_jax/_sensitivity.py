@@ -8,11 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._band import _band
-from ._best_tunings import BestTunings, best_tunings, check_best
-from ._building import BuildingTID, Quantity
-from ._building_sensitivity import BuildingSensitivities, building_sensitivities
-from ._checks import (
+from ._peaks import _band
+from ._optimise._best_tunings import BestTunings, best_tunings, check_best
+from ._model._building import BuildingTID, Quantity
+from ._optimise._building_sensitivity import BuildingSensitivities, building_sensitivities
+from ._model._checks import (
     check_amplitude,
     check_distinct,
     check_single_storey_quantity,
@@ -20,19 +20,19 @@ from ._checks import (
     check_system,
     is_positive,
 )
-from ._design_evaluation import (
+from ._optimise._design_evaluation import (
     Context,
     Scenario,
     coordinates,
     evaluate_designs,
     without_jumped_peaks,
 )
-from ._parallel import serial
+from ._runtime._parallel import serial
 from ._retune import RetuneSettings, check_retune_options
-from ._settings import SolverSettings
-from ._smooth_max import smooth_max
-from ._sqp import Model, decrement, finite, trust_step
-from ._system import TIDSystem
+from ._orbit._settings import SolverSettings
+from ._optimise._smooth_max import smooth_max
+from ._optimise._sqp import Model, decrement, finite, trust_step
+from ._model._system import TIDSystem
 
 
 class SensitivitySettings(eqx.Module):

@@ -14,8 +14,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker as ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ._io import atomic_path  # noqa: E402
-from ._parallel import serial  # noqa: E402
+from ._runtime._io import atomic_path  # noqa: E402
+from ._runtime._parallel import serial  # noqa: E402
 
 LINEAR_STYLE = dict(color="black", linestyle="--", linewidth=2.0, label="linear TID (no friction)")
 AMPLITUDE_LABEL = "forcing amplitude A [N]"  # the single-storey host's amplitude axis

@@ -3,8 +3,8 @@ frequency band, the output, the compilation cache and the processes."""
 
 import argparse
 
-from .._band import DEFAULT_FREQUENCIES
-from .._cache_folder import CACHE_ENVIRONMENT_VARIABLE
+from .._peaks import DEFAULT_FREQUENCIES
+from .._runtime._cache_folder import CACHE_ENVIRONMENT_VARIABLE
 from ._common import DEFAULTS, PHYSICAL_INPUTS, RELATIVE_WIDTH
 from ._pool import WORKERS_ENVIRONMENT_VARIABLE
 

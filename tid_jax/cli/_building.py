@@ -8,14 +8,14 @@ import textwrap
 import numpy as np
 
 from .. import plot
-from .._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
-from .._building_design import BUILDING_BAND, building_peaks, retune_building
-from .._building_orbit import building_response
-from .._building_robust import robust_building, scaled_structure
-from .._building_sensitivity import building_sensitivities, storey_stiffnesses
-from .._io import write_json, write_toml
-from .._settings import SolverSettings
-from .._structure import Structure
+from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
+from .._optimise._building_design import BUILDING_BAND, building_peaks, retune_building
+from .._orbit._building_orbit import building_response
+from .._optimise._building_robust import robust_building, scaled_structure
+from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
+from .._runtime._io import write_json, write_toml
+from .._orbit._settings import SolverSettings
+from .._model._structure import Structure
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
     PROG,

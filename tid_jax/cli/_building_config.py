@@ -5,7 +5,7 @@ filter."""
 
 import math
 
-from .._building import G
+from .._model._building import G
 
 BUILDING_TABLES = ("structure", "tid", "load", "response")
 HARMONIC = "harmonic"

@@ -16,18 +16,18 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import __version__
-from .._band import DEFAULT_FREQUENCIES, default_omegas
-from .._cache import cache_folder
-from .._checks import check_steady_state_device
-from .._io import check_writable_dir, json_text
-from .._linear import (
+from .._peaks import DEFAULT_FREQUENCIES, default_omegas
+from .._runtime._cache import cache_folder
+from .._model._checks import check_steady_state_device
+from .._runtime._io import check_writable_dir, json_text
+from .._model._linear import (
     den_hartog_tuning,
     host_receptance,
     stuck_receptance,
 )
-from .._parallel import ProcessMap, serial
-from .._settings import SolverSettings
-from .._system import (
+from .._runtime._parallel import ProcessMap, serial
+from .._orbit._settings import SolverSettings
+from .._model._system import (
     DEFAULT_FRICTION_WIDTH,
     DEVICE_TERMS,
     PAPER_AMPLITUDES,

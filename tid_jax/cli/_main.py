@@ -16,8 +16,8 @@ import sys
 import jax
 
 from .. import __version__
-from .._cache import enable_compilation_cache
-from .._parallel import ProcessMap, serial
+from .._runtime._cache import enable_compilation_cache
+from .._runtime._parallel import ProcessMap, serial
 from ._common import EXIT_ERROR, EXIT_INTERRUPTED, PROG, CLIError, _Parser, lane_map
 from ._pool import COMMANDS_WITH_LANES
 from .frf import _add_frf_parser, _run_frf

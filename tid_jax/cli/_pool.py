@@ -8,8 +8,8 @@ import argparse
 import os
 from pathlib import Path
 
-from .._cache_folder import default_cache_dir
-from .._parallel import ProcessMap
+from .._runtime._cache_folder import default_cache_dir
+from .._runtime._parallel import ProcessMap
 
 WORKERS_ENVIRONMENT_VARIABLE = "TID_JAX_WORKERS"
 # The commands whose independent lanes are mapped over processes.
@@ -81,4 +81,5 @@ def early_pool(argv: list[str]) -> ProcessMap | None:
 def import_library() -> None:
     """A worker process's first step: the library's modules imported (and the figures')
     before its first task, while the command sets its inputs up."""
-    from .. import _identify, _robust, _sensitivity, plot  # noqa: F401
+    from .._identify import _fit as _identify
+    from .. import _robust, _sensitivity, plot

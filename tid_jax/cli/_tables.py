@@ -4,7 +4,7 @@ and the printed table, declared as a list of columns."""
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from .._io import write_csv
+from .._runtime._io import write_csv
 
 
 def _is_number(text: str) -> bool:

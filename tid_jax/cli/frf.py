@@ -6,9 +6,9 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import plot
-from .._building import Quantity, as_building, uncontrolled_amplitude
-from .._io import write_json, write_toml
-from .._linear import host_breakaway
+from .._model._building import Quantity, as_building, uncontrolled_amplitude
+from .._runtime._io import write_json, write_toml
+from .._model._linear import host_breakaway
 from .._response import frequency_response
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments

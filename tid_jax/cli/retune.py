@@ -5,9 +5,9 @@ import math
 import numpy as np
 
 from .. import plot
-from .._building import Quantity, as_building
-from .._io import write_json, write_toml
-from .._linear import host_breakaway
+from .._model._building import Quantity, as_building
+from .._runtime._io import write_json, write_toml
+from .._model._linear import host_breakaway
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
 from . import _building

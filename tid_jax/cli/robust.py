@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from .. import plot
-from .._io import write_json, write_toml
+from .._runtime._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance

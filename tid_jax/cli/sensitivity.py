@@ -1,8 +1,8 @@
 """`tid-jax sensitivity`: sensitivities of the peaks, at the tuning and the optimum."""
 
 from .. import plot
-from .._design import PARAMETER_UNITS
-from .._io import write_json, write_toml
+from .._optimise._design import PARAMETER_UNITS
+from .._runtime._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._sensitivity import amplitude_sensitivities, elasticity_series

@@ -1,0 +1,1 @@
+"""The inerter device and its identification from test records."""

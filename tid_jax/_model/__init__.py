@@ -1,0 +1,1 @@
+"""The model: a structure, its TID and its load, SI units; their linear theory."""

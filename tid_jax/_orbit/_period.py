@@ -1,0 +1,215 @@
+"""The period map Phi_T: the state one forcing period on from a state at phase 0, with the
+samples of the response over that period, its Jacobians (the monodromy matrix, by the
+variational equations or forward derivatives) and the transient before shooting; diffrax
+for smoothed friction, the closed-form stick-slip flow of `_coulomb` for exact friction."""
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from . import _coulomb
+from .._model._dynamics import tangent_field, vector_field
+from ._settings import SolverSettings
+
+
+def _solver(settings: SolverSettings):
+    return dfx.Kvaerno5() if settings.implicit else dfx.Tsit5()
+
+
+def integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
+    """Integrate `field(theta, y, p)` from phase 0 to `t1` from `y0`, a state `z` or a
+    pair `(z, tangents)`; the step size follows the error of `z` alone."""
+    state_norm = lambda error: optx.rms_norm(error[0] if isinstance(error, tuple) else error)
+    return dfx.diffeqsolve(
+        dfx.ODETerm(field),
+        _solver(settings),
+        t0=0.0,
+        t1=t1,
+        dt0=None,
+        y0=y0,
+        args=p,
+        saveat=saveat,
+        stepsize_controller=dfx.PIDController(
+            rtol=settings.rtol, atol=settings.atol, norm=state_norm
+        ),
+        adjoint=dfx.ForwardMode(),
+        max_steps=max_steps,
+        throw=False,
+    )
+
+
+def _phases(settings: SolverSettings, dtype):
+    return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
+
+
+def flow(p, settings: SolverSettings) -> _coulomb.Flow | None:
+    """What every period at the parameters `p` shares, for the functions below
+    (`modes=`), computed once where many periods are integrated at the same `p`: with
+    exact friction the modes of the stick-slip flow (`_coulomb.flow`); None for smoothed
+    friction (its integrations share nothing)."""
+    return _coulomb.flow(p, settings.samples) if settings.exact_friction else None
+
+
+def _flow(p, settings: SolverSettings, given):
+    return flow(p, settings) if given is None else given
+
+
+def period_samples(z0, p, settings: SolverSettings, modes=None):
+    """x, y and the velocity of the friction's body (y' of a rigid device, q' of a
+    compliant one) sampled over one period from `z0`, the state after the period, the
+    largest |y| at a stick-slip transition and the number of transitions (exact friction;
+    else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
+    if settings.exact_friction:
+        states, z_end, transitions, y_events = _coulomb.period(
+            z0, _flow(p, settings, modes))
+        return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
+                transitions.astype(z0.dtype))
+    phases = _phases(settings, z0.dtype)
+    sol = integrate(
+        vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
+        settings.max_steps,
+    )
+    ys = sol.ys
+    zero = jnp.zeros((), z0.dtype)
+    return ys[:-1, 0], ys[:-1, 2], ys[:-1, -1], ys[-1], zero, zero
+
+
+def _field_and_tangents(theta, y, p):
+    """The vector field with its variational equations: `y = (z, tangents)`, where the
+    tangents (n x n) are d z / d z0."""
+    z, tangents = y
+    return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
+
+
+def period_tangents(z, p, settings: SolverSettings, modes=None):
+    """The state after one period from `z` and its Jacobian with respect to `z` (the
+    monodromy matrix), by the variational equations (their step sizes follow the error of
+    the state alone: accurate enough for Newton's iterations, whose answer does not depend
+    on them). With exact friction, the forward derivatives of the hybrid period map.
+    `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
+    if settings.exact_friction:
+        modes = _flow(p, settings, modes)
+        end = lambda z0: _coulomb.period(z0, modes, keep_samples=False)[1]
+        return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
+            jnp.eye(4, dtype=z.dtype))
+    sol = integrate(
+        _field_and_tangents, (z, jnp.eye(z.shape[0], dtype=z.dtype)), p, 2 * jnp.pi, settings,
+        dfx.SaveAt(t1=True), settings.max_steps,
+    )
+    z_end, monodromy = (y[-1] for y in sol.ys)
+    return z_end, monodromy
+
+
+def samples_and_jacobian(z, p, settings, directions=()):
+    """One integration of a period from `z` with tangents along the state directions
+    and the parameters `p[i]`, `i` in `directions`, differentiating the integration itself
+    (so that the derivatives are those of the computed samples, to rounding): `(xs, ys,
+    ws, z_end)`, their Jacobians with respect to `z` (that of `z_end` is the monodromy
+    matrix) and with respect to those parameters (last axis of size `len(directions)`)."""
+    index = jnp.asarray(directions, dtype=int)
+    fn = lambda z0, q: period_samples(z0, p.at[index].set(q), settings)
+    n = z.shape[0]
+    basis = jnp.eye(n + len(directions), dtype=z.dtype)
+    primal, tangents = jax.vmap(
+        lambda t: jax.jvp(fn, (z, p[index]), (t[:n], t[n:])), out_axes=(None, 0)
+    )(basis)
+    tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
+    return primal, tuple(t[..., :n] for t in tangents), tuple(t[..., n:] for t in tangents)
+
+
+def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
+    """Scaled state at phase 0 of the equivalent linear steady state: the friction
+    ff sgn(v) replaced by the viscous damping that dissipates as much over a period at the
+    amplitude it lets the friction's body (the rigid device's terminal, a compliant
+    device's mechanism) reach, 4 ff / (pi omega |V|) for a velocity amplitude |V| (the
+    describing function of dry friction), that amplitude found by bisection; the stuck
+    linear steady state where the friction force exceeds the force needed to hold the
+    body still. Four states, or six for a `compliant` device (backlash left out)."""
+    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, ks, _,
+     _, amplitude, omega) = p
+    jw = 1j * omega
+    spring = k + jw * c
+    scale = amplitude / stiffness  # displacements in units of A / K
+
+    def host(terminal):
+        """x of the host with the TID's terminal moving `terminal` times as far."""
+        return stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
+
+    def response(friction_damping):
+        """Complex amplitudes (scaled) of x, y and the friction's body, with the friction
+        an extra viscous damping `friction_damping` on that body."""
+        body = jw * (parasitic + friction_damping)
+        if compliant:
+            mechanism = body - inertance * omega**2
+            device = ks * mechanism / (ks + mechanism)
+            terminal = spring / (spring + device - terminal_mass * omega**2)
+        else:
+            terminal = spring / (spring + body - (inertance + terminal_mass) * omega**2)
+        x = host(terminal)
+        y = x * terminal
+        q = y * ks / (ks + mechanism) if compliant else y
+        return x, y, q
+
+    def equivalent_damping(log_amplitude):
+        return 4 * friction / (jnp.pi * omega * scale * jnp.exp(log_amplitude))
+
+    def slips_further(log_amplitude):
+        # whether the body moves more than assumed: the amplitude lies above
+        _, _, q = response(equivalent_damping(log_amplitude))
+        return jnp.log(jnp.abs(q)) > log_amplitude
+
+    def bisect(_, bounds):
+        low, high = bounds
+        middle = 0.5 * (low + high)
+        further = slips_further(middle)
+        return jnp.where(further, middle, low), jnp.where(further, high, middle)
+
+    # Between the frictionless amplitude and e^-40 of it (where more damping would let
+    # the body move more, as near an antiresonance, the bisection ends at the top).
+    high = jnp.log(jnp.abs(response(0.0)[2]))
+    low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
+    x, y, q = response(equivalent_damping(0.5 * (low + high)))
+    # Held still, the body feels the force of what joins it to the host.
+    if compliant:
+        stuck_terminal = spring / (spring + ks - terminal_mass * omega**2)
+        stuck_x = host(stuck_terminal)
+        stuck_y = stuck_x * stuck_terminal
+        holding_force = jnp.abs(ks * stuck_y) * scale
+    else:
+        stuck_x = host(0.0)
+        stuck_y = 0.0
+        holding_force = jnp.abs(spring * stuck_x) * scale
+    stuck = holding_force < friction
+    x, y = jnp.where(stuck, stuck_x, x), jnp.where(stuck, stuck_y, y)
+    # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
+    parts = [x, y] + ([jnp.where(stuck, 0.0, q)] if compliant else [])
+    return jnp.stack([part for z in parts for part in (z.imag, z.real)])
+
+
+def transient(z, p, settings: SolverSettings, periods=None):
+    """Integrate `periods` (default `settings.transient_periods`, at most that; may be
+    traced) periods from `z` (keeps `z` if that fails)."""
+    if settings.transient_periods == 0:
+        return z
+    if settings.exact_friction:
+        count = settings.transient_periods if periods is None else periods
+        modes = flow(p, settings)
+
+        def step(_, z):
+            return _coulomb.period(z, modes, keep_samples=False)[1]
+
+        end = jax.lax.fori_loop(0, count, step, z)
+        return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
+    sol = integrate(
+        vector_field,
+        z,
+        p,
+        2 * jnp.pi * (settings.transient_periods if periods is None else periods),
+        settings,
+        dfx.SaveAt(t1=True),
+        settings.max_steps * settings.transient_periods,
+    )
+    return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)

@@ -1,0 +1,1 @@
+"""The virtual real-time substructuring test of the inerter."""
