@@ -11,81 +11,45 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _API = {
-    "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
-    "_optimise._best_tunings": ("BestTunings", "best_tunings"),
-    "_model._building": ("BuildingTID", "Quantity", "as_building", "first_mode_tunings"),
-    "_optimise._building_design": ("BuildingRetune", "Peak"),
-    "_orbit._building_orbit": ("BuildingResponse",),
-    "_optimise._building_robust": ("BuildingRobust",),
-    "_optimise._building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
-    "_runtime._cache": ("enable_compilation_cache",),
-    "_runtime._cache_folder": ("default_cache_dir",),
     "_identify._device": ("ForceSettings", "InerterDevice"),
     "_identify._fit": ("IdentifySettings", "InerterFit", "InerterRecord", "ModelComparison",
-                  "identify_inerter"),
+                       "identify_inerter"),
     "_loads._monte_carlo": ("MonteCarlo", "MonteCarloSettings", "friction_history", "monte_carlo",
-                     "random_history"),
-    "_runtime._outcomes": ("Outcome",),
-    "_runtime._parallel": ("ProcessMap",),
+                            "random_history"),
+    "_loads._random_design": ("RandomDesign", "RandomSensitivities", "default_bounds",
+                              "random_sensitivities", "retune_random"),
+    "_loads._record_design": ("RecordDesign", "design_for_records"),
+    "_loads._records": ("GroundMotion", "History", "jennings_envelope", "linear_history",
+                        "read_at2", "read_csv_record", "synthetic_motion"),
+    "_loads._stationary": ("Linearisation", "StationaryLoad", "h2_tuning", "rms_response",
+                           "stationary_covariance", "statistical_linearisation"),
+    "_model._building": ("BuildingTID", "Quantity", "as_building", "first_mode_tunings"),
     "_model._linear": ("Breakaway", "LinearReceptance", "den_hartog", "den_hartog_tuning",
-                "paper_system", "stuck_receptance"),
+                       "paper_system", "stuck_receptance"),
+    "_model._structure": ("Structure",),
+    "_model._system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
+    "_optimise._best_tunings": ("BestTunings", "best_tunings"),
+    "_optimise._building_design": ("BuildingRetune", "Peak"),
+    "_optimise._building_robust": ("BuildingRobust",),
+    "_optimise._building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
+    "_orbit._building_orbit": ("BuildingResponse",),
+    "_orbit._settings": ("SolverSettings",),
+    "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_receptance": ("breakaway_amplitude", "linear_receptance"),
     "_response": ("FrequencyResponse", "frequency_response"),
     "_retune": ("RetuneResult", "RetuneSettings", "retune"),
     "_robust": ("RobustDesign", "RobustSettings", "TuningPerformance", "robust_tune",
                 "tuning_performance"),
+    "_runtime._cache": ("enable_compilation_cache",),
+    "_runtime._cache_folder": ("default_cache_dir",),
+    "_runtime._outcomes": ("Outcome",),
+    "_runtime._parallel": ("ProcessMap",),
     "_sensitivity": ("OptimumSensitivities", "SensitivitySettings", "Sensitivities",
                      "amplitude_sensitivities", "sensitivities"),
-    "_orbit._settings": ("SolverSettings",),
-    "_loads._random_design": ("RandomDesign", "RandomSensitivities", "default_bounds",
-                       "random_sensitivities", "retune_random"),
-    "_loads._record_design": ("RecordDesign", "design_for_records"),
-    "_loads._records": ("GroundMotion", "History", "jennings_envelope", "linear_history", "read_at2",
-                 "read_csv_record", "synthetic_motion"),
-    "_loads._stationary": ("Linearisation", "StationaryLoad", "h2_tuning", "rms_response",
-                    "stationary_covariance", "statistical_linearisation"),
-    "_model._structure": ("Structure",),
     "_substructuring._simulate": ("Substructuring", "SubstructuringStability",
-                        "simulate_substructuring", "substructuring_stability"),
-    "_model._system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
+                                  "simulate_substructuring", "substructuring_stability"),
 }
 if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily below
-    from ._peaks import (
-        Peaks as Peaks,
-        default_omegas as default_omegas,
-        peak_response as peak_response,
-        peaks as peaks,
-    )
-    from ._optimise._best_tunings import (
-        BestTunings as BestTunings,
-        best_tunings as best_tunings,
-    )
-    from ._model._building import (
-        BuildingTID as BuildingTID,
-        Quantity as Quantity,
-        as_building as as_building,
-        first_mode_tunings as first_mode_tunings,
-    )
-    from ._optimise._building_design import (
-        BuildingRetune as BuildingRetune,
-        Peak as Peak,
-    )
-    from ._orbit._building_orbit import (
-        BuildingResponse as BuildingResponse,
-    )
-    from ._optimise._building_robust import (
-        BuildingRobust as BuildingRobust,
-    )
-    from ._optimise._building_sensitivity import (
-        BuildingOptimum as BuildingOptimum,
-        BuildingSensitivities as BuildingSensitivities,
-    )
-    from ._runtime._cache import (
-        enable_compilation_cache as enable_compilation_cache,
-    )
-    from ._runtime._cache_folder import (
-        default_cache_dir as default_cache_dir,
-    )
     from ._identify._device import (
         ForceSettings as ForceSettings,
         InerterDevice as InerterDevice,
@@ -97,14 +61,6 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         ModelComparison as ModelComparison,
         identify_inerter as identify_inerter,
     )
-    from ._model._linear import (
-        Breakaway as Breakaway,
-        LinearReceptance as LinearReceptance,
-        den_hartog as den_hartog,
-        den_hartog_tuning as den_hartog_tuning,
-        paper_system as paper_system,
-        stuck_receptance as stuck_receptance,
-    )
     from ._loads._monte_carlo import (
         MonteCarlo as MonteCarlo,
         MonteCarloSettings as MonteCarloSettings,
@@ -112,22 +68,12 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         monte_carlo as monte_carlo,
         random_history as random_history,
     )
-    from ._runtime._outcomes import (
-        Outcome as Outcome,
-    )
-    from ._runtime._parallel import (
-        ProcessMap as ProcessMap,
-    )
     from ._loads._random_design import (
         RandomDesign as RandomDesign,
         RandomSensitivities as RandomSensitivities,
         default_bounds as default_bounds,
         random_sensitivities as random_sensitivities,
         retune_random as retune_random,
-    )
-    from ._receptance import (
-        breakaway_amplitude as breakaway_amplitude,
-        linear_receptance as linear_receptance,
     )
     from ._loads._record_design import (
         RecordDesign as RecordDesign,
@@ -141,6 +87,68 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         read_at2 as read_at2,
         read_csv_record as read_csv_record,
         synthetic_motion as synthetic_motion,
+    )
+    from ._loads._stationary import (
+        Linearisation as Linearisation,
+        StationaryLoad as StationaryLoad,
+        h2_tuning as h2_tuning,
+        rms_response as rms_response,
+        stationary_covariance as stationary_covariance,
+        statistical_linearisation as statistical_linearisation,
+    )
+    from ._model._building import (
+        BuildingTID as BuildingTID,
+        Quantity as Quantity,
+        as_building as as_building,
+        first_mode_tunings as first_mode_tunings,
+    )
+    from ._model._linear import (
+        Breakaway as Breakaway,
+        LinearReceptance as LinearReceptance,
+        den_hartog as den_hartog,
+        den_hartog_tuning as den_hartog_tuning,
+        paper_system as paper_system,
+        stuck_receptance as stuck_receptance,
+    )
+    from ._model._structure import (
+        Structure as Structure,
+    )
+    from ._model._system import (
+        DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
+        PAPER_AMPLITUDES as PAPER_AMPLITUDES,
+        PAPER_STROKE as PAPER_STROKE,
+        TIDSystem as TIDSystem,
+    )
+    from ._optimise._best_tunings import (
+        BestTunings as BestTunings,
+        best_tunings as best_tunings,
+    )
+    from ._optimise._building_design import (
+        BuildingRetune as BuildingRetune,
+        Peak as Peak,
+    )
+    from ._optimise._building_robust import (
+        BuildingRobust as BuildingRobust,
+    )
+    from ._optimise._building_sensitivity import (
+        BuildingOptimum as BuildingOptimum,
+        BuildingSensitivities as BuildingSensitivities,
+    )
+    from ._orbit._building_orbit import (
+        BuildingResponse as BuildingResponse,
+    )
+    from ._orbit._settings import (
+        SolverSettings as SolverSettings,
+    )
+    from ._peaks import (
+        Peaks as Peaks,
+        default_omegas as default_omegas,
+        peak_response as peak_response,
+        peaks as peaks,
+    )
+    from ._receptance import (
+        breakaway_amplitude as breakaway_amplitude,
+        linear_receptance as linear_receptance,
     )
     from ._response import (
         FrequencyResponse as FrequencyResponse,
@@ -158,6 +166,18 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         robust_tune as robust_tune,
         tuning_performance as tuning_performance,
     )
+    from ._runtime._cache import (
+        enable_compilation_cache as enable_compilation_cache,
+    )
+    from ._runtime._cache_folder import (
+        default_cache_dir as default_cache_dir,
+    )
+    from ._runtime._outcomes import (
+        Outcome as Outcome,
+    )
+    from ._runtime._parallel import (
+        ProcessMap as ProcessMap,
+    )
     from ._sensitivity import (
         OptimumSensitivities as OptimumSensitivities,
         Sensitivities as Sensitivities,
@@ -165,31 +185,11 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         amplitude_sensitivities as amplitude_sensitivities,
         sensitivities as sensitivities,
     )
-    from ._orbit._settings import (
-        SolverSettings as SolverSettings,
-    )
-    from ._loads._stationary import (
-        Linearisation as Linearisation,
-        StationaryLoad as StationaryLoad,
-        h2_tuning as h2_tuning,
-        rms_response as rms_response,
-        stationary_covariance as stationary_covariance,
-        statistical_linearisation as statistical_linearisation,
-    )
-    from ._model._structure import (
-        Structure as Structure,
-    )
     from ._substructuring._simulate import (
         Substructuring as Substructuring,
         SubstructuringStability as SubstructuringStability,
         simulate_substructuring as simulate_substructuring,
         substructuring_stability as substructuring_stability,
-    )
-    from ._model._system import (
-        DEFAULT_FRICTION_WIDTH as DEFAULT_FRICTION_WIDTH,
-        PAPER_AMPLITUDES as PAPER_AMPLITUDES,
-        PAPER_STROKE as PAPER_STROKE,
-        TIDSystem as TIDSystem,
     )
 
 _MODULE_OF = {name: module for module, names in _API.items() for name in names}

@@ -13,9 +13,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._model._building import BuildingTID, Quantity
-from ._optimise._building_design import BAND_POINTS, Peak, building_peaks, first_mode_band
-from ._runtime._cache import compiled
 from ._model._checks import check_grid, check_single_storey_quantity, check_system
+from ._model._system import TIDSystem, compiler_options
+from ._optimise._building_design import BAND_POINTS, Peak, building_peaks, first_mode_band
 from ._orbit._sampled_peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -30,6 +30,7 @@ from ._orbit._sampled_peaks import (
     top_peaks,
     true_peaks,
 )
+from ._orbit._settings import SolverSettings
 from ._response import (
     FrequencyResponse,
     batched,
@@ -37,8 +38,7 @@ from ._response import (
     point_response,
     scaled_states,
 )
-from ._orbit._settings import SolverSettings
-from ._model._system import TIDSystem, compiler_options
+from ._runtime._cache import compiled
 
 # Default band, as multiples of the host frequency sqrt(K/M): holds both resonance peaks
 # for TID frequencies from well below to 25% above Den Hartog's.

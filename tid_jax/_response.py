@@ -7,8 +7,6 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from ._model._building import BuildingTID, Quantity
-from ._orbit._building_orbit import BuildingResponse, building_response
-from ._runtime._cache import compiled
 from ._model._checks import (
     check_grid,
     check_single_storey_quantity,
@@ -16,10 +14,11 @@ from ._model._checks import (
     check_system,
 )
 from ._model._dynamics import parameters
+from ._model._system import TIDSystem, compiler_options
+from ._orbit._building_orbit import BuildingResponse, building_response
 from ._orbit._eigen import eigenvalues
 from ._orbit._period import initial_state, transient
 from ._orbit._settings import SolverSettings
-from ._runtime._sharding import map_batch, per_device, sharded_batch
 from ._orbit._steady_state import (
     moving_part,
     refined_peak,
@@ -27,7 +26,8 @@ from ._orbit._steady_state import (
     solve_orbit,
     y_peak,
 )
-from ._model._system import TIDSystem, compiler_options
+from ._runtime._cache import compiled
+from ._runtime._sharding import map_batch, per_device, sharded_batch
 
 
 class FrequencyResponse(eqx.Module):

@@ -13,9 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._peaks import Peaks, _band, response_peaks
 from ._model._building import BuildingTID, Quantity
-from ._optimise._building_design import BuildingRetune, retune_building
 from ._model._checks import (
     check_grid,
     check_optimiser_options,
@@ -24,12 +22,15 @@ from ._model._checks import (
     check_system,
     is_positive,
 )
-from ._optimise._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._model._dynamics import PARAMETERS
 from ._model._linear import den_hartog_tuning, host_breakaway
-from ._runtime._outcomes import Outcome, outcome_code, outcome_message
-from ._runtime._parallel import process_count, serial
+from ._model._system import TIDSystem
+from ._optimise._building_design import BuildingRetune, retune_building
+from ._optimise._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
+from ._optimise._retune_stage import compile_stage, stage_lanes
 from ._orbit._period import initial_state
+from ._orbit._settings import SolverSettings
+from ._peaks import Peaks, _band, response_peaks
 from ._response import (
     FrequencyResponse,
     _on_host,
@@ -38,9 +39,8 @@ from ._response import (
     scaled_states,
     with_tuning,
 )
-from ._optimise._retune_stage import compile_stage, stage_lanes
-from ._orbit._settings import SolverSettings
-from ._model._system import TIDSystem
+from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._parallel import process_count, serial
 
 
 class RetuneSettings(eqx.Module):
@@ -218,7 +218,7 @@ def retune(
     - `settings`: `SolverSettings` of the steady states.
     - `quantity`: a building's measured response (`Quantity`).
     - `max_steps`: BFGS iterations allowed per stage (default 60).
-    - `tol`: (default 1e-4) tolerance of the last stage, on the scaled design variables and the log peak
+    - `tol`: tolerance of the last stage, on the scaled design variables and the log peak
       (the default 1e-4 settles k to about 1e-5 and the peak to about 1e-4, relative);
       the stages before use `retune_settings.continuation_tol`. A stage also ends,
       converged, when its line search finds no decrease in

@@ -9,9 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._optimise._best_tunings import BestTunings, check_best, checked_best
 from ._model._building import BuildingTID, Quantity
-from ._optimise._building_robust import BuildingRobust, robust_building
 from ._model._checks import (
     check_distinct,
     check_single_storey_quantity,
@@ -19,6 +17,9 @@ from ._model._checks import (
     check_system,
     is_positive,
 )
+from ._model._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
+from ._optimise._best_tunings import BestTunings, check_best, checked_best
+from ._optimise._building_robust import BuildingRobust, robust_building
 from ._optimise._design_evaluation import (
     Context,
     Evaluation,
@@ -27,17 +28,16 @@ from ._optimise._design_evaluation import (
     evaluate_design,
     evaluation_of,
 )
-from ._runtime._outcomes import Outcome, outcome_code, outcome_message
-from ._runtime._parallel import map_shares, serial
+from ._optimise._smooth_max import Terms, smooth_max, term_weights
+from ._optimise._sqp import Model, finite, minimise_stage, stationary
 from ._orbit._sampled_peaks import (
     lane_grid_peaks,
 )
+from ._orbit._settings import SolverSettings
 from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
-from ._orbit._settings import SolverSettings
-from ._optimise._smooth_max import Terms, smooth_max, term_weights
-from ._optimise._sqp import Model, finite, minimise_stage, stationary
-from ._model._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
+from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._parallel import map_shares, serial
 
 
 class RobustSettings(eqx.Module):

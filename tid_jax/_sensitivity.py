@@ -8,10 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._peaks import _band
-from ._optimise._best_tunings import BestTunings, best_tunings, check_best
 from ._model._building import BuildingTID, Quantity
-from ._optimise._building_sensitivity import BuildingSensitivities, building_sensitivities
 from ._model._checks import (
     check_amplitude,
     check_distinct,
@@ -20,6 +17,9 @@ from ._model._checks import (
     check_system,
     is_positive,
 )
+from ._model._system import TIDSystem
+from ._optimise._best_tunings import BestTunings, best_tunings, check_best
+from ._optimise._building_sensitivity import BuildingSensitivities, building_sensitivities
 from ._optimise._design_evaluation import (
     Context,
     Scenario,
@@ -27,12 +27,12 @@ from ._optimise._design_evaluation import (
     evaluate_designs,
     without_jumped_peaks,
 )
-from ._runtime._parallel import serial
-from ._retune import RetuneSettings, check_retune_options
-from ._orbit._settings import SolverSettings
 from ._optimise._smooth_max import smooth_max
 from ._optimise._sqp import Model, decrement, finite, trust_step
-from ._model._system import TIDSystem
+from ._orbit._settings import SolverSettings
+from ._peaks import _band
+from ._retune import RetuneSettings, check_retune_options
+from ._runtime._parallel import serial
 
 
 class SensitivitySettings(eqx.Module):

@@ -30,11 +30,11 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._runtime._cache import compiled
 from .._model._checks import check_precision, choice, integer, is_positive, real_scalar
-from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
-from .._runtime._parallel import serial
 from .._optimise._stall import cut_within_tolerance
+from .._runtime._cache import compiled
+from .._runtime._parallel import serial
+from ._device import ForceSettings, InerterDevice, Motion, device_force, friction_width
 
 MODELS = ("ideal", "damped", "compliant", "backlash")
 # each model the one before and one more term of `InerterDevice`

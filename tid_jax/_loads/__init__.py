@@ -1,1 +1,2 @@
-"""Random and recorded loads: stationary statistics, Monte Carlo with friction, record histories, their designs."""
+"""Random and recorded loads: stationary statistics, Monte Carlo with friction, record
+histories, their designs."""

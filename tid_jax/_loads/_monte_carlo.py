@@ -35,10 +35,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._model._building import BuildingTID, Quantity, building_of, selection, state_space
+from .._model._system import FRICTION_WIDTH_RATIO, TIDSystem
 from ._record_flow import MAX_EVENTS, exact_history
 from ._records import GroundMotion, History, propagators
 from ._stationary import StationaryLoad, joint_state_space, quantity_row, stationary_covariance
-from .._model._system import FRICTION_WIDTH_RATIO, TIDSystem
 
 CHUNK = 256  # steps between checkpoints of the reverse-mode derivative
 _BISECTIONS = 48

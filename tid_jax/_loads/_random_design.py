@@ -24,8 +24,17 @@ import optimistix as optx
 import scipy.optimize
 from jaxtyping import Array, Bool, Float, Int
 
+from .._model._building import (
+    BuildingTID,
+    Quantity,
+    building_of,
+    first_mode_tunings,
+    log_tuned,
+    log_tuning_of,
+)
+from .._model._system import TIDSystem, check_values
 from .._optimise._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
-from .._model._building import BuildingTID, Quantity, first_mode_tunings, log_tuned, log_tuning_of
+from .._runtime._outcomes import Outcome, outcome_code, outcome_message
 from ._monte_carlo import (
     MonteCarloSettings,
     check_load,
@@ -36,9 +45,7 @@ from ._monte_carlo import (
     stationary_start,
     stationary_stepper,
 )
-from .._runtime._outcomes import Outcome, outcome_code, outcome_message
 from ._stationary import StationaryLoad, h2_tuning, rms_response, stationary_covariance
-from .._model._system import check_values
 
 _MAX_LOG_STEP = 0.5  # the longest BFGS step in (ln k, ln c)
 SENSITIVITY_PARAMETERS = ("inertance", "friction_force", "psd")
@@ -327,9 +334,9 @@ def _check_bounds(bounds) -> np.ndarray:
     return box
 
 
-def retune_random(system: BuildingTID, load: StationaryLoad, psd_levels,
+def retune_random(system: BuildingTID | TIDSystem, load: StationaryLoad, psd_levels,
                   quantity: Quantity = Quantity(), *,
-                  settings: MonteCarloSettings = MonteCarloSettings(), rtol: float = 1e-5,
+                  settings: MonteCarloSettings = MonteCarloSettings(), tol: float = 1e-5,
                   max_steps: int = 64, bounds=None, stroke_limit: float | None = None,
                   progress=None) -> RandomDesign:
     """The TID's (k, c) minimising the RMS of `quantity` under `load` at each S0 of
@@ -338,8 +345,10 @@ def retune_random(system: BuildingTID, load: StationaryLoad, psd_levels,
     of the linearisation's. `bounds`: `((k_low, k_high), (c_low, c_high))` (N/m, N s/m;
     None: `default_bounds`), which both designs keep within; `stroke_limit` (m; None:
     none): the Monte Carlo design's stroke RMS at most this. Where the free optimum breaks
-    either, SLSQP (scipy) finds the constrained one. `progress(done, total)` is called
-    after each level."""
+    either, SLSQP (scipy) finds the constrained one. `tol`: the optimisers' tolerance.
+    `progress(done, total)` is called after each level. A `TIDSystem` is its host under
+    a random force."""
+    system = building_of(system, "force")
     check_load(system, load, quantity)
     levels = np.asarray(psd_levels, float).reshape(-1)
     if levels.size == 0 or not np.all(np.isfinite(levels) & (levels > 0)):
@@ -351,7 +360,7 @@ def retune_random(system: BuildingTID, load: StationaryLoad, psd_levels,
     rows = []
     for number, level in enumerate(levels):
         at_level = eqx.tree_at(lambda ld: ld.psd, load, jnp.asarray(level))
-        rows.append(_level(system, at_level, quantity, settings, rtol, max_steps,
+        rows.append(_level(system, at_level, quantity, settings, tol, max_steps,
                            np.log(box), stroke_limit))
         if progress is not None:
             progress(number + 1, levels.size)
@@ -374,13 +383,14 @@ class RandomSensitivities(eqx.Module):
     tid_damping: Float[Array, " p"]
 
 
-def random_sensitivities(system: BuildingTID, load: StationaryLoad,
+def random_sensitivities(system: BuildingTID | TIDSystem, load: StationaryLoad,
                          quantity: Quantity = Quantity(), *,
                          settings: MonteCarloSettings = MonteCarloSettings(),
                          exact: bool = False) -> RandomSensitivities:
     """The sensitivities of the RMS optimum, `system` carrying the optimal (k, c) (from
     `retune_random` with the same `settings`); `exact`: the frictionless Lyapunov RMS
     instead of Monte Carlo."""
+    system = building_of(system, "force")
     check_load(system, load, quantity)
     run_plan = plan(system, settings)
     key = jax.random.key(settings.seed)

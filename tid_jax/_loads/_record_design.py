@@ -20,9 +20,9 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._model._building import BuildingTID, Quantity, building_of, log_tuned, log_tuning_of
+from .._model._system import TIDSystem, check_values
 from ._monte_carlo import CHUNK, check_system, first_period, record_stepper, run, substeps
 from ._records import GroundMotion
-from .._model._system import TIDSystem, check_values
 
 STROKE_PENALTY = 10.0
 # The limit is aimed this fraction below the given one: the simplex stops within its
@@ -119,15 +119,16 @@ def _design(system, quantity, suite, log_limit, rtol, max_steps):
     return solution.value, solution.result == optx.RESULTS.successful, before, after
 
 
-def design_for_records(system: BuildingTID | TIDSystem, motions, quantity: Quantity = Quantity(), *,
+def design_for_records(system: BuildingTID | TIDSystem, motions,
+                       quantity: Quantity = Quantity(), *,
                        stroke_limit: float | None = None, time_step: float | None = None,
-                       rtol: float = 1e-4, max_steps: int = 400) -> RecordDesign:
+                       tol: float = 1e-4, max_steps: int = 400) -> RecordDesign:
     """The TID's (k, c) minimising the mean peak of `quantity` over the ground motions
     `motions` (a list of `GroundMotion`, each as given: scale them first), with the
     system's friction (exact, or smoothed with a given `friction_width`), from the
     system's own tuning, with every record's stroke peak within `stroke_limit` (m; None:
     no limit); substeps of at most `time_step` (s; default the first mode's period /
-    200)."""
+    200); `tol`: Nelder-Mead's tolerance. A `TIDSystem` is its host under the records."""
     system = building_of(system, "ground")
     check_system(system)
     quantity.floor_of(system.floors)
@@ -145,7 +146,7 @@ def design_for_records(system: BuildingTID | TIDSystem, motions, quantity: Quant
     log_limit = (jnp.asarray(jnp.inf) if stroke_limit is None
                  else jnp.log(stroke_limit * (1 - STROKE_MARGIN)))
     design, converged, before, after = _design(system, quantity, _suite(motions, h),
-                                               log_limit, rtol, max_steps)
+                                               log_limit, tol, max_steps)
     k, c = jnp.exp(design)
     within = (jnp.asarray(True) if stroke_limit is None
               else jnp.max(after[2]) <= stroke_limit)

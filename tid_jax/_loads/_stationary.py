@@ -186,13 +186,13 @@ def _h2_minimise(system, load, quantity, rtol):
 
 
 def h2_tuning(system: BuildingTID | TIDSystem, load: StationaryLoad,
-              quantity: Quantity = Quantity(), *, rtol: float = 1e-10) -> tuple[float, float]:
+              quantity: Quantity = Quantity(), *, tol: float = 1e-10) -> tuple[float, float]:
     """The TID's (k, c) that minimise the frictionless RMS of `quantity` under the
     stationary `load` (`rms_response`): BFGS (optimistix) on (log k, log c) from the
     system's own tuning, the gradients by differentiating the Lyapunov solve."""
     system = building_of(system, "force")
     quantity.floor_of(system.floors)
-    value, successful = _h2_minimise(system, load, quantity, rtol)
+    value, successful = _h2_minimise(system, load, quantity, tol)
     if not bool(successful):
         raise RuntimeError("the H2 tuning did not converge")
     k, c = np.exp(np.asarray(value))

@@ -1,1 +1,2 @@
-"""The optimisers and the designs built on them: retunes, best tunings, robust designs, sensitivities."""
+"""The optimisers and the designs built on them: retunes, best tunings, robust designs,
+sensitivities."""

@@ -11,15 +11,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._peaks import _band
 from .._model._checks import check_distinct, check_steady_state_device, check_system, is_positive
-from .._runtime._outcomes import Outcome, outcome_code
-from .._runtime._parallel import serial
+from .._model._system import FIELD_NAMES, TIDSystem
 from .._orbit._sampled_peaks import lane_grid_peaks, smooth_log_peak
+from .._orbit._settings import SolverSettings
+from .._peaks import _band
 from .._response import batched
 from .._retune import RetuneSettings, check_retune_options, optimal_tunings
-from .._orbit._settings import SolverSettings
-from .._model._system import FIELD_NAMES, TIDSystem
+from .._runtime._outcomes import Outcome, outcome_code
+from .._runtime._parallel import serial
 
 
 class BestTunings(eqx.Module):

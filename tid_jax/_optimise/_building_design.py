@@ -24,6 +24,7 @@ from .._model._building import (
     quantity_amplitude,
     uncontrolled_amplitude,
 )
+from .._model._checks import check_grid
 from .._orbit._building_flow import flow, plant, projection_units
 from .._orbit._building_orbit import (
     building_settings,
@@ -32,7 +33,6 @@ from .._orbit._building_orbit import (
     period_samples,
     solve_orbit,
 )
-from .._model._checks import check_grid
 from .._orbit._sampled_peaks import local_peaks
 from .._orbit._settings import SolverSettings
 from .._orbit._steady_state import fixed_point_matrix
@@ -240,7 +240,7 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
 
 class BuildingRetune(eqx.Module):
     """The retuned TID per amplitude (SI): `tid_stiffness` k (N/m), `tid_damping` c
-    (N s/m), `peak` (of the quantity over the band), `peak_omega` (rad/s), `uncontrolled`
+    (N s/m), `peak` (of the quantity over the band), `omega_peak` (rad/s), `uncontrolled`
     (the bare structure's peak over the band at that amplitude), `converged` (the search
     ended by its tolerance, or stalled at a first-order minimax point, and every steady
     state was found), and the first-mode tunings' peaks `den_hartog_peak`,
@@ -250,7 +250,7 @@ class BuildingRetune(eqx.Module):
     tid_stiffness: Float[Array, " amps"]
     tid_damping: Float[Array, " amps"]
     peak: Float[Array, " amps"]
-    peak_omega: Float[Array, " amps"]
+    omega_peak: Float[Array, " amps"]
     uncontrolled: Float[Array, " amps"]
     converged: Bool[Array, " amps"]
     den_hartog_peak: Float[Array, " amps"]
@@ -493,6 +493,6 @@ def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quanti
         amplitudes=amplitudes, tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
         peak=np.asarray([np.nan if p is None or not o else float(p.value)
                          for p, o in zip(found, ok, strict=True)]),
-        peak_omega=np.asarray([np.nan if p is None else float(p.omega) for p in found]),
+        omega_peak=np.asarray([np.nan if p is None else float(p.omega) for p in found]),
         uncontrolled=amplitudes * bare, converged=ok,
         den_hartog_peak=reference["den_hartog"], h_infinity_peak=reference["h_infinity"])

@@ -16,6 +16,11 @@ from .._model._building import (
     linear_amplitudes,
     log_tuned,
 )
+from .._model._checks import check_grid
+from .._model._structure import Structure
+from .._model._system import PAPER_STROKE, check_values
+from .._orbit._building_orbit import building_settings, solve_orbits
+from .._orbit._settings import SolverSettings
 from ._building_design import (
     BandSearch,
     frictionless,
@@ -23,11 +28,6 @@ from ._building_design import (
     retune_building,
     search_grid,
 )
-from .._orbit._building_orbit import building_settings, solve_orbits
-from .._model._checks import check_grid
-from .._orbit._settings import SolverSettings
-from .._model._structure import Structure
-from .._model._system import PAPER_STROKE, check_values
 
 # The stroke limit is aimed this fraction below the given one (SLSQP meets its
 # constraints to its tolerance); a design whose largest stroke peak is within

@@ -10,6 +10,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import BuildingTID, Quantity, log_tuned
+from .._model._checks import check_grid
+from .._orbit._building_orbit import building_settings
+from .._orbit._settings import SolverSettings
 from ._building_design import (
     frictionless,
     no_start,
@@ -18,9 +21,6 @@ from ._building_design import (
     retune_building,
     search_grid,
 )
-from .._orbit._building_orbit import building_settings
-from .._model._checks import check_grid
-from .._orbit._settings import SolverSettings
 
 # The TID's and the load's parameters, in the order of the elasticities (a compliant
 # device's series stiffness and backlash come before the amplitude; the floors' masses
@@ -181,7 +181,7 @@ class BuildingOptimum(eqx.Module):
 
 class BuildingSensitivities(eqx.Module):
     """Per amplitude (SI): the highest `peak` of the quantity over the band, its
-    frequency `peak_omega` (rad/s), and `elasticities` (amplitudes x parameters): the
+    frequency `omega_peak` (rad/s), and `elasticities` (amplitudes x parameters): the
     relative change of the peak per relative change of each parameter of `names`
     (`parameter_names`: the TID's k, c, b, ff, cp, mt, a compliant device's series
     stiffness and backlash, the amplitude, every floor's mass and every storey's
@@ -192,7 +192,7 @@ class BuildingSensitivities(eqx.Module):
     amplitudes: Float[Array, " amps"]
     names: tuple[str, ...] = eqx.field(static=True)
     peak: Float[Array, " amps"]
-    peak_omega: Float[Array, " amps"]
+    omega_peak: Float[Array, " amps"]
     elasticities: Float[Array, "amps parameters"]
     converged: Bool[Array, " amps"]
     optimum: BuildingOptimum | None = None
@@ -223,7 +223,7 @@ def building_sensitivities(system: BuildingTID, amplitudes, quantity: Quantity |
     return BuildingSensitivities(
         amplitudes=amplitudes, names=parameter_names(system),
         peak=_keep(ok, [float(row[0].value) for row in rows]),
-        peak_omega=_keep(ok, [float(row[0].omega) for row in rows]),
+        omega_peak=_keep(ok, [float(row[0].omega) for row in rows]),
         elasticities=_keep(ok, jax.device_get([row[1] for row in rows])), converged=ok,
         optimum=(_optimum(system, quantity, amplitudes, omegas, settings, linear)
                  if optimum else None))

@@ -12,10 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._model._system import FIELD_NAMES, TIDSystem, compiler_options
+from .._orbit._sampled_peaks import interpolated, located_peak, parabola_vertices
 from .._peaks import sweep
 from .._runtime._cache import compiled
-from .._orbit._sampled_peaks import interpolated, located_peak, parabola_vertices
-from .._model._system import FIELD_NAMES, TIDSystem, compiler_options
 
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the

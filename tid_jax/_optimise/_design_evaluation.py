@@ -9,7 +9,13 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from .._model._linear import den_hartog_tuning
+from .._model._system import TIDSystem
+from .._orbit._sampled_peaks import REFINED_PEAKS
+from .._orbit._settings import SolverSettings
 from .._peaks import locate_peaks
+from .._response import batched, lane_response, scaled_states
+from .._runtime._parallel import map_shares, serial
 from ._design import (
     C_INDEX,
     CHUNK,
@@ -20,13 +26,7 @@ from ._design import (
     parameters_of,
 )
 from ._design_variables import design_of_tuning, tuning_of_design
-from .._model._linear import den_hartog_tuning
-from .._runtime._parallel import map_shares, serial
-from .._orbit._sampled_peaks import REFINED_PEAKS
-from .._response import batched, lane_response, scaled_states
-from .._orbit._settings import SolverSettings
 from ._smooth_max import Terms
-from .._model._system import TIDSystem
 
 UNSCALED = (1.0, 1.0)  # the design variables' scales here: unscaled
 

@@ -11,11 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
-from .._runtime._cache import compiled
-from ._design_variables import DESIGN_PARAMETERS, tuning_of_design
 from .._model._dynamics import parameters
 from .._model._linear import den_hartog_tuning
+from .._model._system import compiler_options
 from .._orbit._sampled_peaks import (
     REFINED_PEAKS,
     bracket,
@@ -26,11 +24,13 @@ from .._orbit._sampled_peaks import (
     stencil,
     top_peaks,
 )
-from .._response import point_response, with_tuning
 from .._orbit._settings import SolverSettings
-from ._stall import cut_within_tolerance
 from .._orbit._steady_state import refined_peak, settled_state
-from .._model._system import compiler_options
+from .._response import point_response, with_tuning
+from .._runtime._cache import compiled
+from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
+from ._design_variables import DESIGN_PARAMETERS, tuning_of_design
+from ._stall import cut_within_tolerance
 
 
 @compiled(options=compiler_options)

@@ -1,1 +1,2 @@
-"""Periodic orbits: the period map (exact stick-slip flows, diffrax), shooting, Floquet multipliers."""
+"""Periodic orbits: period maps (exact stick-slip flows, diffrax), shooting, Floquet
+multipliers."""

@@ -35,8 +35,8 @@ import numpy as np
 from jaxtyping import Array, Complex, Float, Int
 
 from .._model._building import BuildingTID, Quantity, selection
-from ._coulomb import bracketed_root, differentiable_root, segment_state
 from .._model._dynamics import dead_zone
+from ._coulomb import bracketed_root, differentiable_root, segment_state
 from ._eigen import eigensystem
 from ._period import integrate
 from ._settings import SolverSettings

@@ -10,8 +10,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import BuildingTID, Quantity, friction_influence, uncontrolled_amplitude
-from ._building_flow import flow, period, plant, projection_units, smoothed_period
 from .._model._checks import check_grid
+from ._building_flow import flow, period, plant, projection_units, smoothed_period
 from ._eigen import eigenvalues
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings

@@ -10,8 +10,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from . import _coulomb
 from .._model._dynamics import tangent_field, vector_field
+from . import _coulomb
 from ._settings import SolverSettings
 
 

@@ -8,7 +8,6 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._eigen import eigenvalues
-from ._sampled_peaks import parabola_top
 from ._period import (
     flow,
     initial_state,
@@ -17,6 +16,7 @@ from ._period import (
     samples_and_jacobian,
     transient,
 )
+from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
 
 

@@ -1,1 +1,2 @@
-"""What runs the computations: compiled programs kept on disk, processes, device sharding, files, outcome codes."""
+"""What runs the computations: compiled programs kept on disk, processes, device sharding,
+files, outcome codes."""

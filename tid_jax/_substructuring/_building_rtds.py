@@ -21,10 +21,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._model._building import BuildingTID, Quantity, linear_amplitudes, quantity_amplitude, selection
+from .._model._building import (
+    BuildingTID,
+    Quantity,
+    linear_amplitudes,
+    quantity_amplitude,
+    selection,
+)
 from .._orbit._building_orbit import solve_orbits
-from ._rtds_loop import Plan, Point, first_harmonic_phase
 from .._orbit._settings import SolverSettings
+from ._rtds_loop import Plan, Point, first_harmonic_phase
 
 
 class BuildingModel(eqx.Module):

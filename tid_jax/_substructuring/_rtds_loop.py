@@ -11,11 +11,11 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .._runtime._cache import compiled
 from .._model._dynamics import dead_zone, smooth_sign
 from .._model._linear import host_receptance
-from .._orbit._sampled_peaks import parabola_top
 from .._model._system import TIDSystem
+from .._orbit._sampled_peaks import parabola_top
+from .._runtime._cache import compiled
 
 MAX_PREDICTION_ORDER = 4
 

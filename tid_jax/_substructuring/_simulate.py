@@ -18,12 +18,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._model._building import BuildingTID, Quantity
-from .._orbit._building_orbit import building_settings
-from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
-from .._runtime._cache import compiled
 from .._model._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from .._model._linear import host_receptance
+from .._model._system import TIDSystem
+from .._orbit._building_orbit import building_settings
+from .._orbit._settings import SolverSettings
 from .._response import point_response
+from .._runtime._cache import compiled
+from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
 from ._rtds_loop import (
     MAX_PREDICTION_ORDER,
     Controller,
@@ -33,8 +35,6 @@ from ._rtds_loop import (
     first_harmonic_phase,
     simulate_batch,
 )
-from .._orbit._settings import SolverSettings
-from .._model._system import TIDSystem
 
 SCHEMES = ("conventional", "error_feedback")
 GUESSED_FORCES = ("acceleration", "harmonic")

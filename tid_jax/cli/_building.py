@@ -9,13 +9,13 @@ import numpy as np
 
 from .. import plot
 from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
+from .._model._structure import Structure
 from .._optimise._building_design import BUILDING_BAND, building_peaks, retune_building
-from .._orbit._building_orbit import building_response
 from .._optimise._building_robust import robust_building, scaled_structure
 from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
-from .._runtime._io import write_json, write_toml
+from .._orbit._building_orbit import building_response
 from .._orbit._settings import SolverSettings
-from .._model._structure import Structure
+from .._runtime._io import write_json, write_toml
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
     PROG,
@@ -346,7 +346,7 @@ def _retune_records(system, quantity, result, before, stroke_before, stroke_afte
                 system.load), k_N_per_m=k, c_N_s_per_m=c, k_over_k_den_hartog=k / k_dh,
             c_over_c_den_hartog=c / c_dh, peak_unit=quantity.unit,
             peak_before=finite(before[i]), peak_after=finite(after),
-            peak_frequency_after_Hz=finite(float(result.peak_omega[i]) / (2 * math.pi)),
+            peak_frequency_after_Hz=finite(float(result.omega_peak[i]) / (2 * math.pi)),
             peak_after_over_before=ratio(after, before[i]),
             peak_after_over_den_hartog=ratio(after, result.den_hartog_peak[i]),
             peak_after_over_uncontrolled=ratio(after, amplitude * bare),

@@ -16,17 +16,12 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import __version__
-from .._peaks import DEFAULT_FREQUENCIES, default_omegas
-from .._runtime._cache import cache_folder
 from .._model._checks import check_steady_state_device
-from .._runtime._io import check_writable_dir, json_text
 from .._model._linear import (
     den_hartog_tuning,
     host_receptance,
     stuck_receptance,
 )
-from .._runtime._parallel import ProcessMap, serial
-from .._orbit._settings import SolverSettings
 from .._model._system import (
     DEFAULT_FRICTION_WIDTH,
     DEVICE_TERMS,
@@ -39,6 +34,11 @@ from .._model._system import (
     PAPER_STROKE,
     TIDSystem,
 )
+from .._orbit._settings import SolverSettings
+from .._peaks import DEFAULT_FREQUENCIES, default_omegas
+from .._runtime._cache import cache_folder
+from .._runtime._io import check_writable_dir, json_text
+from .._runtime._parallel import ProcessMap, serial
 from ._building_config import BUILDING_TABLES, amplitude_value, check_harmonic, check_tables
 from ._pool import import_library, requested_workers
 

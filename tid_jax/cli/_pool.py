@@ -81,5 +81,5 @@ def early_pool(argv: list[str]) -> ProcessMap | None:
 def import_library() -> None:
     """A worker process's first step: the library's modules imported (and the figures')
     before its first task, while the command sets its inputs up."""
-    from .._identify import _fit as _identify
-    from .. import _robust, _sensitivity, plot
+    from .. import _robust, _sensitivity, plot  # noqa: F401
+    from .._identify import _fit  # noqa: F401

@@ -7,9 +7,9 @@ import numpy as np
 
 from .. import plot
 from .._model._building import Quantity, as_building, uncontrolled_amplitude
-from .._runtime._io import write_json, write_toml
 from .._model._linear import host_breakaway
 from .._response import frequency_response
+from .._runtime._io import write_json, write_toml
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (

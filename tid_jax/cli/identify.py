@@ -6,9 +6,9 @@ import math
 import numpy as np
 
 from .. import __version__, plot
-from .._optimise._design import PARAMETER_UNITS
 from .._identify._device import Motion
 from .._identify._fit import MODEL_PARAMETERS, MODELS, InerterRecord, identify_inerter
+from .._optimise._design import PARAMETER_UNITS
 from .._runtime._io import write_csv, write_json, write_toml
 from ._arguments import _add_output_arguments
 from ._common import INERTER_TABLE, PROG, CLIError, _number, _Output

@@ -12,12 +12,12 @@ import numpy as np
 from scipy import signal
 
 from .. import __version__, plot
-from .._model._building import BuildingTID, Quantity, as_building, linear_building_response
-from .._runtime._io import write_json
 from .._loads._monte_carlo import MonteCarloSettings, first_period, plan, random_history
 from .._loads._random_design import default_bounds, retune_random
 from .._loads._stationary import StationaryLoad, rms_response
+from .._model._building import BuildingTID, Quantity, as_building, linear_building_response
 from .._model._system import TIDSystem
+from .._runtime._io import write_json
 from . import _building
 from ._arguments import _add_output_arguments, _add_structure_arguments
 from ._building_config import RANDOM_KEYS, RANDOM_KINDS

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import plot
-from .._model._building import G
-from .._runtime._io import write_json
 from .._loads._monte_carlo import first_period, friction_history
 from .._loads._record_design import design_for_records
 from .._loads._records import GroundMotion, read_at2, read_csv_record
+from .._model._building import G
+from .._runtime._io import write_json
 from . import _building
 from ._arguments import _add_output_arguments, _add_structure_arguments
 from ._common import PROG, CLIError, _number, _Output

@@ -6,10 +6,10 @@ import numpy as np
 
 from .. import plot
 from .._model._building import Quantity, as_building
-from .._runtime._io import write_json, write_toml
 from .._model._linear import host_breakaway
 from .._response import _on_host
 from .._retune import RetuneSettings, retune
+from .._runtime._io import write_json, write_toml
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._building import uncontrolled_peak

@@ -5,10 +5,10 @@ import math
 import numpy as np
 
 from .. import plot
-from .._runtime._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
 from .._robust import RobustSettings, robust_tune, tuning_performance
+from .._runtime._io import write_json, write_toml
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (

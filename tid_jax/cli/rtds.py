@@ -6,7 +6,12 @@ import numpy as np
 
 from .. import plot
 from .._runtime._io import write_json
-from .._substructuring._simulate import GUESSED_FORCES, PREDICTIONS, SCHEMES, simulate_substructuring
+from .._substructuring._simulate import (
+    GUESSED_FORCES,
+    PREDICTIONS,
+    SCHEMES,
+    simulate_substructuring,
+)
 from . import _building
 from ._arguments import _add_band_arguments, _add_output_arguments, _add_structure_arguments
 from ._common import (

@@ -2,9 +2,9 @@
 
 from .. import plot
 from .._optimise._design import PARAMETER_UNITS
-from .._runtime._io import write_json, write_toml
 from .._response import _on_host
 from .._retune import RetuneSettings
+from .._runtime._io import write_json, write_toml
 from .._sensitivity import amplitude_sensitivities, elasticity_series
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
