@@ -392,20 +392,20 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
     scales = (0.95, 1.05)
     omegas = np.linspace(0.5, 1.6, 31) * float(building.modes()[0][0])
-    free = tj.robust_building(system, [1.0], stiffness_scales=scales, omegas=omegas,
-                              stroke_limit=None)
+    free = tj.robust_tune(system, [1.0], omegas=omegas, stroke_limit=None,
+                          host_frequency_scales=np.sqrt(scales))
     assert free.stroke_limit is None and not bool(free.stroke_limited)
     limit = 0.9 * float(np.max(free.stroke_peak))
-    result = tj.robust_building(system, [1.0], stiffness_scales=scales, omegas=omegas,
-                                stroke_limit=limit)
+    result = tj.robust_tune(system, [1.0], omegas=omegas, stroke_limit=limit,
+                            host_frequency_scales=np.sqrt(scales))
     assert bool(result.converged) and bool(result.within_stroke_limit)
     assert bool(result.stroke_limited) and result.stroke_limit == limit
     systems = [system.replace(structure=tj.Structure(*_scaled_matrices(building, scale)))
                for scale in scales]
     k, c = float(result.tid_stiffness), float(result.tid_damping)
     for j, scaled in enumerate(systems):
-        shot = tj.building_response(scaled.replace(tid_stiffness=k, tid_damping=c), omegas,
-                                    [1.0])
+        shot = tj.frequency_response(scaled.replace(tid_stiffness=k, tid_damping=c), omegas,
+                                     [1.0])
         assert float(np.max(shot.stroke_max)) <= limit * (1 + 1e-9)
         assert float(np.max(shot.stroke_max)) == pytest.approx(
             float(result.stroke_peak[0, j]), rel=1e-6)
@@ -413,7 +413,7 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     def worst(x):
         tuned = [s.replace(tid_stiffness=math.exp(x[0]), tid_damping=math.exp(x[1]))
                  for s in systems]
-        ratio = max(float(tj.building_peaks(t, [1.0], omegas=omegas).value[0])
+        ratio = max(float(tj.peaks(t, omegas, [1.0]).value[0])
                     / float(result.best[0, j]) for j, t in enumerate(tuned))
         stroke = max(float(np.max(_linear_strokes(t, omegas))) for t in tuned)
         return ratio, stroke
@@ -433,7 +433,7 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     assert float(result.worst_ratio) <= ratio * (1 + 2e-3)
     assert float(result.worst_ratio) >= float(free.worst_ratio)
     with pytest.raises(ValueError, match="stroke_limit"):
-        tj.robust_building(system, [1.0], stroke_limit=-0.01)
+        tj.robust_tune(system, [1.0], stroke_limit=-0.01)
 
 
 def _scaled_matrices(structure, scale):

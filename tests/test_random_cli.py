@@ -64,7 +64,7 @@ def test_random_json_is_the_library_s_retune(random_run):
     # why there is no linearised design: its outcome's text, the library's
     assert result["linearised_status"] == mine.linearised_messages()[0]
     assert "no statistical linearisation" in result["linearised_status"]
-    assert result["stroke_rms_after"] == pytest.approx(float(mine.stroke_rms_after[0]),
+    assert result["stroke_rms_after_m"] == pytest.approx(float(mine.stroke_rms_after[0]),
                                                        rel=1e-10)
     assert result["at_bound"] is bool(mine.at_bound[0]) and result["stroke_limited"] is False
     assert result["rms_frictionless"] == pytest.approx(

@@ -207,14 +207,15 @@ def test_cli_robust_writes_the_design(tmp_path, capsys, band, robust_free):
     assert cli.main(argv) == 0
     lines = capsys.readouterr().out.splitlines()
     data = json.loads((tmp_path / "robust.json").read_text())
-    assert data["robust"]["tid_stiffness"] == pytest.approx(float(robust_free.tid_stiffness),
-                                                            rel=1e-6)
+    assert data["robust"]["k_N_per_m"] == pytest.approx(float(robust_free.tid_stiffness),
+                                                        rel=1e-6)
     assert data["robust"]["worst_ratio"] == pytest.approx(float(robust_free.worst_ratio),
                                                           rel=1e-6)
     with open(tmp_path / "robust.csv", newline="") as file:
         rows = list(csv.DictReader(file))
-    assert [float(row["amplitude_N"]) for row in rows] == list(ROBUST_AMPLITUDES)
+    assert [float(row["amplitude"]) for row in rows] == list(ROBUST_AMPLITUDES)
+    assert {row["amplitude_unit"] for row in rows} == {"N"}
     ratios = np.asarray(robust_free.performance.ratio)[0]
-    # the table: a row per scenario, the robust ratio in its fifth column
-    assert [float(line.split()[4]) for line in lines[3:]] == pytest.approx(ratios, abs=5e-4)
+    # the table: a row per scenario, the robust ratio in its sixth column
+    assert [float(line.split()[5]) for line in lines[3:]] == pytest.approx(ratios, abs=5e-4)
 
