@@ -10,8 +10,8 @@ import pytest
 
 import tid_jax as tj
 from tests.lanes import peaks_of
+from tid_jax._model._system import FIELD_NAMES, compiler_options
 from tid_jax._optimise._design_variables import DESIGN_SCALE, design_of_tuning
-from tid_jax._model._system import compiler_options
 
 SENSITIVITY_AMPLITUDE = 400.0  # N: both resonance peaks split, the optimum is smooth there
 
@@ -37,7 +37,7 @@ def _peaks(system, amplitude, band):
 
 def test_sensitivities_match_finite_differences(system, band, sensitivity):
     # Five-point central differences of the peaks found by `tj.peaks` (relative step 5e-4).
-    assert sensitivity.parameters == tuple(tj._system.FIELD_NAMES[:7]) + (
+    assert sensitivity.parameters == tuple(FIELD_NAMES[:7]) + (
         "parasitic_damping", "terminal_mass", "amplitude")
     assert bool(sensitivity.converged)
     x0, y0 = _peaks(system, SENSITIVITY_AMPLITUDE, band)
@@ -78,9 +78,9 @@ def test_derivatives_are_those_of_every_sample_at_the_candidates(system, band):
     # The kernel takes derivatives at the samples of each response's highest candidates
     # only; against the derivatives of every sample (jacfwd through the whole sweep), at
     # 200 N (the stroke sticks over part of the band) and 700 N.
-    from tid_jax._peaks import sweep
     from tid_jax._optimise._design import _TANGENT_CANDIDATES, _log_candidates, changed_system
     from tid_jax._optimise._design_evaluation import Context
+    from tid_jax._peaks import sweep
 
     # (the default settings, as `sensitivities` passes them)
     settings = tj.SolverSettings()
