@@ -267,7 +267,7 @@ def compiler_options(*args, **kwargs) -> dict:
     """XLA's options for a program compiled for these arguments (`_cache.compiled`):
     where they hold a system with exact Coulomb friction or a compliant device, XLA's
     fusion emitters off. Exact friction's period map is the closed-form stick-slip flow
-    (`_coulomb`), whose programs compile in about two thirds of the time without them and
+    (`_flow`), whose programs compile in about two thirds of the time without them and
     run as fast. The compliant device's six-state integrations run faster without them:
     on the paper's system with a compliant device, its frequency response takes three
     quarters of the time (a third with backlash) and its sensitivities a quarter, their

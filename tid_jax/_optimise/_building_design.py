@@ -25,7 +25,6 @@ from .._model._building import (
     uncontrolled_amplitude,
 )
 from .._model._checks import check_grid
-from .._orbit._building_flow import flow, plant, projection_units
 from .._orbit._building_orbit import (
     building_settings,
     peak_of,
@@ -33,6 +32,7 @@ from .._orbit._building_orbit import (
     period_samples,
     solve_orbit,
 )
+from .._orbit._flow import flow, plant, projection_units
 from .._orbit._sampled_peaks import local_peaks
 from .._orbit._settings import SolverSettings
 from .._orbit._steady_state import fixed_point_matrix

@@ -1,5 +1,5 @@
 """Periodic steady states of a `BuildingTID` by shooting: the linear equivalent start,
-Newton's iterations on the period map (`_building_flow`) with its monodromy matrix by
+Newton's iterations on the period map (`_flow`) with its monodromy matrix by
 forward derivatives, Floquet multipliers, and batches of them over amplitudes and
 frequencies (`building_response`)."""
 
@@ -11,8 +11,9 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import BuildingTID, Quantity, friction_influence, uncontrolled_amplitude
 from .._model._checks import check_grid
-from ._building_flow import flow, period, plant, projection_units, smoothed_period
 from ._eigen import eigenvalues
+from ._flow import flow, period, plant, projection_units
+from ._period import smoothed_period
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
 from ._steady_state import fixed_point_matrix, moving_part
@@ -143,7 +144,7 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
     s = z0.shape[0]
     eye = jnp.eye(s, dtype=z0.dtype)
     samples = settings.samples
-    empty = (jnp.full((samples, 2), jnp.nan, z0.dtype), jnp.zeros((), int),
+    empty = (jnp.full((samples, 3), jnp.nan, z0.dtype), jnp.zeros((), int),
              jnp.zeros((), z0.dtype), z0)
     start = _Newton(z0, jnp.full((s, s), jnp.nan, z0.dtype),
                     jax.scipy.linalg.lu_factor(eye), jnp.asarray(jnp.inf, z0.dtype),

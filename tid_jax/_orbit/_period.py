@@ -1,7 +1,8 @@
 """The period map Phi_T: the state one forcing period on from a state at phase 0, with the
 samples of the response over that period, its Jacobians (the monodromy matrix, by the
 variational equations or forward derivatives) and the transient before shooting; diffrax
-for smoothed friction, the closed-form stick-slip flow of `_coulomb` for exact friction."""
+for smoothed friction, the closed-form stick-slip flow of `_flow` for exact friction (the
+paper's system as the one-storey `Plant`, `_flow.parameter_plant`)."""
 
 import diffrax as dfx
 import jax
@@ -10,8 +11,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._model._dynamics import tangent_field, vector_field
-from . import _coulomb
+from .._model._dynamics import dead_zone, tangent_field, vector_field
+from . import _flow
 from ._settings import SolverSettings
 
 
@@ -45,15 +46,29 @@ def _phases(settings: SolverSettings, dtype):
     return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
 
 
-def flow(p, settings: SolverSettings) -> _coulomb.Flow | None:
+def flow(p, settings: SolverSettings) -> _flow.Flow | None:
     """What every period at the parameters `p` shares, for the functions below
     (`modes=`), computed once where many periods are integrated at the same `p`: with
-    exact friction the modes of the stick-slip flow (`_coulomb.flow`); None for smoothed
+    exact friction the modes of the stick-slip flow (`_flow.flow`); None for smoothed
     friction (its integrations share nothing)."""
-    return _coulomb.flow(p, settings.samples) if settings.exact_friction else None
+    if not settings.exact_friction:
+        return None
+    return _flow.flow(_flow.parameter_plant(p), settings.samples)
 
 
-def _flow(p, settings: SolverSettings, given):
+# The paper's state (x, x', y, y') in the order of the one-storey plant's (x, r, x', r'),
+# r = y (the inerter joins the terminal to the ground); the permutation is its own inverse.
+_PLANT_ORDER = np.array([0, 2, 1, 3])
+
+
+def _exact_period(z0, modes: _flow.Flow, keep_samples: bool = True):
+    """`_flow.period` in the paper's state order: samples of x, y and y', the state after
+    the period, the transitions and the largest |y| at a transition."""
+    values, z_end, transitions, y_events = _flow.period(z0[_PLANT_ORDER], modes, keep_samples)
+    return values, z_end[_PLANT_ORDER], transitions, y_events
+
+
+def _given_flow(p, settings: SolverSettings, given):
     return flow(p, settings) if given is None else given
 
 
@@ -63,9 +78,9 @@ def period_samples(z0, p, settings: SolverSettings, modes=None):
     largest |y| at a stick-slip transition and the number of transitions (exact friction;
     else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
-        states, z_end, transitions, y_events = _coulomb.period(
-            z0, _flow(p, settings, modes))
-        return (states[:, 0], states[:, 2], states[:, 3], z_end, y_events,
+        values, z_end, transitions, y_events = _exact_period(
+            z0, _given_flow(p, settings, modes))
+        return (values[:, 0], values[:, 1], values[:, 2], z_end, y_events,
                 transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
     sol = integrate(
@@ -91,8 +106,8 @@ def period_tangents(z, p, settings: SolverSettings, modes=None):
     on them). With exact friction, the forward derivatives of the hybrid period map.
     `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
     if settings.exact_friction:
-        modes = _flow(p, settings, modes)
-        end = lambda z0: _coulomb.period(z0, modes, keep_samples=False)[1]
+        modes = _given_flow(p, settings, modes)
+        end = lambda z0: _exact_period(z0, modes, keep_samples=False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
@@ -199,7 +214,7 @@ def transient(z, p, settings: SolverSettings, periods=None):
         modes = flow(p, settings)
 
         def step(_, z):
-            return _coulomb.period(z, modes, keep_samples=False)[1]
+            return _exact_period(z, modes, keep_samples=False)[1]
 
         end = jax.lax.fori_loop(0, count, step, z)
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
@@ -213,3 +228,31 @@ def transient(z, p, settings: SolverSettings, periods=None):
         settings.max_steps * settings.transient_periods,
     )
     return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
+
+
+def smoothed_field(theta, z, plant: _flow.Plant):
+    """The scaled field with the friction smoothed as `tanh(r' / width)`."""
+    m = z.shape[0] // 2
+    friction = plant.friction * jnp.tanh(z[2 * m - 1] / plant.width)
+    stretch = z[plant.stroke] - z[m - 1]  # a compliant device's series spring (else 0)
+    play = stretch - dead_zone(stretch, plant.gap)
+    return (plant.slip @ z + plant.forcing * jnp.sin(theta) - friction * plant.friction_vector
+            + play * plant.play_vector)
+
+
+def smoothed_period(z0, plant: _flow.Plant, settings: SolverSettings, keep_samples: bool = True):
+    """One period of the smoothed flow of a `_flow.Plant` (diffrax): the same outputs as
+    `_flow.period`."""
+    phases = np.arange(settings.samples) * (2 * np.pi / settings.samples)
+    saveat = dfx.SaveAt(ts=phases, t1=True) if keep_samples else dfx.SaveAt(t1=True)
+    sol = integrate(smoothed_field, z0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
+    ys = sol.ys
+    z_end = jnp.where(sol.result == dfx.RESULTS.successful, ys[-1], jnp.nan)
+    if not keep_samples:
+        return jnp.zeros((0, 3), z0.dtype), z_end, jnp.zeros((), int), jnp.zeros((), z0.dtype)
+    states = ys[:-1]
+    rates = jax.vmap(smoothed_field, in_axes=(0, 0, None))(jnp.asarray(phases), states, plant)
+    values = (states @ plant.rows.T + rates @ plant.rows_rate.T
+              + jnp.sin(jnp.asarray(phases))[:, None] * plant.rows_sin)
+    return (values[:, :3], z_end, jnp.zeros((), int),
+            jnp.zeros((), z0.dtype))

@@ -46,7 +46,7 @@ class SolverSettings(eqx.Module):
     - `samples`: points per period at which x and y are sampled; each peak is refined by a
       parabola through the three samples around it.
     - `exact_friction`: the exact Coulomb friction of a system with `friction_width=0`
-      (the stick-slip flow of `_coulomb`, in closed form between transitions; `rtol`,
+      (the stick-slip flow of `_flow`, in closed form between transitions; `rtol`,
       `atol`, `max_steps` and `implicit` then play no part, and the samples also serve
       to find the transitions). The entry points set it from the system
       (`for_system`).

@@ -1,25 +1,29 @@
-"""One forcing period of a `BuildingTID` in scaled form: the stick-slip flow of exact
-Coulomb friction in closed form, or smoothed friction integrated by diffrax.
+"""The stick-slip flow of exact Coulomb friction in closed form: one forcing period of a
+structure with its TID in scaled form, for one storey (the paper's system) and many.
 
 Scaled units: phase `theta = omega t`, coordinates in units of `D = A d` (d: the static
-scale, `BuildingTID.static_scale`), velocities in `omega D`. The state is
-`z = (u, u')` over the coordinates u (`_building`: the floors, the stroke r and a
-compliant device's mechanism q; the friction on the last), and
+scale, `BuildingTID.static_scale`; 1 / K for the paper's host), velocities in `omega D`.
+The state is `z = (u, u')` over the coordinates u (`_building`: the floors, the stroke r
+and a compliant device's mechanism q; the friction on the last), and
 
     z' = S z + f sin(theta) - phi_s F,      phi_s = phi / (omega^2 D),
 
 with `S = [[0, I], [-Mg^-1 Kg / w^2, -Mg^-1 Cg / w]]`, `f = (0, Mg^-1 G / (w^2 d))`,
 `F = (0, Mg^-1 e_f)` (f: the friction's coordinate, written r below; a compliant
 device's backlash adds its play, smoothed friction only). Exact friction is linear in
-each of three modes, as for the single-storey host (`_coulomb`): slipping with sign s
-(`phi = s ff`), and stuck (`r' = 0`, r held: the other coordinates move as the structure
-with the device held at that point, and the friction force phi that holds it is linear
-in the state and the forcing). A slipping inerter sticks where `r'` reaches 0 with
-`|phi| <= ff`, else slips back; a stuck one slips with the sign of phi once `|phi|`
-reaches ff. Each mode's motion is a harmonic and a constant particular solution plus its
-modal homogeneous part; events are found on the sample grid and refined by safeguarded
-Newton steps, each event time carrying the implicit derivative of one Newton step so
-that forward derivatives include the jumps at the transitions.
+each of three modes: slipping with sign s (`phi = s ff`), and stuck (`r' = 0`, r held:
+the other coordinates move as the structure with the device held at that point, and the
+friction force phi that holds it is linear in the state and the forcing). A slipping
+inerter sticks where `r'` reaches 0 with `|phi| <= ff`, else slips back; a stuck one
+slips with the sign of phi once `|phi|` reaches ff. Each mode's motion is a harmonic and
+a constant particular solution plus its modal homogeneous part, so a period is a short
+sequence of segments; each segment ends at the first of its mode's events, located on
+the sample grid (an event function that dips below 0 and back between two samples is
+not seen) and refined by safeguarded Newton steps. Every event time carries the
+derivative of one Newton step from its (constant) root, the implicit derivative of the
+event time, so that forward derivatives of the period map (the monodromy matrix, the
+parameter Jacobians) include the jumps at the transitions (saltation) without any
+special case.
 
 Only projections of the state are sampled (the quantity, the stroke, r' and phi), so
 that a period costs O(samples n) beyond its events.
@@ -27,7 +31,6 @@ that a period costs O(samples n) beyond its events.
 
 import functools as ft
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -35,13 +38,10 @@ import numpy as np
 from jaxtyping import Array, Complex, Float, Int
 
 from .._model._building import BuildingTID, Quantity, selection
-from .._model._dynamics import dead_zone
-from ._coulomb import bracketed_root, differentiable_root, segment_state
 from ._eigen import eigensystem
-from ._period import integrate
-from ._settings import SolverSettings
 
 MAX_SEGMENTS = 24  # segments per period; an orbit that needs more is reported as failed
+_ROOT_ITERATIONS = 60  # safeguarded Newton iterations allowed per event
 _STICK = 0
 # rows of the sampled projections: the quantity, the stroke, its velocity, the friction
 # force a stuck inerter needs
@@ -74,11 +74,41 @@ class Plant(eqx.Module):
 def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
     """The scaled model of `system` at load amplitude `amplitude` and frequency `omega`
     (rad/s); differentiable with respect to the system's arrays."""
-    m = system.coordinates
+    w, wd, kappa, _ = selection(system, quantity)
+    return scaled_plant(system.generalised_matrices(), system.load_vector(),
+                        system.static_scale(), (w, wd, kappa), system.floors,
+                        system.friction_force, system.width_at(amplitude, omega),
+                        system.backlash, system.play_direction(), amplitude, omega)
+
+
+def parameter_plant(p: Float[Array, " 14"]) -> Plant:
+    """The scaled model of the paper's system (a rigid device) at the parameter vector `p`
+    (order `_dynamics.PARAMETERS`): the one-storey case of `plant`, whose inerter joins
+    the terminal to the ground (the stroke r is the terminal's displacement y) and whose
+    quantity is the host's displacement x; its scaled units are those of `_dynamics`
+    (A / K)."""
+    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, _, _, width,
+     amplitude, omega) = p
+    matrices = (jnp.stack([jnp.stack([mass, 0 * mass]),
+                           jnp.stack([0 * mass, inertance + terminal])]),
+                jnp.stack([jnp.stack([damping + c, -c]), jnp.stack([-c, c + parasitic])]),
+                jnp.stack([jnp.stack([stiffness + k, -k]), jnp.stack([-k, k])]))
+    one, zero = jnp.ones_like(mass), jnp.zeros_like(mass)
+    return scaled_plant(matrices, jnp.stack([one, zero]), 1 / stiffness,
+                        (np.array([1.0, 0.0]), np.zeros(2), 0.0), 1, friction, width,
+                        zero, jnp.zeros(2, mass.dtype), amplitude, omega)
+
+
+def scaled_plant(matrices, load, scale, quantity, stroke: int, friction_force, width,
+                 backlash, play_direction, amplitude, omega) -> Plant:
+    """The `Plant` of the generalised `matrices` `(Mg, Cg, Kg)` (the friction on the last
+    coordinate) under the load `load` per unit amplitude, in units of the static `scale`
+    d, measuring `quantity = (w, wd, kappa)` (`_building.selection`), the stroke on
+    coordinate `stroke`, at amplitude A and frequency omega."""
+    mass, damping, stiffness = matrices
+    m = mass.shape[0]
     f = m - 1  # the friction's coordinate; the others move while it is stuck
-    mass, damping, stiffness = system.generalised_matrices()
-    scale = system.static_scale()
-    g = system.load_vector() / (omega**2 * scale)
+    g = load / (omega**2 * scale)
     ks, cs = stiffness / omega**2, damping / omega
     eye, zeros = jnp.eye(m), jnp.zeros((m, m))
     inverse = jnp.linalg.inv(mass)
@@ -90,25 +120,24 @@ def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
     free = -solve @ jnp.concatenate([ks, cs.at[:, f].set(0.0)], axis=1)
     stuck = jnp.zeros((2 * m, 2 * m)).at[:f, m:m + f].set(jnp.eye(f)).at[m:m + f].set(free[:f])
     stuck_forcing = jnp.zeros(2 * m).at[m:m + f].set((solve @ g)[:f])
-    w, wd, kappa, _ = selection(system, quantity)
+    w, wd, kappa = quantity
     units = np.zeros((2, 2 * m))
-    units[0, system.floors] = units[1, m + f] = 1.0  # the stroke; the friction's velocity
+    units[0, stroke] = units[1, m + f] = 1.0  # the stroke; the friction's velocity
     rows = jnp.concatenate([jnp.append(jnp.asarray(w), jnp.zeros(m))[None],
                             jnp.asarray(units), free[f][None]])
     rows_rate = jnp.zeros((4, 2 * m)).at[_QUANTITY].set(jnp.append(jnp.zeros(m), wd))
-    rows_sin = jnp.stack([kappa / (omega**2 * scale), 0.0, 0.0, (solve @ g)[f]])
+    rows_sin = jnp.stack([kappa / (omega**2 * scale), 0.0 * scale, 0.0 * scale,
+                          (solve @ g)[f]])
     unit = amplitude * scale
     return Plant(slip=slip, forcing=jnp.concatenate([jnp.zeros(m), inverse @ g]),
                  friction_vector=jnp.concatenate([jnp.zeros(m), inverse[:, f]]),
-                 friction=system.friction_force / (omega**2 * unit),
+                 friction=friction_force / (omega**2 * unit),
                  stuck=stuck, stuck_forcing=stuck_forcing, demand=free[f],
                  demand_sin=(solve @ g)[f], rows=rows, rows_rate=rows_rate,
-                 rows_sin=rows_sin,
-                 width=system.width_at(amplitude, omega) / (omega * unit),
-                 gap=system.backlash / unit,
+                 rows_sin=rows_sin, width=width / (omega * unit), gap=backlash / unit,
                  play_vector=jnp.concatenate([jnp.zeros(m),
-                                              inverse @ system.play_direction() / omega**2]),
-                 stroke=system.floors)
+                                              inverse @ play_direction / omega**2]),
+                 stroke=stroke)
 
 
 def projection_units(system: BuildingTID, quantity: Quantity, amplitude, omega):
@@ -154,6 +183,56 @@ def _mode(matrix, forcing, plant: Plant, grid, stuck: bool) -> _Mode:
     projected_harmonic = rows @ harmonic + 1j * (plant.rows_rate @ harmonic)
     return _Mode(vectors, inverse, values, harmonic,
                  jnp.exp(values[None, :] * grid[:, None]), projected, projected_harmonic)
+
+
+def segment_state(segment, mode, theta):
+    """The state at phase `theta` (>= the segment's start) of a closed-form segment (a
+    `_Segment` and its `_Mode`, or any with their fields) and its phase derivative."""
+    tau = jnp.maximum(theta - segment.start, 0.0)
+    growth = segment.coefficients * jnp.exp(mode.eigenvalues * tau)
+    harmonic = mode.harmonic * jnp.exp(1j * theta)
+    z = jnp.real(harmonic + mode.vectors @ growth) + segment.constant
+    dz = jnp.real(1j * harmonic + mode.vectors @ (mode.eigenvalues * growth))
+    return z, dz
+
+
+def bracketed_root(g_of, low, high, g_low, g_high, active):
+    """The phase in `[low, high]` where the event function `g_of(theta) -> (g, dg/dtheta)`
+    changes sign (positive at `low`, negative at `high`), by Newton steps kept inside the
+    shrinking bracket from the secant of the values `g_low`, `g_high` there; no
+    iterations where not `active`."""
+    secant = g_low / jnp.where(g_low == g_high, 1.0, g_low - g_high)
+    first = low + (high - low) * jnp.clip(secant, 0.1, 0.9)
+    tol = 1e-14 * 2 * np.pi
+
+    def cond(carry):
+        low, high, theta, step, i = carry
+        return (jnp.abs(step) > tol) & (high - low > tol) & (i < _ROOT_ITERATIONS)
+
+    def body(carry):
+        low, high, theta, _, i = carry
+        g, dg = g_of(theta)
+        low, high = jnp.where(g >= 0, theta, low), jnp.where(g >= 0, high, theta)
+        newton = theta - g / jnp.where(dg == 0, 1.0, dg)
+        # (a step below theta's rounding leaves newton == theta, on the bracket's end)
+        inside = (newton >= low) & (newton <= high) & (dg != 0)
+        new = jnp.where(inside, newton, 0.5 * (low + high))
+        return low, high, new, new - theta, i + 1
+
+    _, _, theta, _, _ = jax.lax.while_loop(
+        cond, body, (low, high, first, jnp.where(active, jnp.inf, 0.0).astype(low.dtype), 0)
+    )
+    return theta
+
+
+def differentiable_root(g_of, theta0):
+    """`theta0`, a root of the event function `g_of(theta) -> (g, dg/dtheta)`, with the
+    forward derivative of one Newton step from it: the implicit derivative
+    -dg / (dg/dtheta) of the event time (the value stays `theta0`)."""
+    theta0 = jax.lax.stop_gradient(theta0)
+    g, dg = g_of(theta0)
+    dg = jax.lax.stop_gradient(jnp.where(dg == 0, 1.0, dg))
+    return theta0 - (g - jax.lax.stop_gradient(g)) / dg
 
 
 class Flow(eqx.Module):
@@ -249,7 +328,7 @@ def _initial_sign(z, plant: Plant):
 
 class _Period(eqx.Module):
     segment: _Segment
-    samples: Float[Array, "samples 2"]
+    samples: Float[Array, "samples 3"]
     z_end: Float[Array, " s"]
     transitions: Int[Array, ""]
     stroke_events: Float[Array, ""]
@@ -258,10 +337,11 @@ class _Period(eqx.Module):
 
 @ft.partial(jax.jit, static_argnums=(2, 3))
 def period(z0, flow: Flow, keep_samples: bool = True, sample_tangents: bool = True):
-    """One period of the stick-slip flow from `z0` at phase 0: the quantity and the
-    stroke sampled at the grid's phases (`samples x 2`; without their derivatives unless
-    `sample_tangents`), the state after the period (NaN past `MAX_SEGMENTS` segments),
-    the number of transitions and the largest |stroke| at a transition."""
+    """One period of the stick-slip flow from `z0` at phase 0: the quantity, the stroke
+    and the friction's velocity sampled at the grid's phases (`samples x 3`; without
+    their derivatives unless `sample_tangents`), the state after the period (NaN past
+    `MAX_SEGMENTS` segments), the number of transitions and the largest |stroke| at a
+    transition."""
     dtype = z0.dtype
     plant, modes = flow.plant, flow.modes
     samples = modes[0].powers.shape[0] - 1
@@ -293,7 +373,7 @@ def period(z0, flow: Flow, keep_samples: bool = True, sample_tangents: bool = Tr
             lambda t: _event(segment, *segment_state(segment, mode, t), t, plant), theta)
         theta = jnp.where(ends, theta, 2 * np.pi)
         own = (grid[:-1] >= segment.start) & (grid[:-1] < theta)
-        kept = values[:-1, _QUANTITY:_STROKE + 1]
+        kept = values[:-1, _QUANTITY:_STROKE_VELOCITY + 1]
         samples = jnp.where(own[:, None], kept, state.samples) if keep_samples else state.samples
         z, _ = segment_state(segment, mode, theta)
         z = jnp.where(segment.sign == _STICK, z, z.at[2 * m - 1].set(0.0))
@@ -313,35 +393,8 @@ def period(z0, flow: Flow, keep_samples: bool = True, sample_tangents: bool = Tr
         )
 
     first = _start(_initial_sign(z0, plant), jnp.zeros((), dtype), z0, plant, modes)
-    start = _Period(first, jnp.zeros((samples if keep_samples else 0, 2), dtype),
+    start = _Period(first, jnp.zeros((samples if keep_samples else 0, 3), dtype),
                     jnp.zeros_like(z0), jnp.zeros((), int), jnp.zeros((), dtype),
                     jnp.asarray(False))
     end = jax.lax.while_loop(lambda state: ~state.done, body, start)
     return end.samples, end.z_end, end.transitions, end.stroke_events
-
-
-def smoothed_field(theta, z, plant: Plant):
-    """The scaled field with the friction smoothed as `tanh(r' / width)`."""
-    m = z.shape[0] // 2
-    friction = plant.friction * jnp.tanh(z[2 * m - 1] / plant.width)
-    stretch = z[plant.stroke] - z[m - 1]  # a compliant device's series spring (else 0)
-    play = stretch - dead_zone(stretch, plant.gap)
-    return (plant.slip @ z + plant.forcing * jnp.sin(theta) - friction * plant.friction_vector
-            + play * plant.play_vector)
-
-
-def smoothed_period(z0, plant: Plant, settings: SolverSettings, keep_samples: bool = True):
-    """One period of the smoothed flow (diffrax): the same outputs as `period`."""
-    phases = np.arange(settings.samples) * (2 * np.pi / settings.samples)
-    saveat = dfx.SaveAt(ts=phases, t1=True) if keep_samples else dfx.SaveAt(t1=True)
-    sol = integrate(smoothed_field, z0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
-    ys = sol.ys
-    z_end = jnp.where(sol.result == dfx.RESULTS.successful, ys[-1], jnp.nan)
-    if not keep_samples:
-        return jnp.zeros((0, 2), z0.dtype), z_end, jnp.zeros((), int), jnp.zeros((), z0.dtype)
-    states = ys[:-1]
-    rates = jax.vmap(smoothed_field, in_axes=(0, 0, None))(jnp.asarray(phases), states, plant)
-    values = (states @ plant.rows.T + rates @ plant.rows_rate.T
-              + jnp.sin(jnp.asarray(phases))[:, None] * plant.rows_sin)
-    return (values[:, _QUANTITY:_STROKE + 1], z_end, jnp.zeros((), int),
-            jnp.zeros((), z0.dtype))
