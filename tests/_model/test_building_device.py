@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tests._model.test_building import MASSES, STIFFNESSES, B, _matrices
 from tests.reference import building_linear
 from tests.reference.building_stick_slip import steady_state
 from tests.reference.compliant import compliant_peaks
-from tests.test_building import MASSES, STIFFNESSES, B, _matrices
 
 DEVICE = dict(series_stiffness=2e6, terminal_mass=20.0, parasitic_damping=30.0)
 K_TID, C_TID = 41668.57, 524.636

@@ -94,7 +94,7 @@ import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, {root!r})
-from tests.test_sharding import measure
+from tests._runtime.test_sharding import measure
 print(json.dumps(measure(chunk=2)))
 """
 
@@ -104,7 +104,7 @@ def _start(device_count: int) -> subprocess.Popen:
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={device_count}"
     env["JAX_ENABLE_X64"] = "1"
     env["JAX_PLATFORMS"] = "cpu"
-    root = str(Path(__file__).resolve().parent.parent)
+    root = str(Path(__file__).resolve().parents[2])
     return subprocess.Popen(
         [sys.executable, "-c", SCRIPT.format(root=root)], env=env, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True,

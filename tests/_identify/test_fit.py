@@ -12,16 +12,11 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tests.cli.test_main import run
+from tests.reference.inerter import synthetic_records
 from tid_jax._identify import _fit as _identify
 from tid_jax._identify._device import ForceSettings, Motion, friction_width
 from tid_jax.cli._common import INPUT_KEYS, _inputs, _system
-
-try:
-    from reference.inerter import synthetic_records
-    from test_cli import run
-except ImportError:  # tests/ imported as a package
-    from tests.reference.inerter import synthetic_records
-    from tests.test_cli import run
 
 jax.config.update("jax_enable_x64", True)
 

@@ -13,8 +13,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import tid_jax as tj
+from tests._model.test_building import MASSES, STIFFNESSES, B
 from tests.reference import building_linear
-from tests.test_building import MASSES, STIFFNESSES, B
 
 STRUCTURE = tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)
 FIRST = float(STRUCTURE.modes()[0][0])

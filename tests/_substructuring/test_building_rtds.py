@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
+from tests._model.test_building import MASSES, STIFFNESSES, B, _matrices
 from tests.reference import building_linear
-from tests.test_building import MASSES, STIFFNESSES, B, _matrices
 
 STRUCTURE = tj.Structure.shear_building(MASSES, STIFFNESSES, damping_ratio=0.02)
 FIRST = float(STRUCTURE.modes()[0][0])

@@ -564,7 +564,7 @@ def test_a_refused_command_leaves_no_worker_processes():
 
 # --- the README's quick start and example ---------------------------------------------------
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
 def readme_blocks(heading):
