@@ -1,0 +1,52 @@
+"""The paper's system is the one-storey case of the stick-slip flow that every structure
+runs on: the same `Plant`, the same period map, the same steady states."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import tid_jax as tj
+from tid_jax._model._building import building_of
+from tid_jax._model._dynamics import parameter_vector
+from tid_jax._orbit._flow import flow, parameter_plant, period, plant
+
+AMPLITUDE = 300.0  # N
+OMEGAS = 2 * np.pi * np.array([3.4, 3.8, 3.95, 4.3])  # rad/s, through stick-slip
+
+
+def _plants(system, omega):
+    building = building_of(system, "force")
+    return (parameter_plant(parameter_vector(system, AMPLITUDE, omega)),
+            plant(building, tj.Quantity(), AMPLITUDE, omega))
+
+
+@pytest.mark.parametrize("omega", OMEGAS)
+def test_the_paper_system_is_the_one_storey_building_plant(omega):
+    ours, building = _plants(tj.paper_system(), omega)
+    assert ours.stroke == building.stroke == 1
+    for field in dataclasses.fields(ours):
+        if field.name != "stroke":
+            np.testing.assert_allclose(np.asarray(getattr(ours, field.name)),
+                                       np.asarray(getattr(building, field.name)),
+                                       rtol=1e-13, atol=1e-15, err_msg=field.name)
+
+
+def test_one_period_of_both_is_the_same_computation():
+    ours, building = _plants(tj.paper_system(), OMEGAS[2])
+    z0 = np.array([0.3, -1.2, 2.0, 0.4])  # (x, y, x', y') in A / K, omega A / K
+    one = period(z0, flow(ours, 128))
+    other = period(z0, flow(building, 128))
+    assert int(one[2]) == int(other[2]) > 0  # the same stick-slip transitions
+    for a, b in zip(one, other, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-14)
+
+
+def test_steady_states_of_the_paper_system_and_its_one_storey_building_agree():
+    system = tj.paper_system()
+    host = tj.frequency_response(system, OMEGAS, AMPLITUDE)
+    building = tj.frequency_response(building_of(system, "force"), OMEGAS, AMPLITUDE)
+    assert np.all(host.converged) and np.all(building.converged)
+    np.testing.assert_array_equal(host.transitions, building.transitions[0])
+    np.testing.assert_allclose(host.x_max, building.response_max[0], rtol=1e-7)
+    np.testing.assert_allclose(host.y_max, building.stroke_max[0], rtol=1e-7)
