@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import plot
-from .._loads._monte_carlo import first_period, friction_history
+from .._loads._monte_carlo import friction_history
 from .._loads._record_design import design_for_records
 from .._loads._records import GroundMotion, read_at2, read_csv_record
 from .._model._building import G
@@ -50,8 +50,9 @@ def _add_records_parser(subparsers) -> None:
                        help="scale each record to this peak ground acceleration [g] "
                        "(default: as recorded)")
     group.add_argument("--time-step", dest="time_step", type=float, metavar="S",
-                       help="longest substep of the integration [s] (default: the first "
-                       "mode's period / 200)")
+                       help="hold the friction over substeps of at most S [s] (default: "
+                       "exact friction on a rigid device is stepped exactly, events "
+                       "located; otherwise the first mode's period / 200)")
     _add_structure_arguments(
         parser,
         "TOML file with the structure and device keys, as for the other commands, "
@@ -87,8 +88,8 @@ def _run_records(args) -> int:
         case = case._replace(system=case.system.replace(friction_width=0.0))
         note = EXACT_NOTE
     system, quantity = case.system, case.quantity
-    # (the design's default, kept for the design's histories: the same substeps)
-    time_step = (first_period(system) / 200 if args.time_step is None
+    # (None: exact friction on a rigid device is stepped exactly, as in the design)
+    time_step = (None if args.time_step is None
                  else _number("--time-step", args.time_step, "positive"))
     pga = None if args.pga is None else _number("--pga", args.pga, "positive")
     motions = [_read(path, args.units, pga) for path in args.files]
