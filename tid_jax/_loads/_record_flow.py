@@ -46,6 +46,9 @@ DIP_MARGIN = 1e-2
 _ROOT_ITERATIONS = 60
 _ROOT_TOLERANCE = 1e-13  # of the record's step, in time
 _STICK = 0
+# quiet record steps tried in one iteration of the march's loop (fewer iterations: each
+# has a fixed cost)
+QUIET_STEPS = 4
 
 
 class _Mode(eqx.Module):
@@ -329,17 +332,18 @@ def _advance(march: _March, go, z, sign, capped=False) -> _March:
                   jax.lax.dynamic_update_index_in_dim(march.signs, sign, j, 0))
 
 
-def _quiet_step(flow: RecordFlow, acceleration, march: _March) -> _March:
+def _quiet_step(flow: RecordFlow, acceleration, last, march: _March) -> _March:
     """The next record step from matrices computed once, where its event signal shows no
-    event; else `march` blocked."""
+    event and the march is neither blocked nor at the sample `last`; else `march`
+    blocked."""
     start, end = acceleration[march.index], acceleration[march.index + 1]
     slope = (end - start) / flow.time_step
     stuck = (march.sign == _STICK).astype(int)
     inputs = jnp.concatenate([march.z, jnp.stack([start, slope,
                                                   _constant(flow, march.sign, march.z)])])
     g, rate = _event(flow, march.sign, *(flow.signals[stuck] @ inputs).T)
-    return _advance(march, _quiet(g, rate, flow.time_step / flow.grid),
-                    flow.ends[stuck] @ inputs, march.sign)
+    go = _quiet(g, rate, flow.time_step / flow.grid) & ~march.blocked & (march.index < last)
+    return _advance(march, go, flow.ends[stuck] @ inputs, march.sign)
 
 
 def _quiet(g, rate, spacing):
@@ -356,8 +360,12 @@ def _quiet(g, rate, spacing):
 def _march(flow: RecordFlow, acceleration, last, march: _March) -> _March:
     """Quiet steps as far as they go (to the sample `last`), then one step cut at its
     events."""
-    march = jax.lax.while_loop(lambda m: ~m.blocked & (m.index < last),
-                               lambda m: _quiet_step(flow, acceleration, m),
+    def quiet_steps(march):
+        for _ in range(QUIET_STEPS):
+            march = _quiet_step(flow, acceleration, last, march)
+        return march
+
+    march = jax.lax.while_loop(lambda m: ~m.blocked & (m.index < last), quiet_steps,
                                eqx.tree_at(lambda m: m.blocked, march, jnp.asarray(False)))
     j = jnp.minimum(march.index, last - 1)
     start, end = acceleration[j], acceleration[j + 1]
