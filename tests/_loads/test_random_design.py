@@ -17,8 +17,8 @@ from scipy.optimize import minimize
 
 import tid_jax as tj
 from tid_jax._loads._monte_carlo import first_period, plan
-from tid_jax._runtime._outcomes import outcome_code
 from tid_jax._loads._random_design import _linearised_log_rms, log_mean_square, log_mean_squares
+from tid_jax._runtime._outcomes import outcome_code
 
 LOAD = tj.StationaryLoad("white_noise", 700.0)
 # a fixed time step: the same steps whatever the inertance (its first period)
@@ -229,24 +229,74 @@ def test_stroke_limited_record_design_is_scipy_s_constrained_minimum():
         tj.design_for_records(system, motions, stroke_limit=-0.01)
 
 
-def test_record_design_with_friction_lowers_the_mean_peak():
+def _friction_records():
     kt = tj.StationaryLoad("kanai_tajimi", 0.05, ground_frequency=15.0, ground_damping=0.6)
-    motions = [tj.synthetic_motion(kt, 6.0, 0.01, seed=s).scaled_to(0.05) for s in (1, 2)]
+    return [tj.synthetic_motion(kt, duration, 0.01, seed=s).scaled_to(0.05)
+            for s, duration in ((1, 6.0), (2, 4.5))]
+
+
+def _history_statistics(system, motions, **options):
+    """Each record's peak, RMS and stroke peak by `friction_history`."""
+    histories = [tj.friction_history(system, m, **options) for m in motions]
+    return np.array([[float(h.peak), float(h.rms), float(np.max(np.abs(h.stroke)))]
+                     for h in histories])
+
+
+def test_record_design_with_friction_steps_the_records_as_friction_history():
+    # Records of two lengths (padded in the design): with exact friction the design's
+    # peaks, RMS and stroke peaks before and after are those of the exact stick-slip
+    # history; with a time step, those of the held-friction history.
+    motions = _friction_records()
     system = _paper(on="ground")
     result = tj.design_for_records(system, motions)
+    assert bool(result.converged)
     assert float(np.mean(result.peak_after)) < float(np.mean(result.peak_before))
-    # the design steps the records as Monte Carlo does: friction held over substeps
+    designed = system.replace(tid_stiffness=float(result.tid_stiffness),
+                              tid_damping=float(result.tid_damping))
+    for tuned, ours in ((system, (result.peak_before, result.rms_before,
+                                  result.stroke_peak_before)),
+                        (designed, (result.peak_after, result.rms_after,
+                                    result.stroke_peak_after))):
+        exact = _history_statistics(tuned, motions)
+        np.testing.assert_allclose(np.stack(ours, axis=1), exact, rtol=1e-9, atol=0)
     step = first_period(system) / 200
-    for motion, peak in zip(motions, np.asarray(result.peak_before), strict=True):
-        held = tj.friction_history(system, motion, time_step=step)
-        assert float(held.peak) == pytest.approx(peak, rel=1e-9)
-        # within the held scheme's first-order error of the exact history
-        assert float(tj.friction_history(system, motion).peak) == pytest.approx(peak,
-                                                                                 rel=1e-2)
+    held = tj.design_for_records(system, motions, time_step=step, max_steps=1)
+    np.testing.assert_allclose(
+        np.stack([held.peak_before, held.rms_before, held.stroke_peak_before], axis=1),
+        _history_statistics(system, motions, time_step=step), rtol=1e-9, atol=0)
+    # the held scheme is within its first-order error of the exact history
+    np.testing.assert_allclose(held.peak_before, result.peak_before, rtol=1e-2)
     with pytest.raises(ValueError, match="load='ground'"):
         tj.design_for_records(_paper(), motions)
     with pytest.raises(ValueError, match="GroundMotion"):
         tj.design_for_records(system, [])
+    with pytest.raises(ValueError, match="max_events"):
+        tj.design_for_records(system, motions, max_events=-1)
+
+
+def test_record_design_keeps_within_its_bounds():
+    # The free design lowers c to 48 N s/m, at the default lower bound (Den Hartog's
+    # c / 10); with c at least 150 N s/m the design lies on that bound, and the bounded
+    # minimum is no worse than the free design held at the bound.
+    motions = _friction_records()
+    system = _paper(on="ground")
+    free = tj.design_for_records(system, motions)
+    np.testing.assert_allclose([free.stiffness_bounds, free.damping_bounds],
+                               tj.default_bounds(system))
+    bounds = ((1e4, 2e5), (150.0, 2e3))
+    result = tj.design_for_records(system, motions, bounds=bounds)
+    assert bool(result.converged) and bool(result.at_bound)
+    # (within Nelder-Mead's tolerance of the bound)
+    assert 150.0 <= float(result.tid_damping) <= 150.0 * (1 + 1e-3)
+    assert 1e4 < float(result.tid_stiffness) < 2e5
+    np.testing.assert_allclose(result.damping_bounds, bounds[1])
+    held = system.replace(tid_stiffness=float(free.tid_stiffness), tid_damping=150.0)
+    assert float(np.mean(result.peak_after)) <= float(
+        np.mean(_history_statistics(held, motions)[:, 0])) * (1 + 1e-6)
+    assert float(np.mean(result.peak_after)) > float(np.mean(free.peak_after))
+    for bad in (((1e4, 2e5),), ((2e5, 1e4), (150.0, 2e3)), ((1e4, 2e5), (-1.0, 2e3))):
+        with pytest.raises(ValueError, match="bounds must be"):
+            tj.design_for_records(system, motions, bounds=bad)
 
 
 def _exact_log_squares(system, load, x):

@@ -13,7 +13,6 @@ import structdyn
 import tid_jax as tj
 from tests._loads.test_records import EL_CENTRO
 from tests.cli.test_main import read_csv, run
-from tid_jax._loads._monte_carlo import first_period
 
 # Short Monte Carlo runs: the command's numbers against the library's, not converged ones.
 SETTINGS = tj.MonteCarloSettings(samples=16, duration=12.0)
@@ -222,9 +221,8 @@ def test_records_json_is_the_library_s(records_run):
     results = data["results"]
     assert [r["name"] for r in results] == ["RSN6_IMPVALL.I_I-ELC180-hor1", "slice"]
     for r, motion in zip(results, motions, strict=True):
-        # the command steps the records as its design does (friction held over substeps)
-        history = tj.friction_history(system, motion, tj.Quantity(),
-                                      time_step=first_period(system) / 200)
+        # the command steps the records as its design does (the exact stick-slip flow)
+        history = tj.friction_history(system, motion, tj.Quantity())
         assert r["peak_before"] == pytest.approx(float(history.peak), rel=1e-10)
         assert r["rms_before"] == pytest.approx(float(history.rms), rel=1e-10)
         assert r["amplitude"] == pytest.approx(0.2 * 9.80665, rel=1e-12)
@@ -235,12 +233,16 @@ def test_records_json_is_the_library_s(records_run):
     assert data["tid_stiffness"] == pytest.approx(float(design.tid_stiffness), rel=1e-10)
     assert data["tid_damping"] == pytest.approx(float(design.tid_damping), rel=1e-10)
     assert data["converged"] is bool(design.converged)
+    assert data["stiffness_bounds"] == pytest.approx(list(tj.default_bounds(system)[0]))
+    assert data["damping_bounds"] == pytest.approx([float(v) for v in design.damping_bounds])
+    assert data["at_bound"] is bool(design.at_bound)
     for i, r in enumerate(results):
         assert r["peak_after"] == pytest.approx(float(design.peak_after[i]), rel=1e-10)
         assert r["rms_after"] == pytest.approx(float(design.rms_after[i]), rel=1e-10)
     assert data["mean_peak_after"] < data["mean_peak"]
     assert data["given_tuning"]["tid_damping"] == pytest.approx(float(system.tid_damping))
     assert data["friction_width"] == 0.0 and data["pga_g"] == 0.2
+    assert data["time_step"] is None
     assert data["stroke_limit"] == 0.025 and data["within_stroke_limit"] is True
     assert 0.0245 < max(r["stroke_after_m"] for r in results) <= 0.025
     assert all(r["within_stroke_limit"] and r["status"].startswith("ok") == data["converged"]
@@ -256,6 +258,21 @@ def test_records_write_their_files(records_run):
     assert len(rows) == 2 and {"name", "peak_before", "rms_before", "peak_after", "rms_after"} <= set(header)
     assert json.loads((out / "records.json").read_text()) == data
     assert "designed over the suite" in stderr and "record 2/2 slice" in stderr
+
+
+def test_records_design_within_given_bounds(tmp_path):
+    # the free design lowers c below 50 N s/m; at least 150 N s/m holds it on that bound
+    record = _slice(tmp_path / "slice.csv", 600)
+    status, stdout, stderr = run(["records", record, "--pga", "0.2", "--damping-bounds",
+                                  "150", "2000", "--out", tmp_path / "out", "--json"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    assert data["damping_bounds"] == [150.0, 2000.0] and data["at_bound"] is True
+    assert 150.0 <= data["tid_damping"] <= 150.0 * (1 + 1e-3)
+    status, stdout, stderr = run(["records", record, "--damping-bounds", "2000", "150",
+                                  "--out", tmp_path / "bad"])
+    assert status == 2 and stdout == "" and len(stderr.strip().splitlines()) == 1
+    assert "bounds must be" in stderr
 
 
 @pytest.mark.parametrize("text, where", [

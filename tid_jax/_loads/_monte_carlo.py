@@ -380,6 +380,12 @@ def substeps(motion: GroundMotion, time_step: float) -> tuple[int, np.ndarray]:
     return count, np.stack([starts, np.repeat(slope, count)], axis=1)
 
 
+def uses_exact_flow(system: BuildingTID, time_step: float | None) -> bool:
+    """Whether a history under a record is the exact stick-slip flow: a rigid device with
+    exact friction and no `time_step` asked for."""
+    return time_step is None and system.exact_friction and not system.compliant
+
+
 def friction_history(system: BuildingTID | TIDSystem, motion: GroundMotion,
                      quantity: Quantity = Quantity(), *,
                      time_step: float | None = None,
@@ -401,7 +407,7 @@ def friction_history(system: BuildingTID | TIDSystem, motion: GroundMotion,
         raise ValueError("a recorded ground motion needs a system with load='ground'")
     if isinstance(max_events, bool) or not isinstance(max_events, int) or max_events < 0:
         raise ValueError(f"max_events must be a non-negative integer, got {max_events!r}")
-    if time_step is None and system.exact_friction and not system.compliant:
+    if uses_exact_flow(system, time_step):
         return exact_history(system, motion, quantity, max_events)
     h = first_period(system) / 200 if time_step is None else time_step
     count, inputs = substeps(motion, h)

@@ -321,7 +321,7 @@ def default_bounds(system: BuildingTID) -> tuple[tuple[float, float], tuple[floa
     return ((k / BOUND_FACTOR, k * BOUND_FACTOR), (c / BOUND_FACTOR, c * BOUND_FACTOR))
 
 
-def _check_bounds(bounds) -> np.ndarray:
+def check_bounds(bounds) -> np.ndarray:
     """The bounds as a 2 x 2 array (rows k and c), or ValueError."""
     try:
         box = np.asarray(bounds, float)
@@ -353,7 +353,7 @@ def retune_random(system: BuildingTID | TIDSystem, load: StationaryLoad, psd_lev
     levels = np.asarray(psd_levels, float).reshape(-1)
     if levels.size == 0 or not np.all(np.isfinite(levels) & (levels > 0)):
         raise ValueError(f"psd_levels must be positive numbers, got {psd_levels!r}")
-    box = _check_bounds(default_bounds(system) if bounds is None else bounds)
+    box = check_bounds(default_bounds(system) if bounds is None else bounds)
     if stroke_limit is not None:
         check_values("stroke_limit", stroke_limit, "positive")
         stroke_limit = float(stroke_limit)

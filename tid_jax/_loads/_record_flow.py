@@ -46,6 +46,9 @@ DIP_MARGIN = 1e-2
 _ROOT_ITERATIONS = 60
 _ROOT_TOLERANCE = 1e-13  # of the record's step, in time
 _STICK = 0
+# quiet record steps tried in one iteration of the march's loop (fewer iterations: each
+# has a fixed cost)
+QUIET_STEPS = 4
 
 
 class _Mode(eqx.Module):
@@ -73,7 +76,7 @@ class RecordFlow(eqx.Module):
     friction_force: Float[Array, ""]
     signals: Float[Array, "2 points 4 P"]  # [slip, stuck], P = N + 3
     ends: Float[Array, "2 N P"]
-    time_step: float = eqx.field(static=True)
+    time_step: Float[Array, ""]
     grid: int = eqx.field(static=True)
     max_events: int = eqx.field(static=True)
 
@@ -173,7 +176,7 @@ def record_flow(system: BuildingTID, time_step: float, grid: int = GRID,
     (slip_signals, slip_end), (stuck_signals, stuck_end) = signals(slip), signals(stuck)
     return RecordFlow(slip, stuck, holding, holding_load, system.friction_force,
                       jnp.stack([slip_signals, stuck_signals]),
-                      jnp.stack([slip_end, stuck_end]), time_step, grid,
+                      jnp.stack([slip_end, stuck_end]), jnp.asarray(time_step), grid,
                       max_events)
 
 
@@ -329,17 +332,18 @@ def _advance(march: _March, go, z, sign, capped=False) -> _March:
                   jax.lax.dynamic_update_index_in_dim(march.signs, sign, j, 0))
 
 
-def _quiet_step(flow: RecordFlow, acceleration, march: _March) -> _March:
+def _quiet_step(flow: RecordFlow, acceleration, last, march: _March) -> _March:
     """The next record step from matrices computed once, where its event signal shows no
-    event; else `march` blocked."""
+    event and the march is neither blocked nor at the sample `last`; else `march`
+    blocked."""
     start, end = acceleration[march.index], acceleration[march.index + 1]
     slope = (end - start) / flow.time_step
     stuck = (march.sign == _STICK).astype(int)
     inputs = jnp.concatenate([march.z, jnp.stack([start, slope,
                                                   _constant(flow, march.sign, march.z)])])
     g, rate = _event(flow, march.sign, *(flow.signals[stuck] @ inputs).T)
-    return _advance(march, _quiet(g, rate, flow.time_step / flow.grid),
-                    flow.ends[stuck] @ inputs, march.sign)
+    go = _quiet(g, rate, flow.time_step / flow.grid) & ~march.blocked & (march.index < last)
+    return _advance(march, go, flow.ends[stuck] @ inputs, march.sign)
 
 
 def _quiet(g, rate, spacing):
@@ -353,11 +357,15 @@ def _quiet(g, rate, spacing):
     return jnp.all(g[1:] >= -1e-12 * scale) & ~jnp.any(upturn & (lower < DIP_MARGIN * scale))
 
 
-def _march(flow: RecordFlow, acceleration, march: _March) -> _March:
-    """Quiet steps as far as they go, then one step cut at its events."""
-    last = acceleration.shape[0] - 1
-    march = jax.lax.while_loop(lambda m: ~m.blocked & (m.index < last),
-                               lambda m: _quiet_step(flow, acceleration, m),
+def _march(flow: RecordFlow, acceleration, last, march: _March) -> _March:
+    """Quiet steps as far as they go (to the sample `last`), then one step cut at its
+    events."""
+    def quiet_steps(march):
+        for _ in range(QUIET_STEPS):
+            march = _quiet_step(flow, acceleration, last, march)
+        return march
+
+    march = jax.lax.while_loop(lambda m: ~m.blocked & (m.index < last), quiet_steps,
                                eqx.tree_at(lambda m: m.blocked, march, jnp.asarray(False)))
     j = jnp.minimum(march.index, last - 1)
     start, end = acceleration[j], acceleration[j + 1]
@@ -373,43 +381,57 @@ def exact_history(system: BuildingTID, motion: GroundMotion, quantity: Quantity,
     device with exact friction, a ground load) under `motion`, from rest."""
     a = motion.acceleration
     grid = grid_points(system, motion.time_step)
-    states, signs, forces, capped = _states(system, a, motion.time_step, grid, max_events)
-    return _history(system, quantity, a, motion.time_step, states, signs == _STICK, forces,
-                    capped)
+    return _history(system, quantity, a, motion.time_step, grid, max_events)
 
 
 @eqx.filter_jit
-def _history(system, quantity, a, time_step, states, stuck, forces, capped) -> History:
+def _history(system, quantity, a, time_step, grid, max_events) -> History:
+    flow = record_flow(system, time_step, grid, max_events)
+    states, signs, forces, capped = march(flow, a, a.shape[0] - 1)
+    values, stroke = outputs(system, quantity, a, states, forces)
+    peak, rms, _ = summary(values, stroke, jnp.ones(a.shape[0], bool), capped)
+    return History(time=jnp.arange(a.shape[0]) * time_step, quantity=values, stroke=stroke,
+                   peak=peak, rms=rms, stuck=signs == _STICK, friction_force=forces,
+                   events_capped=capped)
+
+
+def outputs(system: BuildingTID, quantity: Quantity, acceleration, states, forces):
+    """`quantity` (SI) and the stroke (m) at the samples from the states, the ground's
+    `acceleration` (m/s2) and the friction forces (N) there."""
     m = system.coordinates
     A, g = state_space(system)
     friction = jnp.zeros(2 * m).at[m:].set(
         jnp.linalg.solve(system.generalised_matrices()[0], jnp.eye(m)[-1]))
-    rates = states @ A.T + a[:, None] * g + forces[:, None] * friction
+    rates = states @ A.T + acceleration[:, None] * g + forces[:, None] * friction
     w, wd, kappa, _ = selection(system, quantity)
-    values = states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd) + kappa * a
-    failed = lambda value: jnp.where(capped, jnp.nan, value)
-    return History(time=jnp.arange(a.shape[0]) * time_step, quantity=values,
-                   stroke=states[:, system.floors], peak=failed(jnp.max(jnp.abs(values))),
-                   rms=failed(jnp.sqrt(jnp.mean(values**2))), stuck=stuck,
-                   friction_force=forces, events_capped=capped)
+    values = (states[:, :m] @ jnp.asarray(w) + rates[:, m:] @ jnp.asarray(wd)
+              + kappa * acceleration)
+    return values, states[:, system.floors]
 
 
-@eqx.filter_jit
-def _states(system: BuildingTID, acceleration: Float[Array, " samples"], time_step: float,
-            grid: int, max_events: int):
-    """The states (u, u') at the samples, the modes there (+-1 slipping, 0 stuck), the
-    friction forces (N) and whether some step needed more than `max_events` events."""
-    flow = record_flow(system, time_step, grid, max_events)
-    size, count = 2 * system.coordinates, acceleration.shape[0]
+def summary(values, stroke, counted, capped):
+    """The peak and the RMS of `values` and the stroke's peak over the `counted` samples;
+    NaN where the solve was `capped`."""
+    values, stroke = jnp.where(counted, values, 0.0), jnp.where(counted, stroke, 0.0)
+    found = (jnp.max(jnp.abs(values)), jnp.sqrt(jnp.sum(values**2) / jnp.sum(counted)),
+             jnp.max(jnp.abs(stroke)))
+    return tuple(jnp.where(capped, jnp.nan, value) for value in found)
+
+
+def march(flow: RecordFlow, acceleration: Float[Array, " samples"], last):
+    """The states (u, u') at the samples from rest, the modes there (+-1 slipping, 0
+    stuck), the friction forces (N) and whether some step needed more than the flow's
+    `max_events` events; the record ends at the sample `last` (later samples, and those
+    after a failure, are NaN)."""
+    size, count = flow.slip.load.shape[0], acceleration.shape[0]
     z0 = jnp.zeros(size)
     sign0 = _decide(flow, z0, acceleration[0])
-    # (samples never reached, after a failure, stay NaN)
     first = _March(jnp.asarray(0), z0, sign0, jnp.asarray(False), jnp.asarray(False),
                    jnp.full((count, size), jnp.nan).at[0].set(z0),
                    jnp.zeros(count, sign0.dtype).at[0].set(sign0))
-    march = jax.lax.while_loop(lambda m: (m.index < count - 1) & ~m.capped,
-                               lambda m: _march(flow, acceleration, m), first)
-    states, signs, capped = march.states, march.signs, march.capped
+    last_march = jax.lax.while_loop(lambda m: (m.index < last) & ~m.capped,
+                                    lambda m: _march(flow, acceleration, last, m), first)
+    states, signs, capped = last_march.states, last_march.signs, last_march.capped
     forces = jnp.where(signs == _STICK, holding_force(flow, states, acceleration),
                        -signs * flow.friction_force + 0 * states[:, 0])
     return states, signs, forces, capped

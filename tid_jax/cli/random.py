@@ -65,13 +65,7 @@ def _add_random_parser(subparsers) -> None:
     )
     _add_monte_carlo_arguments(parser.add_argument_group("Monte Carlo"))
     limits = parser.add_argument_group("design limits")
-    limits.add_argument(
-        "--stiffness-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
-        help="bounds on k [N/m] (default: 1/10 and 10 times the first mode's Den Hartog k)")
-    limits.add_argument(
-        "--damping-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
-        help="bounds on c [N s/m] (default: 1/10 and 10 times the first mode's Den "
-        "Hartog c)")
+    add_bounds_arguments(limits)
     limits.add_argument(
         "--stroke-rms-limit", type=float, metavar="M",
         help="limit on the Monte Carlo design's stroke RMS [m] (default: none)")
@@ -228,7 +222,7 @@ def _run_random(args) -> int:
     with output.steps(levels.size + 1) as step:
         design = retune_random(
             system, load(levels[0]), levels, quantity, settings=settings,
-            bounds=_bounds(args, system), stroke_limit=args.stroke_rms_limit,
+            bounds=design_bounds(args, system), stroke_limit=args.stroke_rms_limit,
             progress=lambda done, total: step(
                 f"S0 = {levels[done - 1]:g} {unit}: retuned ({done}/{total})"))
         retuned = tuned(system, design.tid_stiffness[top], design.tid_damping[top])
@@ -262,7 +256,18 @@ def _run_random(args) -> int:
     return output.finish(data, _table(records, case, parameters["kind"], unit) + notes)
 
 
-def _bounds(args, system: BuildingTID):
+def add_bounds_arguments(group) -> None:
+    """--stiffness-bounds and --damping-bounds, for a design's (k, c)."""
+    group.add_argument(
+        "--stiffness-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
+        help="bounds on k [N/m] (default: 1/10 and 10 times the first mode's Den Hartog k)")
+    group.add_argument(
+        "--damping-bounds", nargs=2, type=float, metavar=("LOW", "HIGH"),
+        help="bounds on c [N s/m] (default: 1/10 and 10 times the first mode's Den "
+        "Hartog c)")
+
+
+def design_bounds(args, system: BuildingTID):
     """The bounds on (k, c) of --stiffness-bounds and --damping-bounds, the default for
     one not given; None where neither is."""
     if args.stiffness_bounds is None and args.damping_bounds is None:

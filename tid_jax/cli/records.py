@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import plot
-from .._loads._monte_carlo import first_period, friction_history
+from .._loads._monte_carlo import friction_history
+from .._loads._random_design import check_bounds
 from .._loads._record_design import design_for_records
 from .._loads._records import GroundMotion, read_at2, read_csv_record
 from .._model._building import G
@@ -17,7 +18,15 @@ from ._arguments import _add_output_arguments, _add_structure_arguments
 from ._common import PROG, CLIError, _number, _Output
 from ._schema import RECORDS_COLUMNS, finite, ratio, row, status, stroke_problem
 from ._tables import save_records, shown, table
-from .random import build_case, case_inputs, document, tuned, wrapped
+from .random import (
+    add_bounds_arguments,
+    build_case,
+    case_inputs,
+    design_bounds,
+    document,
+    tuned,
+    wrapped,
+)
 
 UNITS = ("g", "m/s2")
 EXACT_NOTE = ("the friction width relative to a forcing needs a stationary load: exact "
@@ -30,8 +39,9 @@ def _add_records_parser(subparsers) -> None:
         help="peaks and RMS under recorded ground motions, and the TID designed over them",
         description="The response with the inerter's friction (from rest) under each "
         "recorded ground motion, scaled to --pga, with the given tuning and with the TID's "
-        "k and c designed over the suite (the least mean peak, Nelder-Mead, every "
-        "record's stroke peak within --stroke-limit, default 0.07 m). The system is "
+        "k and c designed over the suite (the least mean peak, Nelder-Mead, within "
+        "--stiffness-bounds and --damping-bounds, every record's stroke peak within "
+        "--stroke-limit, default 0.07 m). The system is "
         "under ground acceleration: the paper's host by default, or a [structure] in "
         "--config ([load] on = 'ground'). The friction is exact Coulomb friction unless "
         "--friction-width gives a width (m/s). Prints a table and saves records.csv, "
@@ -50,8 +60,10 @@ def _add_records_parser(subparsers) -> None:
                        help="scale each record to this peak ground acceleration [g] "
                        "(default: as recorded)")
     group.add_argument("--time-step", dest="time_step", type=float, metavar="S",
-                       help="longest substep of the integration [s] (default: the first "
-                       "mode's period / 200)")
+                       help="hold the friction over substeps of at most S [s] (default: "
+                       "exact friction on a rigid device is stepped exactly, events "
+                       "located; otherwise the first mode's period / 200)")
+    add_bounds_arguments(parser.add_argument_group("design limits"))
     _add_structure_arguments(
         parser,
         "TOML file with the structure and device keys, as for the other commands, "
@@ -87,10 +99,13 @@ def _run_records(args) -> int:
         case = case._replace(system=case.system.replace(friction_width=0.0))
         note = EXACT_NOTE
     system, quantity = case.system, case.quantity
-    # (the design's default, kept for the design's histories: the same substeps)
-    time_step = (first_period(system) / 200 if args.time_step is None
+    # (None: exact friction on a rigid device is stepped exactly, as in the design)
+    time_step = (None if args.time_step is None
                  else _number("--time-step", args.time_step, "positive"))
     pga = None if args.pga is None else _number("--pga", args.pga, "positive")
+    bounds = design_bounds(args, system)
+    if bounds is not None:
+        check_bounds(bounds)  # (before any computation)
     motions = [_read(path, args.units, pga) for path in args.files]
     output = _Output(args)
     output.say(f"{len(motions)} record(s){'' if pga is None else f' scaled to {pga:g} g'}, "
@@ -103,7 +118,8 @@ def _run_records(args) -> int:
             step(f"record {i + 1}/{len(motions)} {motion.name}: peak "
                  f"{float(before[-1].peak):.4g} {quantity.unit} with the given tuning")
         limit = inputs["stroke_limit"]
-        design = design_for_records(system, motions, quantity, stroke_limit=limit,
+        design = design_for_records(system, motions, quantity,
+                                    bounds=bounds, stroke_limit=limit,
                                     time_step=time_step)
         designed = tuned(system, design.tid_stiffness, design.tid_damping)
         step(f"designed over the suite: k = {float(design.tid_stiffness):.5g} N/m, c = "
@@ -126,6 +142,9 @@ def _run_records(args) -> int:
                     tid_stiffness=float(design.tid_stiffness),
                     tid_damping=float(design.tid_damping), converged=bool(design.converged),
                     stroke_limit=limit, within_stroke_limit=bool(design.within_stroke_limit),
+                    stiffness_bounds=[float(v) for v in design.stiffness_bounds],
+                    damping_bounds=[float(v) for v in design.damping_bounds],
+                    at_bound=bool(design.at_bound),
                     mean_peak=float(np.mean([r["peak_before"] for r in records])),
                     mean_peak_after=float(np.mean([r["peak_after"] for r in records])),
                     results=records)
