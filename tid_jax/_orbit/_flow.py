@@ -81,22 +81,31 @@ def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
                         system.backlash, system.play_direction(), amplitude, omega)
 
 
-def parameter_plant(p: Float[Array, " 14"]) -> Plant:
-    """The scaled model of the paper's system (a rigid device) at the parameter vector `p`
-    (order `_dynamics.PARAMETERS`): the one-storey case of `plant`, whose inerter joins
-    the terminal to the ground (the stroke r is the terminal's displacement y) and whose
-    quantity is the host's displacement x; its scaled units are those of `_dynamics`
-    (A / K)."""
-    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, _, _, width,
-     amplitude, omega) = p
-    matrices = (jnp.stack([jnp.stack([mass, 0 * mass]),
-                           jnp.stack([0 * mass, inertance + terminal])]),
-                jnp.stack([jnp.stack([damping + c, -c]), jnp.stack([-c, c + parasitic])]),
-                jnp.stack([jnp.stack([stiffness + k, -k]), jnp.stack([-k, k])]))
-    one, zero = jnp.ones_like(mass), jnp.zeros_like(mass)
-    return scaled_plant(matrices, jnp.stack([one, zero]), 1 / stiffness,
-                        (np.array([1.0, 0.0]), np.zeros(2), 0.0), 1, friction, width,
-                        zero, jnp.zeros(2, mass.dtype), amplitude, omega)
+def parameter_plant(p: Float[Array, " 14"], compliant: bool = False) -> Plant:
+    """The scaled model of the paper's system at the parameter vector `p` (order
+    `_dynamics.PARAMETERS`): the one-storey case of `plant`, whose inerter joins the
+    terminal to the ground (the stroke r is the terminal's displacement y) and whose
+    quantity is the host's displacement x, in the scaled units of A / K. A `compliant`
+    device adds its mechanism q (the friction's coordinate), joined to the terminal (mass
+    mt) by the series stiffness ks with its backlash: coordinates (x, y, q)."""
+    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, ks, backlash,
+     width, amplitude, omega) = p
+    zero = jnp.zeros_like(mass)
+    if compliant:
+        rows = (((mass, zero, zero), (zero, terminal, zero), (zero, zero, inertance)),
+                ((damping + c, -c, zero), (-c, c, zero), (zero, zero, parasitic)),
+                ((stiffness + k, -k, zero), (-k, k + ks, -ks), (zero, -ks, ks)))
+        play = jnp.stack([zero, ks, -ks])
+    else:
+        rows = (((mass, zero), (zero, inertance + terminal)),
+                ((damping + c, -c), (-c, c + parasitic)),
+                ((stiffness + k, -k), (-k, k)))
+        play, backlash = jnp.zeros(2, mass.dtype), zero
+    matrices = tuple(jnp.stack([jnp.stack(row) for row in matrix]) for matrix in rows)
+    m = matrices[0].shape[0]
+    load = jnp.zeros(m, mass.dtype).at[0].set(1.0)
+    return scaled_plant(matrices, load, 1 / stiffness, (np.eye(m)[0], np.zeros(m), 0.0), 1,
+                        friction, width, backlash, play, amplitude, omega)
 
 
 def scaled_plant(matrices, load, scale, quantity, stroke: int, friction_force, width,

@@ -11,7 +11,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._model._dynamics import dead_zone, tangent_field, vector_field
+from .._model._dynamics import dead_zone
 from . import _flow
 from ._settings import SolverSettings
 
@@ -56,16 +56,30 @@ def flow(p, settings: SolverSettings) -> _flow.Flow | None:
     return _flow.flow(_flow.parameter_plant(p), settings.samples)
 
 
-# The paper's state (x, x', y, y') in the order of the one-storey plant's (x, r, x', r'),
-# r = y (the inerter joins the terminal to the ground); the permutation is its own inverse.
-_PLANT_ORDER = np.array([0, 2, 1, 3])
+# The paper's state (x, x', y, y'), and (x, x', y, y', q, q') with a compliant device, in
+# the order of the one-storey plant's coordinates and their velocities: (x, y, x', y') (the
+# stroke r is y: the inerter joins the terminal to the ground), (x, y, q, x', y', q').
+_PLANT_ORDER = {4: np.array([0, 2, 1, 3]), 6: np.array([0, 2, 4, 1, 3, 5])}
+
+
+def _to_plant(z):
+    return z[..., _PLANT_ORDER[z.shape[-1]]]
+
+
+def _from_plant(z):
+    return z[..., np.argsort(_PLANT_ORDER[z.shape[-1]])]
 
 
 def _exact_period(z0, modes: _flow.Flow, keep_samples: bool = True):
     """`_flow.period` in the paper's state order: samples of x, y and y', the state after
     the period, the transitions and the largest |y| at a transition."""
-    values, z_end, transitions, y_events = _flow.period(z0[_PLANT_ORDER], modes, keep_samples)
-    return values, z_end[_PLANT_ORDER], transitions, y_events
+    values, z_end, transitions, y_events = _flow.period(_to_plant(z0), modes, keep_samples)
+    return values, _from_plant(z_end), transitions, y_events
+
+
+def _plant(p, z):
+    """The paper's system at `p` as the one-storey `Plant` of states like `z`."""
+    return _flow.parameter_plant(p, compliant=z.shape[-1] == 6)
 
 
 def _given_flow(p, settings: SolverSettings, given):
@@ -84,19 +98,12 @@ def period_samples(z0, p, settings: SolverSettings, modes=None):
                 transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
     sol = integrate(
-        vector_field, z0, p, 2 * jnp.pi, settings, dfx.SaveAt(ts=phases, t1=True),
-        settings.max_steps,
+        smoothed_field, _to_plant(z0), _plant(p, z0), 2 * jnp.pi, settings,
+        dfx.SaveAt(ts=phases, t1=True), settings.max_steps,
     )
-    ys = sol.ys
+    ys = sol.ys  # (x, y, ..., y' or q'): the friction's velocity last
     zero = jnp.zeros((), z0.dtype)
-    return ys[:-1, 0], ys[:-1, 2], ys[:-1, -1], ys[-1], zero, zero
-
-
-def _field_and_tangents(theta, y, p):
-    """The vector field with its variational equations: `y = (z, tangents)`, where the
-    tangents (n x n) are d z / d z0."""
-    z, tangents = y
-    return vector_field(theta, z, p), tangent_field(theta, z, tangents, p)
+    return ys[:-1, 0], ys[:-1, 1], ys[:-1, -1], _from_plant(ys[-1]), zero, zero
 
 
 def period_tangents(z, p, settings: SolverSettings, modes=None):
@@ -111,11 +118,12 @@ def period_tangents(z, p, settings: SolverSettings, modes=None):
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
-        _field_and_tangents, (z, jnp.eye(z.shape[0], dtype=z.dtype)), p, 2 * jnp.pi, settings,
-        dfx.SaveAt(t1=True), settings.max_steps,
+        _field_and_tangents, (_to_plant(z), jnp.eye(z.shape[0], dtype=z.dtype)), _plant(p, z),
+        2 * jnp.pi, settings, dfx.SaveAt(t1=True), settings.max_steps,
     )
     z_end, monodromy = (y[-1] for y in sol.ys)
-    return z_end, monodromy
+    # d z_end / d z in the paper's order: the rows and the columns permuted back
+    return _from_plant(z_end), _from_plant(_from_plant(monodromy).T).T
 
 
 def samples_and_jacobian(z, p, settings, directions=()):
@@ -219,25 +227,63 @@ def transient(z, p, settings: SolverSettings, periods=None):
         end = jax.lax.fori_loop(0, count, step, z)
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
     sol = integrate(
-        vector_field,
-        z,
-        p,
+        smoothed_field,
+        _to_plant(z),
+        _plant(p, z),
         2 * jnp.pi * (settings.transient_periods if periods is None else periods),
         settings,
         dfx.SaveAt(t1=True),
         settings.max_steps * settings.transient_periods,
     )
-    return jnp.where(jnp.all(jnp.isfinite(sol.ys[-1])), sol.ys[-1], z)
+    end = _from_plant(sol.ys[-1])
+    return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
+
+
+def _product(matrix, z):
+    """`matrix @ z` (z a state or columns of tangents) as a sum over the columns of
+    `matrix`: in a batch of small plants this fuses with the field, where a batched
+    product calls the matrix kernel lane by lane."""
+    columns = [matrix[:, j] if z.ndim == 1 else matrix[:, j, None] for j in range(z.shape[0])]
+    return sum(column * z[j] for j, column in enumerate(columns))
+
+
+def _play(z, plant: _flow.Plant):
+    """A compliant device's series spring's stretch `r - q` (rows of z: the states, or
+    their tangents)."""
+    return z[plant.stroke] - z[plant.stroke + 1]
+
+
+def _compliant(z, plant: _flow.Plant) -> bool:
+    """Whether the plant's device is compliant: its stroke is not the friction's
+    coordinate (the last)."""
+    return plant.stroke != z.shape[0] // 2 - 1
 
 
 def smoothed_field(theta, z, plant: _flow.Plant):
     """The scaled field with the friction smoothed as `tanh(r' / width)`."""
     m = z.shape[0] // 2
     friction = plant.friction * jnp.tanh(z[2 * m - 1] / plant.width)
-    stretch = z[plant.stroke] - z[m - 1]  # a compliant device's series spring (else 0)
-    play = stretch - dead_zone(stretch, plant.gap)
-    return (plant.slip @ z + plant.forcing * jnp.sin(theta) - friction * plant.friction_vector
-            + play * plant.play_vector)
+    field = (_product(plant.slip, z) + plant.forcing * jnp.sin(theta)
+             - friction * plant.friction_vector)
+    if not _compliant(z, plant):
+        return field
+    stretch = _play(z, plant)
+    return field + (stretch - dead_zone(stretch, plant.gap)) * plant.play_vector
+
+
+def _field_and_tangents(theta, y, plant: _flow.Plant):
+    """The smoothed field with its variational equations: `y = (z, tangents)`, where the
+    tangents (n x n) are d z / d z0."""
+    z, tangents = y
+    m = z.shape[0] // 2
+    slope = plant.friction * (1 - jnp.tanh(z[2 * m - 1] / plant.width) ** 2) / plant.width
+    along = _product(plant.slip, tangents) - jnp.outer(plant.friction_vector,
+                                                       slope * tangents[2 * m - 1])
+    if _compliant(z, plant):
+        # within the free play the series spring's force is constant: d(s - D(s)) = ds
+        slack = jnp.abs(_play(z, plant)) <= 0.5 * plant.gap
+        along += jnp.outer(plant.play_vector, jnp.where(slack, 1.0, 0.0) * _play(tangents, plant))
+    return smoothed_field(theta, z, plant), along
 
 
 def smoothed_period(z0, plant: _flow.Plant, settings: SolverSettings, keep_samples: bool = True):
