@@ -330,18 +330,34 @@ def smoothed_field(theta, z, plant: Plant):
             + play * plant.play_vector)
 
 
-def smoothed_period(z0, plant: Plant, settings: SolverSettings, keep_samples: bool = True):
-    """One period of the smoothed flow (diffrax): the same outputs as `period`."""
+def _field_and_tangents(theta, y, plant: Plant):
+    """The smoothed field with its variational equations: `y = (z, tangents)`, the
+    tangents (s x s) d z / d z0."""
+    z, tangents = y
+    return jax.vmap(lambda t: jax.jvp(lambda s: smoothed_field(theta, s, plant), (z,), (t,)),
+                    in_axes=1, out_axes=(None, 1))(tangents)
+
+
+def smoothed_period(z0, plant: Plant, settings: SolverSettings, keep_samples: bool = True,
+                    tangents: bool = False):
+    """One period of the smoothed flow (diffrax): the same outputs as `period`, and with
+    `tangents` the monodromy matrix last, by the variational equations (their step sizes
+    follow the error of the state alone: accurate enough for Newton's iterations, whose
+    answer does not depend on it, and cheaper than forward derivatives of the steps)."""
     phases = np.arange(settings.samples) * (2 * np.pi / settings.samples)
     saveat = dfx.SaveAt(ts=phases, t1=True) if keep_samples else dfx.SaveAt(t1=True)
-    sol = integrate(smoothed_field, z0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
-    ys = sol.ys
+    field, y0 = smoothed_field, z0
+    if tangents:
+        field, y0 = _field_and_tangents, (z0, jnp.eye(z0.shape[0], dtype=z0.dtype))
+    sol = integrate(field, y0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
+    ys, monodromy = (sol.ys[0], (sol.ys[1][-1],)) if tangents else (sol.ys, ())
     z_end = jnp.where(sol.result == dfx.RESULTS.successful, ys[-1], jnp.nan)
     if not keep_samples:
-        return jnp.zeros((0, 2), z0.dtype), z_end, jnp.zeros((), int), jnp.zeros((), z0.dtype)
+        return (jnp.zeros((0, 2), z0.dtype), z_end, jnp.zeros((), int),
+                jnp.zeros((), z0.dtype)) + monodromy
     states = ys[:-1]
     rates = jax.vmap(smoothed_field, in_axes=(0, 0, None))(jnp.asarray(phases), states, plant)
     values = (states @ plant.rows.T + rates @ plant.rows_rate.T
               + jnp.sin(jnp.asarray(phases))[:, None] * plant.rows_sin)
     return (values[:, _QUANTITY:_STROKE + 1], z_end, jnp.zeros((), int),
-            jnp.zeros((), z0.dtype))
+            jnp.zeros((), z0.dtype)) + monodromy

@@ -1,7 +1,8 @@
 """Periodic steady states of a `BuildingTID` by shooting: the linear equivalent start,
 Newton's iterations on the period map (`_building_flow`) with its monodromy matrix by
-forward derivatives, Floquet multipliers, and batches of them over amplitudes and
-frequencies (`building_response`)."""
+forward derivatives (exact friction) or the variational equations (smoothed friction),
+Floquet multipliers, and batches of them over amplitudes and frequencies
+(`building_response`)."""
 
 import equinox as eqx
 import jax
@@ -11,11 +12,19 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import BuildingTID, Quantity, friction_influence, uncontrolled_amplitude
 from .._model._checks import check_grid
-from ._building_flow import flow, period, plant, projection_units, smoothed_period
+from ._building_flow import (
+    flow,
+    period,
+    plant,
+    projection_units,
+    smoothed_field,
+    smoothed_period,
+)
 from ._eigen import eigenvalues
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
 from ._steady_state import fixed_point_matrix, moving_part
+from ._stiffness import choose, explicit_steps
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 # bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
@@ -69,14 +78,17 @@ def period_samples(z, pl, fl, settings: SolverSettings):
     return smoothed_period(z, pl, settings)
 
 
-def _record(z, pl, fl, settings: SolverSettings):
-    """The period from `z`: its end, and (without derivatives) its samples, transitions
-    and largest stroke at a transition."""
+def _record(z, pl, fl, settings: SolverSettings, tangents: bool = False):
+    """The period from `z`: its end, (without derivatives) its samples, transitions and
+    largest stroke at a transition, and with `tangents` (smoothed friction) its
+    monodromy matrix."""
     if settings.exact_friction:
         values, z_end, transitions, events = period(z, fl, sample_tangents=False)
+        more = ()
     else:
-        values, z_end, transitions, events = smoothed_period(z, pl, settings)
-    return z_end, jax.lax.stop_gradient((values, transitions, events, z))
+        values, z_end, transitions, events, *more = smoothed_period(z, pl, settings,
+                                                                    tangents=tangents)
+    return (z_end, jax.lax.stop_gradient((values, transitions, events, z)), *more)
 
 
 class _Newton(eqx.Module):
@@ -101,8 +113,9 @@ def _limited(z, update):
 def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
             monodromy=None) -> _Newton:
     """Iterations for z = Phi_T(z) from `z0`: `newton_steps` Newton steps, each with the
-    monodromy matrix by forward derivatives of the period map (the stuck stroke's family
-    of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
+    monodromy matrix (forward derivatives of the period map, or the variational equations
+    of smoothed friction; the stuck stroke's family of orbits kept apart by
+    `fixed_point_matrix`), then chord steps with the last matrix
     held, each one period without tangents, until the residual is within `tol` or
     after `settings.max_newton_steps` of them; then, where not done, all that again
     (`_ROUNDS` in all), each round integrating 100 times more accurately than the one
@@ -118,9 +131,12 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
         record = lambda z: _record(z, pl, fl, accuracy)
 
         def newton(state):
-            z_end, monodromy, kept = jax.vmap(
-                lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
-                out_axes=(None, 1, None))(basis)
+            if fl is None:  # smoothed friction: by the variational equations
+                z_end, kept, monodromy = _record(state.z, pl, fl, accuracy, tangents=True)
+            else:
+                z_end, monodromy, kept = jax.vmap(
+                    lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
+                    out_axes=(None, 1, None))(basis)
             lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
             return _step(state, z_end, kept, monodromy, lu)
 
@@ -261,6 +277,27 @@ def building_settings(system: BuildingTID, settings: SolverSettings | None) -> S
     return eqx.tree_at(lambda s: s.exact_friction, settings, system.exact_friction)
 
 
+@jax.jit
+def _explicit_steps(system: BuildingTID, quantity: Quantity, amplitudes, omegas):
+    """`_stiffness.explicit_steps` at each point (`amplitudes[i]`, `omegas[i]`)."""
+    def one(amplitude, omega):
+        model = plant(system, quantity, amplitude, omega)
+        z = initial_state(system, amplitude, omega)
+        return explicit_steps(smoothed_field, z, model, model.width, z[-1] == 0.0)
+
+    return jax.vmap(one)(amplitudes, omegas)
+
+
+def for_points(settings: SolverSettings, system: BuildingTID, quantity: Quantity,
+               amplitudes, omegas) -> SolverSettings:
+    """`settings` (fitted: `building_settings`) with `implicit` decided where it is None
+    (automatic, `_stiffness`) at the points (`amplitudes[i]`, `omegas[i]`)."""
+    if settings.implicit is not None or settings.exact_friction:
+        return settings
+    return choose(settings, _explicit_steps(system, quantity, jnp.asarray(amplitudes),
+                                            jnp.asarray(omegas)))
+
+
 class BuildingResponse(eqx.Module):
     """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
     peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
@@ -291,6 +328,7 @@ def building_response(system: BuildingTID, omegas, amplitudes,
     quantity.floor_of(system.floors)
     settings = building_settings(system, settings)
     a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
+    settings = for_points(settings, system, quantity, a, w)
     orbits = solve_orbits(system, quantity, jnp.asarray(a), jnp.asarray(w), settings)
     shape = (amplitudes.size, omegas.size)
     ok = np.asarray(orbits.converged).reshape(shape)

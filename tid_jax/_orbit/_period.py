@@ -16,7 +16,7 @@ from ._settings import SolverSettings
 
 
 def _solver(settings: SolverSettings):
-    return dfx.Kvaerno5() if settings.implicit else dfx.Tsit5()
+    return dfx.Kvaerno5() if settings.implicit is True else dfx.Tsit5()
 
 
 def integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
