@@ -33,6 +33,12 @@ _BISECTIONS = 24
 CHUNK = 2  # orbits solved together (vectorised) in a batch
 _WARM_CHORDS = 6  # chord steps from a warm start before Newton's from the start again
 _ROUNDS = 2  # rounds of Newton steps, each followed by chord steps
+# Newton steps of a round before the chord steps (`solve_orbit`'s default): a Newton step
+# of smoothed friction integrates s tangents, as dear as 10-20 periods without them, and
+# chord steps from the first Newton matrix converge in as many steps as Newton's (8
+# frequencies of the 10- and 30-storey buildings of `benchmarks/bench_building.py`: the
+# same steps, 41 -> 16 and 327 -> 121 ms per orbit); exact friction's are cheap.
+_NEWTON_STEPS = {True: 3, False: 1}  # by `settings.exact_friction`
 
 
 def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
@@ -209,10 +215,11 @@ def peak_of(samples):
 
 
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
-                settings: SolverSettings, newton_steps: int = 3, start=None,
+                settings: SolverSettings, newton_steps: int | None = None, start=None,
                 cold=None) -> BuildingOrbit:
     """The periodic steady state at one point (traceable; see `building_response`):
-    `newton_steps` Newton steps, then chord steps (`_newton`), from the linear equivalent
+    `newton_steps` Newton steps (default: 3 with exact friction, 1 smoothed), then chord
+    steps (`_newton`), from the linear equivalent
     state or from `start`, the state and monodromy matrix of a nearby orbit (with a
     scalar `cold`, where it is False; a monodromy matrix that is not finite is not
     used)."""
@@ -233,6 +240,8 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
         z, monodromy = start
         if cold is not None:
             z = jax.lax.cond(cold, linear_start, lambda: z)
+    if newton_steps is None:
+        newton_steps = _NEWTON_STEPS[settings.exact_friction]
     newton = _newton(z, pl, fl, settings, tol, newton_steps, monodromy)
     # the last period the iterations computed: from the orbit's state where they are done
     values, transitions, stroke_events, state = newton.record
