@@ -20,10 +20,12 @@ evenly over 0.7..1.3 times the first mode; the peak roof displacement.
   smoothed model as a first-order system (x, r, x', r') with a precomputed Mg^-1 and an
   analytic Jacobian, rtol 1e-6, atol scaled to the linear motion, from the frictionless
   linear steady state over P forcing periods; the peak over 512 samples of the last
-  period. P is the smallest of 10, 20, 40, 80, 160 whose peaks all match tid_jax's
-  smoothed ones within 1e-3 at n = 3, and is used for every n. Where the loop over all
-  points would take longer than `--lsoda-budget` seconds, it is timed on `--lsoda-subset`
-  points spread over the band.
+  period. P is, for each n, the smallest of 10, 20, 40, 80, 160 whose last-period peaks
+  all match tid_jax's converged smoothed orbits within 1e-3; the time is that of the run
+  at P. Where the loop over all points would take longer than `--lsoda-budget` seconds
+  (estimated at 40 periods), it is timed on `--lsoda-subset` points spread over the band.
+- The smoothed rows use the default settings: the integrator is chosen automatically
+  (`SolverSettings.implicit=None`); the table says which one was.
 
 `--retune` also times `tid_jax.retune` of the 10-storey building (exact friction,
 default settings) at `--retune-amplitudes`, cold (first call in the process, compiling)
@@ -50,6 +52,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
 from tid_jax._model._system import FRICTION_WIDTH_RATIO  # noqa: E402
+from tid_jax._orbit._building_orbit import building_settings, for_points  # noqa: E402
 
 STOREY_MASS = 3.0e5  # kg
 FIRST_MODE_HZ = 1.0
@@ -62,7 +65,7 @@ ROOF = tj.Quantity("displacement")
 RTOL = 1e-6
 MATCH = 1e-3
 CANDIDATE_PERIODS = (10, 20, 40, 80, 160)
-CHOOSE_AT = 3  # storeys of the building P is chosen on
+ESTIMATE_PERIODS = 40  # periods of the run that estimates LSODA's time per point
 SAMPLES = 512  # LSODA output samples in the last period
 REPEATS = 3
 RETUNE_STOREYS = 10
@@ -240,36 +243,33 @@ def max_rel_difference(values, reference):
     return float(np.max(np.where(np.isfinite(rel), rel, np.inf)))
 
 
-def choose_periods(lsoda, omegas, reference):
-    """Smallest candidate P whose peaks all match `reference` within MATCH."""
-    tried = []
-    for periods in CANDIDATE_PERIODS:
-        tried.append((periods, max_rel_difference(lsoda.peaks(omegas, periods), reference)))
-        print(f"choosing P at n = {CHOOSE_AT}: {periods} periods, max rel. difference "
-              f"{tried[-1][1]:.1e}", file=sys.stderr, flush=True)
-        if tried[-1][1] <= MATCH:
-            return periods, True, tried
-    return CANDIDATE_PERIODS[-1], False, tried
-
-
-def lsoda_points(lsoda, omegas, periods, budget_s, subset):
+def lsoda_points(lsoda, omegas, budget_s, subset):
     """The indices LSODA is timed on: all, or `subset` spread over the band where the
-    loop would exceed `budget_s` (estimated from one point)."""
+    loop would exceed `budget_s` (estimated from one point at `ESTIMATE_PERIODS`)."""
     start = time.perf_counter()
-    lsoda.peak(float(omegas[0]), periods)
+    lsoda.peak(float(omegas[0]), ESTIMATE_PERIODS)
     estimate = (time.perf_counter() - start) * omegas.size
     if estimate <= budget_s or subset >= omegas.size:
         return np.arange(omegas.size)
     return np.unique(np.round(np.linspace(0, omegas.size - 1, subset)).astype(int))
 
 
-def measure_lsoda(lsoda, omegas, periods, reference, budget_s, subset):
-    index = lsoda_points(lsoda, omegas, periods, budget_s, subset)
-    start = time.perf_counter()
-    peaks = lsoda.peaks(omegas[index], periods)
-    seconds = time.perf_counter() - start
-    return dict(per_orbit=seconds / index.size, points=index.size,
-                difference=max_rel_difference(peaks, reference[index]),
+def measure_lsoda(lsoda, omegas, reference, budget_s, subset):
+    """LSODA at the smallest candidate P whose peaks all match `reference` within MATCH
+    (else the largest), timed at that P."""
+    index = lsoda_points(lsoda, omegas, budget_s, subset)
+    tried = []
+    for periods in CANDIDATE_PERIODS:
+        start = time.perf_counter()
+        peaks = lsoda.peaks(omegas[index], periods)
+        seconds = time.perf_counter() - start
+        tried.append((periods, max_rel_difference(peaks, reference[index])))
+        print(f"  LSODA {periods} periods: max rel. difference {tried[-1][1]:.1e}",
+              file=sys.stderr, flush=True)
+        if tried[-1][1] <= MATCH:
+            break
+    return dict(per_orbit=seconds / index.size, points=index.size, periods=periods,
+                matched=tried[-1][1] <= MATCH, tried=tried, difference=tried[-1][1],
                 converged=int(np.sum(np.isfinite(peaks))))
 
 
@@ -286,19 +286,23 @@ class Building:
         self.lsoda = Lsoda(model, float(self.exact.friction_force), static_scale(stiffnesses))
         first = self.exact.first_mode()[0]
         self.omegas = first * np.linspace(*BAND, points)
-        self._smoothed = None
-
-    def smoothed_run(self):
-        if self._smoothed is None:
-            self._smoothed = measure_tid(self.smoothed, self.omegas)
-        return self._smoothed
 
 
-def measure(building, periods, args):
+def smoothed_integrator(building):
+    """The integrator the automatic choice takes for the smoothed building's points."""
+    settings = building_settings(building.smoothed, None)
+    omegas = building.omegas
+    chosen = for_points(settings, building.smoothed, ROOF, np.full(omegas.shape, AMPLITUDE),
+                        omegas)
+    return "Kvaerno5" if chosen.implicit else "Tsit5"
+
+
+def measure(building, args):
     print(f"n = {building.n} ...", file=sys.stderr, flush=True)
     exact = measure_tid(building.exact, building.omegas)
-    smoothed = building.smoothed_run()
-    lsoda = measure_lsoda(building.lsoda, building.omegas, periods, smoothed["peaks"],
+    smoothed = measure_tid(building.smoothed, building.omegas)
+    smoothed["integrator"] = smoothed_integrator(building)
+    lsoda = measure_lsoda(building.lsoda, building.omegas, smoothed["peaks"],
                           args.lsoda_budget, args.lsoda_subset)
     return dict(n=building.n, exact=exact, smoothed=smoothed, lsoda=lsoda)
 
@@ -312,42 +316,46 @@ def growth_exponent(storeys, per_orbit):
     return float(np.polyfit(np.log(storeys), np.log(per_orbit), 1)[0])
 
 
-def row(result, periods, points):
+def row(result, points):
     ex, sm, ls = result["exact"], result["smoothed"], result["lsoda"]
     ms = lambda seconds: f"{seconds * 1e3:.3g}"
     lsoda_ms = ms(ls["per_orbit"])
     if ls["points"] < points:
         lsoda_ms += f" ({ls['points']} of {points} points)"
+    periods = f"{ls['periods']}" + ("" if ls["matched"] else " (not matched)")
     return (f"| {result['n']} | {2 * (result['n'] + 1)} | {ms(ex['per_orbit'])} | "
-            f"{ms(sm['per_orbit'])} | {periods} | {lsoda_ms} | "
+            f"{ms(sm['per_orbit'])} ({sm['integrator']}) | {periods} | {lsoda_ms} | "
             f"{ls['per_orbit'] / ex['per_orbit']:.3g}x | "
             f"{ls['per_orbit'] / sm['per_orbit']:.3g}x | {ls['difference']:.1e} | "
             f"exact {ex['converged']}/{points}, smoothed {sm['converged']}/{points}, "
             f"LSODA {ls['converged']}/{ls['points']} |")
 
 
-def table(results, periods, matched, tried, points):
-    choice = ", ".join(f"{p}: {d:.1e}" for p, d in tried)
+def table(results, points):
     lines = [
         f"Shear building, TID from the ground to floor 1, ground acceleration "
         f"{AMPLITUDE} m/s2, {points} frequencies over {BAND[0]}..{BAND[1]} times the first "
         f"mode; peak roof displacement. tid_jax: warm `frequency_response`, best of "
-        f"{REPEATS}. LSODA: one `solve_ivp` call per point, rtol {RTOL:g}, from the linear "
-        f"steady state over P = {periods} periods, chosen at n = {CHOOSE_AT} "
-        f"({'matched' if matched else 'NOT matched'} within {MATCH:g}; tried {choice}).",
+        f"{REPEATS}, default settings (smoothed: the integrator chosen automatically). "
+        f"LSODA: one `solve_ivp` call per point, rtol {RTOL:g}, from the linear steady "
+        f"state over the fewest periods P of {', '.join(map(str, CANDIDATE_PERIODS))} whose "
+        f"last-period peaks match tid_jax's smoothed orbits within {MATCH:g}.",
         "",
         "| storeys | states | tid_jax exact ms/orbit | tid_jax smoothed ms/orbit | LSODA "
         "periods | LSODA ms/orbit | LSODA / exact | LSODA / smoothed | LSODA max rel. "
         "difference to tid_jax smoothed | converged |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    lines += [row(result, periods, points) for result in results]
+    lines += [row(result, points) for result in results]
     storeys = [result["n"] for result in results]
     lines.append("")
     for name, key in (("tid_jax exact", "exact"), ("tid_jax smoothed", "smoothed"),
                       ("LSODA", "lsoda")):
         p = growth_exponent(storeys, [result[key]["per_orbit"] for result in results])
         lines.append(f"- {name}: time per orbit ~ n^p, p = {p:.2f}")
+    lines.append("- LSODA periods tried: " + "; ".join(
+        f"n = {r['n']}: " + ", ".join(f"{p}: {d:.1e}" for p, d in r["lsoda"]["tried"])
+        for r in results))
     return lines
 
 
@@ -391,12 +399,8 @@ def parse():
 
 def run_table(args):
     storeys = [int(s) for s in args.storeys.split(",") if s.strip()]
-    buildings = {n: Building(n, args.points) for n in sorted(set(storeys) | {CHOOSE_AT})}
-    chooser = buildings[CHOOSE_AT]
-    reference = chooser.smoothed_run()["peaks"]
-    periods, matched, tried = choose_periods(chooser.lsoda, chooser.omegas, reference)
-    results = [measure(buildings[n], periods, args) for n in storeys]
-    return table(results, periods, matched, tried, args.points)
+    results = [measure(Building(n, args.points), args) for n in storeys]
+    return table(results, args.points)
 
 
 def main():

@@ -26,6 +26,7 @@ from ._orbit._steady_state import (
     solve_orbit,
     y_peak,
 )
+from ._orbit._stiffness import for_points
 from ._runtime._cache import compiled
 from ._runtime._sharding import map_batch, per_device, sharded_batch
 
@@ -253,6 +254,7 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     block of the batch is sharded over all JAX devices (`sharded_batch`). The solutions are
     NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
+    settings = for_points(settings, batch[2], batch[0], batch[1])
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out
     # on an orbit that converges slowly, or stalled at the integration error of its

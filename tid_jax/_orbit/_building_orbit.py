@@ -1,7 +1,8 @@
 """Periodic steady states of a `BuildingTID` by shooting: the linear equivalent start,
-Newton's iterations on the period map (`_flow`) with its monodromy matrix by
-forward derivatives, Floquet multipliers, and batches of them over amplitudes and
-frequencies (`building_response`)."""
+Newton's iterations on the period map (`_flow`, `_period`) with its monodromy matrix by
+forward derivatives (exact friction) or the variational equations (smoothed friction),
+Floquet multipliers, and batches of them over amplitudes and frequencies
+(`building_response`)."""
 
 import equinox as eqx
 import jax
@@ -13,10 +14,11 @@ from .._model._building import BuildingTID, Quantity, friction_influence, uncont
 from .._model._checks import check_grid
 from ._eigen import eigenvalues
 from ._flow import flow, period, plant, projection_units
-from ._period import smoothed_period
+from ._period import smoothed_field, smoothed_period
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
 from ._steady_state import fixed_point_matrix, moving_part
+from ._stiffness import choose, explicit_steps
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 # bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
@@ -25,6 +27,12 @@ _BISECTIONS = 24
 CHUNK = 2  # orbits solved together (vectorised) in a batch
 _WARM_CHORDS = 6  # chord steps from a warm start before Newton's from the start again
 _ROUNDS = 2  # rounds of Newton steps, each followed by chord steps
+# Newton steps of a round before the chord steps (`solve_orbit`'s default): a Newton step
+# of smoothed friction integrates s tangents, as dear as 10-20 periods without them, and
+# chord steps from the first Newton matrix converge in as many steps as Newton's (8
+# frequencies of the 10- and 30-storey buildings of `benchmarks/bench_building.py`: the
+# same steps, 41 -> 16 and 327 -> 121 ms per orbit); exact friction's are cheap.
+_NEWTON_STEPS = {True: 3, False: 1}  # by `settings.exact_friction`
 
 
 def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
@@ -70,14 +78,17 @@ def period_samples(z, pl, fl, settings: SolverSettings):
     return smoothed_period(z, pl, settings)
 
 
-def _record(z, pl, fl, settings: SolverSettings):
-    """The period from `z`: its end, and (without derivatives) its samples, transitions
-    and largest stroke at a transition."""
+def _record(z, pl, fl, settings: SolverSettings, tangents: bool = False):
+    """The period from `z`: its end, (without derivatives) its samples, transitions and
+    largest stroke at a transition, and with `tangents` (smoothed friction) its
+    monodromy matrix."""
     if settings.exact_friction:
         values, z_end, transitions, events = period(z, fl, sample_tangents=False)
+        more = ()
     else:
-        values, z_end, transitions, events = smoothed_period(z, pl, settings)
-    return z_end, jax.lax.stop_gradient((values, transitions, events, z))
+        values, z_end, transitions, events, *more = smoothed_period(z, pl, settings,
+                                                                    tangents=tangents)
+    return (z_end, jax.lax.stop_gradient((values, transitions, events, z)), *more)
 
 
 class _Newton(eqx.Module):
@@ -102,8 +113,9 @@ def _limited(z, update):
 def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
             monodromy=None) -> _Newton:
     """Iterations for z = Phi_T(z) from `z0`: `newton_steps` Newton steps, each with the
-    monodromy matrix by forward derivatives of the period map (the stuck stroke's family
-    of orbits kept apart by `fixed_point_matrix`), then chord steps with the last matrix
+    monodromy matrix (forward derivatives of the period map, or the variational equations
+    of smoothed friction; the stuck stroke's family of orbits kept apart by
+    `fixed_point_matrix`), then chord steps with the last matrix
     held, each one period without tangents, until the residual is within `tol` or
     after `settings.max_newton_steps` of them; then, where not done, all that again
     (`_ROUNDS` in all), each round integrating 100 times more accurately than the one
@@ -119,9 +131,12 @@ def _newton(z0, pl, fl, settings: SolverSettings, tol, newton_steps: int,
         record = lambda z: _record(z, pl, fl, accuracy)
 
         def newton(state):
-            z_end, monodromy, kept = jax.vmap(
-                lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
-                out_axes=(None, 1, None))(basis)
+            if fl is None:  # smoothed friction: by the variational equations
+                z_end, kept, monodromy = _record(state.z, pl, fl, accuracy, tangents=True)
+            else:
+                z_end, monodromy, kept = jax.vmap(
+                    lambda t: jax.jvp(record, (state.z,), (t,), has_aux=True),
+                    out_axes=(None, 1, None))(basis)
             lu = jax.scipy.linalg.lu_factor(fixed_point_matrix(monodromy))
             return _step(state, z_end, kept, monodromy, lu)
 
@@ -194,10 +209,11 @@ def peak_of(samples):
 
 
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
-                settings: SolverSettings, newton_steps: int = 3, start=None,
+                settings: SolverSettings, newton_steps: int | None = None, start=None,
                 cold=None) -> BuildingOrbit:
     """The periodic steady state at one point (traceable; see `building_response`):
-    `newton_steps` Newton steps, then chord steps (`_newton`), from the linear equivalent
+    `newton_steps` Newton steps (default: 3 with exact friction, 1 smoothed), then chord
+    steps (`_newton`), from the linear equivalent
     state or from `start`, the state and monodromy matrix of a nearby orbit (with a
     scalar `cold`, where it is False; a monodromy matrix that is not finite is not
     used)."""
@@ -218,6 +234,8 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
         z, monodromy = start
         if cold is not None:
             z = jax.lax.cond(cold, linear_start, lambda: z)
+    if newton_steps is None:
+        newton_steps = _NEWTON_STEPS[settings.exact_friction]
     newton = _newton(z, pl, fl, settings, tol, newton_steps, monodromy)
     # the last period the iterations computed: from the orbit's state where they are done
     values, transitions, stroke_events, state = newton.record
@@ -262,6 +280,27 @@ def building_settings(system: BuildingTID, settings: SolverSettings | None) -> S
     return eqx.tree_at(lambda s: s.exact_friction, settings, system.exact_friction)
 
 
+@jax.jit
+def _explicit_steps(system: BuildingTID, quantity: Quantity, amplitudes, omegas):
+    """`_stiffness.explicit_steps` at each point (`amplitudes[i]`, `omegas[i]`)."""
+    def one(amplitude, omega):
+        model = plant(system, quantity, amplitude, omega)
+        z = initial_state(system, amplitude, omega)
+        return explicit_steps(smoothed_field, z, model, model.width, z[-1] == 0.0)
+
+    return jax.vmap(one)(amplitudes, omegas)
+
+
+def for_points(settings: SolverSettings, system: BuildingTID, quantity: Quantity,
+               amplitudes, omegas) -> SolverSettings:
+    """`settings` (fitted: `building_settings`) with `implicit` decided where it is None
+    (automatic, `_stiffness`) at the points (`amplitudes[i]`, `omegas[i]`)."""
+    if settings.implicit is not None or settings.exact_friction:
+        return settings
+    return choose(settings, _explicit_steps(system, quantity, jnp.asarray(amplitudes),
+                                            jnp.asarray(omegas)))
+
+
 class BuildingResponse(eqx.Module):
     """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
     peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
@@ -292,6 +331,7 @@ def building_response(system: BuildingTID, omegas, amplitudes,
     quantity.floor_of(system.floors)
     settings = building_settings(system, settings)
     a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
+    settings = for_points(settings, system, quantity, a, w)
     orbits = solve_orbits(system, quantity, jnp.asarray(a), jnp.asarray(w), settings)
     shape = (amplitudes.size, omegas.size)
     ok = np.asarray(orbits.converged).reshape(shape)

@@ -17,7 +17,7 @@ from ._settings import SolverSettings
 
 
 def _solver(settings: SolverSettings):
-    return dfx.Kvaerno5() if settings.implicit else dfx.Tsit5()
+    return dfx.Kvaerno5() if settings.implicit is True else dfx.Tsit5()
 
 
 def integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
@@ -62,19 +62,19 @@ def flow(p, settings: SolverSettings) -> _flow.Flow | None:
 _PLANT_ORDER = {4: np.array([0, 2, 1, 3]), 6: np.array([0, 2, 4, 1, 3, 5])}
 
 
-def _to_plant(z):
+def to_plant(z):
     return z[..., _PLANT_ORDER[z.shape[-1]]]
 
 
-def _from_plant(z):
+def from_plant(z):
     return z[..., np.argsort(_PLANT_ORDER[z.shape[-1]])]
 
 
 def _exact_period(z0, modes: _flow.Flow, keep_samples: bool = True):
     """`_flow.period` in the paper's state order: samples of x, y and y', the state after
     the period, the transitions and the largest |y| at a transition."""
-    values, z_end, transitions, y_events = _flow.period(_to_plant(z0), modes, keep_samples)
-    return values, _from_plant(z_end), transitions, y_events
+    values, z_end, transitions, y_events = _flow.period(to_plant(z0), modes, keep_samples)
+    return values, from_plant(z_end), transitions, y_events
 
 
 def _plant(p, z):
@@ -98,12 +98,12 @@ def period_samples(z0, p, settings: SolverSettings, modes=None):
                 transitions.astype(z0.dtype))
     phases = _phases(settings, z0.dtype)
     sol = integrate(
-        smoothed_field, _to_plant(z0), _plant(p, z0), 2 * jnp.pi, settings,
+        smoothed_field, to_plant(z0), _plant(p, z0), 2 * jnp.pi, settings,
         dfx.SaveAt(ts=phases, t1=True), settings.max_steps,
     )
     ys = sol.ys  # (x, y, ..., y' or q'): the friction's velocity last
     zero = jnp.zeros((), z0.dtype)
-    return ys[:-1, 0], ys[:-1, 1], ys[:-1, -1], _from_plant(ys[-1]), zero, zero
+    return ys[:-1, 0], ys[:-1, 1], ys[:-1, -1], from_plant(ys[-1]), zero, zero
 
 
 def period_tangents(z, p, settings: SolverSettings, modes=None):
@@ -118,12 +118,12 @@ def period_tangents(z, p, settings: SolverSettings, modes=None):
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(4, dtype=z.dtype))
     sol = integrate(
-        _field_and_tangents, (_to_plant(z), jnp.eye(z.shape[0], dtype=z.dtype)), _plant(p, z),
+        _field_and_tangents, (to_plant(z), jnp.eye(z.shape[0], dtype=z.dtype)), _plant(p, z),
         2 * jnp.pi, settings, dfx.SaveAt(t1=True), settings.max_steps,
     )
     z_end, monodromy = (y[-1] for y in sol.ys)
     # d z_end / d z in the paper's order: the rows and the columns permuted back
-    return _from_plant(z_end), _from_plant(_from_plant(monodromy).T).T
+    return from_plant(z_end), from_plant(from_plant(monodromy).T).T
 
 
 def samples_and_jacobian(z, p, settings, directions=()):
@@ -228,14 +228,14 @@ def transient(z, p, settings: SolverSettings, periods=None):
         return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
     sol = integrate(
         smoothed_field,
-        _to_plant(z),
+        to_plant(z),
         _plant(p, z),
         2 * jnp.pi * (settings.transient_periods if periods is None else periods),
         settings,
         dfx.SaveAt(t1=True),
         settings.max_steps * settings.transient_periods,
     )
-    end = _from_plant(sol.ys[-1])
+    end = from_plant(sol.ys[-1])
     return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
 
 
@@ -286,19 +286,26 @@ def _field_and_tangents(theta, y, plant: _flow.Plant):
     return smoothed_field(theta, z, plant), along
 
 
-def smoothed_period(z0, plant: _flow.Plant, settings: SolverSettings, keep_samples: bool = True):
+def smoothed_period(z0, plant: _flow.Plant, settings: SolverSettings, keep_samples: bool = True,
+                    tangents: bool = False):
     """One period of the smoothed flow of a `_flow.Plant` (diffrax): the same outputs as
-    `_flow.period`."""
+    `_flow.period`, and with `tangents` the monodromy matrix last, by the variational
+    equations (their step sizes follow the error of the state alone: accurate enough for
+    Newton's iterations, whose answer does not depend on it, and cheaper than forward
+    derivatives of the steps)."""
     phases = np.arange(settings.samples) * (2 * np.pi / settings.samples)
     saveat = dfx.SaveAt(ts=phases, t1=True) if keep_samples else dfx.SaveAt(t1=True)
-    sol = integrate(smoothed_field, z0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
-    ys = sol.ys
+    field, y0 = smoothed_field, z0
+    if tangents:
+        field, y0 = _field_and_tangents, (z0, jnp.eye(z0.shape[0], dtype=z0.dtype))
+    sol = integrate(field, y0, plant, 2 * np.pi, settings, saveat, settings.max_steps)
+    ys, monodromy = (sol.ys[0], (sol.ys[1][-1],)) if tangents else (sol.ys, ())
     z_end = jnp.where(sol.result == dfx.RESULTS.successful, ys[-1], jnp.nan)
     if not keep_samples:
-        return jnp.zeros((0, 3), z0.dtype), z_end, jnp.zeros((), int), jnp.zeros((), z0.dtype)
+        return (jnp.zeros((0, 3), z0.dtype), z_end, jnp.zeros((), int),
+                jnp.zeros((), z0.dtype)) + monodromy
     states = ys[:-1]
     rates = jax.vmap(smoothed_field, in_axes=(0, 0, None))(jnp.asarray(phases), states, plant)
     values = (states @ plant.rows.T + rates @ plant.rows_rate.T
               + jnp.sin(jnp.asarray(phases))[:, None] * plant.rows_sin)
-    return (values[:, :3], z_end, jnp.zeros((), int),
-            jnp.zeros((), z0.dtype))
+    return (values[:, :3], z_end, jnp.zeros((), int), jnp.zeros((), z0.dtype)) + monodromy

@@ -23,8 +23,12 @@ class SolverSettings(eqx.Module):
 
     - `rtol`, `atol`: tolerances of the adaptive integration, on the state scaled by the
       static displacement A / K.
-    - `implicit`: integrate with the implicit Kvaerno5 instead of the explicit Tsit5, for
-      stiff problems (a narrow friction width against slow forcing).
+    - `implicit`: the integrator of smoothed friction: True, the implicit Kvaerno5; False,
+      the explicit Tsit5; None (automatic), Kvaerno5 where the explicit steps a period
+      needs for stability (estimated at each point's linear equivalent start:
+      `_stiffness`) exceed `_stiffness.STIFF_STEPS` at most of the points of a
+      `frequency_response` call, as where a narrow friction width holds the device
+      stuck, else Tsit5 (and where no points are given, as in the building designs).
     - `max_steps`: integration steps allowed per forcing period.
     - `transient_periods`: periods integrated from the initial guess (the linear steady
       state) before shooting; 0: Newton's iterations start from it.
@@ -73,7 +77,7 @@ class SolverSettings(eqx.Module):
     periodicity_tol: float = 1e-6
     exact_periodicity_tol: float = 1e-10
     samples: int = 128
-    implicit: bool = False
+    implicit: bool | None = None
     exact_friction: bool = False
     compliant: bool = False
     chunk: int = 64
@@ -90,6 +94,15 @@ class SolverSettings(eqx.Module):
             if not (isinstance(value, int) and value >= low):
                 raise ValueError(
                     f"SolverSettings.{name} must be an integer >= {low}, got {value!r}")
+        if not (self.implicit is None or isinstance(self.implicit, bool)):
+            raise ValueError("SolverSettings.implicit must be None (automatic), True or False, "
+                             f"got {self.implicit!r}")
+
+    def with_implicit(self, stiff: bool) -> "SolverSettings":
+        """These settings with `implicit` set to `stiff` where it is None (automatic)."""
+        if self.implicit is not None:
+            return self
+        return eqx.tree_at(lambda s: s.implicit, self, stiff, is_leaf=lambda x: x is None)
 
     def fallbacks(self) -> tuple["SolverSettings", ...]:
         """Settings for further attempts, in turn, at points that did not converge: a
@@ -107,7 +120,8 @@ class SolverSettings(eqx.Module):
         )
         if self.exact_friction:
             return (persistent.without_coarse(),)
-        stiff = eqx.tree_at(lambda s: s.implicit, persistent.more_accurate(10), True)
+        stiff = eqx.tree_at(lambda s: s.implicit, persistent.more_accurate(10), True,
+                            is_leaf=lambda x: x is None)
         return persistent.more_accurate(100).without_coarse(), stiff.without_coarse()
 
     def more_accurate(self, factor: float = 100.0) -> "SolverSettings":
