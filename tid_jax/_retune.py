@@ -39,7 +39,7 @@ from ._response import (
     scaled_states,
     with_tuning,
 )
-from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._outcomes import Outcome, outcome_code, outcome_messages
 from ._runtime._parallel import process_count, serial
 
 
@@ -125,11 +125,11 @@ class RetuneResult(eqx.Module):
     x_response_initial: Float[Array, "amps check"]  # m, the same for the initial tuning
 
     def status_messages(self) -> list[str]:
-        messages = []
-        for code, at_bound in zip(np.asarray(self.status), np.asarray(self.damping_at_bound)):
-            text = outcome_message(Outcome, code)
-            messages.append(text + ("; damping at its lower bound 0" if at_bound else ""))
-        return messages
+        """The meaning of `status`, one message per amplitude (`Outcome`'s), with a note
+        where the damping is at its lower bound."""
+        return [text + ("; damping at its lower bound 0" if at_bound else "")
+                for text, at_bound in zip(outcome_messages(self.status),
+                                          np.ravel(self.damping_at_bound), strict=True)]
 
 
 def _check_lanes(systems, amplitudes, omegas, warm, settings):

@@ -36,7 +36,7 @@ from ._orbit._sampled_peaks import (
 from ._orbit._settings import SolverSettings
 from ._response import batched, lane_response
 from ._retune import RetuneSettings, check_retune_options
-from ._runtime._outcomes import Outcome, outcome_code, outcome_message
+from ._runtime._outcomes import Outcome, outcome_code, outcome_message, outcome_messages
 from ._runtime._parallel import map_shares, serial
 
 
@@ -372,7 +372,7 @@ class RobustDesign(eqx.Module):
     def status_messages(self) -> list[str]:
         """The meaning of `status`, one message per entry (one here), as
         `RetuneResult.status_messages`."""
-        return [outcome_message(Outcome, code) for code in np.atleast_1d(self.status)]
+        return outcome_messages(self.status)
 
 
 def _check_stroke_limit(stroke_limit) -> float:

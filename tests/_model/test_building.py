@@ -8,16 +8,14 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import settings as hypothesis_settings
-from hypothesis import strategies as st
-
+from hypothesis import given, settings as hypothesis_settings, strategies as st
 from scipy.optimize import minimize
 
 import tid_jax as tj
 from tests.reference import building_hinf, building_linear
 from tests.reference.building_stick_slip import steady_state
 from tests.reference.hinf import h_infinity_optimum
+from tid_jax._runtime._outcomes import outcome_code, outcome_message
 
 MASSES = [2000.0, 2000.0, 1500.0]
 STIFFNESSES = [1.5e6, 1.25e6, 1.0e6]  # first mode near 2 Hz
@@ -210,6 +208,41 @@ def test_frictionless_retune_is_the_h_infinity_optimum(building):
     assert bool(result.converged[0])
     assert result.peak[0] == pytest.approx(reference["peak"], rel=1e-5)
     assert result.tid_stiffness[0] == pytest.approx(reference["k"], rel=1e-3)
+
+
+def _read_as_the_host_s(result, outcome):
+    """`result`'s `status` is `outcome`'s code everywhere, its messages `Outcome`'s and
+    `converged` exactly where it is ok."""
+    code = outcome_code(outcome)
+    assert np.all(np.asarray(result.status) == code)
+    assert result.status_messages() == [outcome_message(tj.Outcome, code)] * np.size(
+        result.status)
+    assert np.array_equal(np.asarray(result.converged), np.asarray(result.status) == 0)
+
+
+def test_building_results_read_their_outcome_as_the_host_s(building):
+    system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
+    first = float(building.modes()[0][0])
+    _read_as_the_host_s(tj.retune(system, [1.0]), tj.Outcome.ok)
+    # one SLSQP step: the search ends before a minimax point
+    stopped = tj.retune(system, [1.0], max_steps=1)
+    _read_as_the_host_s(stopped, tj.Outcome.not_stationary)
+    assert np.isnan(stopped.peak[0])
+    # a band below the first mode: the peak at its upper end, still reported
+    below = np.linspace(0.5, 0.8, 31) * first
+    edge = tj.retune(system, [1.0], omegas=below)
+    _read_as_the_host_s(edge, tj.Outcome.peak_at_band_edge)
+    assert edge.omega_peak[0] == pytest.approx(below[-1]) and np.isfinite(edge.peak[0])
+    sensitivities = tj.amplitude_sensitivities(system, [1.0], omegas=below, optimum=False)
+    _read_as_the_host_s(sensitivities, tj.Outcome.peak_at_band_edge)
+    assert np.all(np.isfinite(sensitivities.elasticities))
+    _read_as_the_host_s(tj.amplitude_sensitivities(system, [1.0], optimum=False),
+                        tj.Outcome.ok)
+    # a stroke limit of 0.1 mm, which no tuning within the search's range meets
+    limited = tj.robust_tune(system, [1.0], stroke_limit=1e-4)
+    _read_as_the_host_s(limited, tj.Outcome.stroke_over_limit)
+    assert not bool(limited.within_stroke_limit)
+    _read_as_the_host_s(tj.robust_tune(system, [1.0], stroke_limit=None), tj.Outcome.ok)
 
 
 def test_retune_with_friction_beats_the_first_mode_tunings(building):

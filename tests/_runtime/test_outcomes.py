@@ -5,7 +5,7 @@ import equinox as eqx
 import numpy as np
 import pytest
 
-from tid_jax._runtime._outcomes import Outcome, outcome_code, outcome_message
+from tid_jax._runtime._outcomes import Outcome, outcome_code, outcome_message, outcome_messages
 
 
 class _Outcome(eqx.Enumeration):
@@ -33,3 +33,9 @@ def test_the_codes_results_hold_are_those_of_their_items():
     assert outcome_code(Outcome.stroke_over_limit) == 6
     assert "initial tuning kept" in outcome_message(Outcome, 4)
     assert outcome_message(Outcome, 6) == "stroke over the limit on the check grid"
+
+
+def test_every_result_s_messages_are_those_of_its_codes_in_order():
+    assert outcome_messages(np.asarray(6)) == [outcome_message(Outcome, 6)]
+    assert outcome_messages(np.asarray([[0, 3], [1, 0]])) == [
+        "ok", outcome_message(Outcome, 3), outcome_message(Outcome, 1), "ok"]

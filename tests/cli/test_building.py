@@ -7,8 +7,10 @@ import math
 import numpy as np
 import pytest
 
+import tid_jax as tj
 from tests.cli.test_main import run
 from tests.reference import building_linear
+from tid_jax._runtime._outcomes import outcome_code, outcome_message
 
 CONFIG = """
 inertance = 275.0
@@ -246,3 +248,27 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
         assert r["stroke_after_m"] > 0 and r["status"].startswith("ok")
     for name in ("robust.csv", "robust.json", "robust.png", "robust_config.toml"):
         assert (out / name).exists()
+
+
+def test_building_rows_say_the_result_s_outcome_as_host_rows_do(tmp_path):
+    # frictionless, a band below the first mode (2 Hz): the retuned peak at its upper end;
+    # a stroke limit of 0.1 mm that no robust design meets
+    text = CONFIG.replace("friction_force = 135.0", "friction_force = 0.0").replace(
+        'amplitudes = ["0.1g", 2.0]', "amplitudes = [2.0]")
+    edge = outcome_message(tj.Outcome, outcome_code(tj.Outcome.peak_at_band_edge))
+    status, stdout, stderr = run(["retune", "--config", _config(
+        tmp_path, text.replace("n_frequencies = 7", "n_frequencies = 7\nband_hz = [1.0, 1.5]")),
+        "--out", tmp_path / "retune", "--json", "--quiet"])
+    assert status == 0, stderr
+    (record,) = json.loads(stdout)["results"]
+    assert not record["converged"] and record["status"].split("; ")[0] == edge
+    assert record["peak_frequency_after_Hz"] == pytest.approx(1.5)
+    over = outcome_message(tj.Outcome, outcome_code(tj.Outcome.stroke_over_limit))
+    status, stdout, stderr = run(["robust", "--config", _config(
+        tmp_path, "stroke_limit = 1e-4\n" + text), "--out", tmp_path / "robust", "--json",
+        "--quiet"])
+    assert status == 0, stderr
+    data = json.loads(stdout)
+    assert not data["robust"]["converged"] and data["robust"]["status"] == over
+    assert all(not r["converged"] and r["status"].split("; ")[0] == over
+               for r in data["results"])

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import (
     BuildingTID,
@@ -36,6 +36,7 @@ from .._orbit._flow import flow, plant, projection_units
 from .._orbit._sampled_peaks import local_peaks
 from .._orbit._settings import SolverSettings
 from .._orbit._steady_state import fixed_point_matrix
+from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
 
 # The default band of a building's design: these multiples of the bare structure's
 # first natural frequency.
@@ -241,10 +242,13 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
 class BuildingRetune(eqx.Module):
     """The retuned TID per amplitude (SI): `tid_stiffness` k (N/m), `tid_damping` c
     (N s/m), `peak` (of the quantity over the band), `omega_peak` (rad/s), `uncontrolled`
-    (the bare structure's peak over the band at that amplitude), `converged` (the search
-    ended by its tolerance, or stalled at a first-order minimax point, and every steady
-    state was found), and the first-mode tunings' peaks `den_hartog_peak`,
-    `h_infinity_peak`."""
+    (the bare structure's peak over the band at that amplitude), the first-mode tunings'
+    peaks `den_hartog_peak`, `h_infinity_peak`, and `status`, codes of `Outcome` read by
+    `status_messages()`: `steady_states_failed` where no first-mode tuning's steady states
+    were all found (no search; the H-infinity tuning returned), `not_stationary` where the
+    search ended neither by its tolerance nor at a first-order minimax point (`peak` NaN
+    for both), `peak_at_band_edge` where the design's peak is at an end of the band, else
+    `ok`; `converged` is `status == ok`."""
 
     amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
@@ -255,6 +259,11 @@ class BuildingRetune(eqx.Module):
     converged: Bool[Array, " amps"]
     den_hartog_peak: Float[Array, " amps"]
     h_infinity_peak: Float[Array, " amps"]
+    status: Int[Array, " amps"]
+
+    def status_messages(self) -> list[str]:
+        """The meaning of `status`, one message per amplitude (`Outcome`'s)."""
+        return outcome_messages(self.status)
 
 
 @eqx.filter_jit
@@ -413,7 +422,8 @@ def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, ma
                 linear):
     """The retune at one amplitude (`minimax` of one scenario), from the better of the
     first mode's tunings and within `_RANGE` of its H-infinity tuning. Returns the
-    tuning, its `Peak`, whether the search converged, and the peaks of the first-mode
+    tuning, its `Peak`, the `Outcome` of the search (ok, not_stationary, or
+    steady_states_failed where no start was found) and the peaks of the first-mode
     tunings (`tunings`: name -> (k, c))."""
     search = BandSearch(system, quantity, amplitude, omegas, settings, linear)
     references, starts = {}, {}
@@ -428,15 +438,23 @@ def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, ma
         found = minimax([search], [0.0], np.log(np.asarray(tunings[first], float)), centre,
                         rtol, max_steps)
     if found is None:
-        return np.exp(centre), None, False, references
+        return np.exp(centre), None, Outcome.steady_states_failed, references
     x, _, ok = found
-    return np.exp(x), search(x)[3], ok, references
+    return np.exp(x), search(x)[3], Outcome.ok if ok else Outcome.not_stationary, references
 
 
 @eqx.filter_jit
 def _peaks_at(system, quantity, amplitudes, omegas, settings, linear):
     return jax.vmap(lambda a: peak_over_frequency(system, quantity, a, omegas, settings,
                                                   linear).peak)(amplitudes)
+
+
+def at_band_edge(omega_peak, omegas) -> np.ndarray:
+    """Whether each peak frequency `omega_peak` (rad/s) is at an end of the band `omegas`
+    (`peak_over_frequency` holds a peak there exactly, its refinement clipped to the
+    band)."""
+    omega_peak, omegas = np.asarray(omega_peak), np.asarray(omegas)
+    return (omega_peak <= omegas.min()) | (omega_peak >= omegas.max())
 
 
 def frictionless(system: BuildingTID) -> bool:
@@ -486,13 +504,17 @@ def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quanti
             progress(i + 1, amplitudes.size)
     tuning = np.asarray([row[0] for row in rows])
     found = [row[1] for row in rows]
-    ok = np.asarray([row[2] for row in rows])
+    status = np.asarray([outcome_code(row[2]) for row in rows])
+    searched = status == outcome_code(Outcome.ok)
+    omega_peak = np.asarray([np.nan if p is None else float(p.omega) for p in found])
+    status = np.where(searched & at_band_edge(omega_peak, omegas),
+                      outcome_code(Outcome.peak_at_band_edge), status)
     reference = {name: np.asarray([row[3][name] for row in rows]) for name in tunings}
     bare = np.max(np.asarray(uncontrolled_amplitude(system, quantity, w)))
     return BuildingRetune(
         amplitudes=amplitudes, tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
-        peak=np.asarray([np.nan if p is None or not o else float(p.value)
-                         for p, o in zip(found, ok, strict=True)]),
-        omega_peak=np.asarray([np.nan if p is None else float(p.omega) for p in found]),
-        uncontrolled=amplitudes * bare, converged=ok,
-        den_hartog_peak=reference["den_hartog"], h_infinity_peak=reference["h_infinity"])
+        peak=np.asarray([float(p.value) if o else np.nan
+                         for p, o in zip(found, searched, strict=True)]),
+        omega_peak=omega_peak, uncontrolled=amplitudes * bare,
+        converged=status == outcome_code(Outcome.ok), den_hartog_peak=reference["den_hartog"],
+        h_infinity_peak=reference["h_infinity"], status=status)

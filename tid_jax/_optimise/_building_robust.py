@@ -7,7 +7,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from .._model._building import (
     BuildingTID,
@@ -21,6 +21,7 @@ from .._model._structure import Structure
 from .._model._system import PAPER_STROKE, check_values
 from .._orbit._building_orbit import building_settings, solve_orbits
 from .._orbit._settings import SolverSettings
+from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
 from ._building_design import (
     BandSearch,
     frictionless,
@@ -99,11 +100,15 @@ class BuildingRobust(eqx.Module):
     """The robust tuning (SI): `tid_stiffness` k (N/m) and `tid_damping` c (N s/m), and
     per scenario (amplitude x stiffness scale, arrays of that shape) its `peak`, the
     `best` peak of a tuning of the scenario's own (`retune_building`) and their `ratio`;
-    `worst_ratio`, the highest ratio; `converged`: the search ended by its tolerance, or
-    at a first-order minimax point, and every steady state was found. Per scenario too,
-    `stroke_peak` (m), the stroke's peak over the band's grid; the `stroke_limit` (m;
-    None: none), whether every stroke peak is `within_stroke_limit` and whether the limit
-    is active, `stroke_limited` (the largest peak within `STROKE_ACTIVE` of it)."""
+    `worst_ratio`, the highest ratio. Per scenario too, `stroke_peak` (m), the stroke's
+    peak over the band's grid; the `stroke_limit` (m; None: none), whether every stroke
+    peak is `within_stroke_limit` and whether the limit is active, `stroke_limited` (the
+    largest peak within `STROKE_ACTIVE` of it). `status`, a code of `Outcome` read by
+    `status_messages()`: `not_stationary` where the search ended neither by its tolerance
+    nor at a first-order minimax point, `steady_states_failed` where a steady state was
+    not found (a scenario-own tuning's or the design's), `stroke_over_limit` where a
+    stroke peak is over the limit (the values NaN where no design within it was found),
+    else `ok`; `converged` is `status == ok`."""
 
     amplitudes: Float[Array, " amps"]
     stiffness_scales: Float[Array, " scales"]
@@ -117,7 +122,12 @@ class BuildingRobust(eqx.Module):
     stroke_peak: Float[Array, "amps scales"]
     within_stroke_limit: Bool[Array, ""]
     stroke_limited: Bool[Array, ""]
+    status: Int[Array, ""]
     stroke_limit: float | None = eqx.field(static=True, default=None)
+
+    def status_messages(self) -> list[str]:
+        """The meaning of `status`, one message (`Outcome`'s)."""
+        return outcome_messages(self.status)
 
 
 def scaled_structure(structure: Structure, scale: float) -> Structure:
@@ -179,8 +189,8 @@ def robust_building(system: BuildingTID, amplitudes, quantity: Quantity | None =
         result = minimax(searches, offsets, start, centre, rtol, max_steps, limits,
                          -np.log1p(-STROKE_MARGIN))
     say("robust tuning")
-    return _robust_result(searches, strokes, order, result, centre, best, amplitudes,
-                          scales, stroke_limit)
+    return _robust_result(searches, strokes, order, (start, result), centre, best,
+                          amplitudes, scales, stroke_limit)
 
 
 def _start(searches, offsets, tunings, limits):
@@ -198,16 +208,33 @@ def _start(searches, offsets, tunings, limits):
     return np.asarray(min(worst, key=worst.get)) if worst else None
 
 
-def _robust_result(searches, strokes, order, result, centre, best, amplitudes, scales,
-                   stroke_limit) -> BuildingRobust:
-    """The `BuildingRobust` of `minimax`'s `result` (None: not found, its values NaN)."""
-    peaks, stroke = np.full(best.shape, np.nan), np.full(best.shape, np.nan)
+def _outcome(searches, start, result, values, stroke_limit) -> Outcome:
+    """The `Outcome` of the robust search from `start` (None: no scenario-own tuning was
+    found in every scenario) that ended in `minimax`'s `result` (None: the start's steady
+    states were not all found, or no design within the stroke limits was); `values`, the
+    design's peaks and stroke peaks (NaN where a steady state was not found)."""
     if result is None:
-        x, ok = centre, False
-    else:
-        x, _, ok = result
+        started = start is not None and all(search(start)[2] for search in searches)
+        return Outcome.stroke_over_limit if started else Outcome.steady_states_failed
+    peaks, stroke = values
+    if not result[2]:
+        return Outcome.not_stationary
+    if not (np.all(np.isfinite(peaks)) and np.all(np.isfinite(stroke))):
+        return Outcome.steady_states_failed
+    if stroke_limit is not None and np.max(stroke) > stroke_limit:
+        return Outcome.stroke_over_limit
+    return Outcome.ok
+
+
+def _robust_result(searches, strokes, order, ended, centre, best, amplitudes, scales,
+                   stroke_limit) -> BuildingRobust:
+    """The `BuildingRobust` of the search `ended` = (its start, `minimax`'s result; the
+    result None: not found, its values NaN)."""
+    start, result = ended
+    peaks, stroke = np.full(best.shape, np.nan), np.full(best.shape, np.nan)
+    x = centre if result is None else result[0]
+    if result is not None:
         found = [search(x) for search in searches]
-        ok = ok and all(f[2] for f in found)
         for (i, j), f, s in zip(order, found, strokes, strict=True):
             peaks[i, j] = float(f[3].value) if f[2] else np.nan
             stroke[i, j] = float(np.exp(s.value(x)))
@@ -215,10 +242,12 @@ def _robust_result(searches, strokes, order, result, centre, best, amplitudes, s
     top = np.max(stroke)  # NaN where one was not found
     within = stroke_limit is None or bool(top <= stroke_limit)
     active = stroke_limit is not None and bool(top >= stroke_limit * (1 - STROKE_ACTIVE))
+    status = outcome_code(_outcome(searches, start, result, (peaks, stroke), stroke_limit))
     k, c = np.exp(x)
     return BuildingRobust(
         amplitudes=amplitudes, stiffness_scales=scales, tid_stiffness=jnp.asarray(k),
         tid_damping=jnp.asarray(c), peak=peaks, best=best, ratio=ratio,
-        worst_ratio=jnp.asarray(np.max(ratio)), converged=jnp.asarray(bool(ok) and within),
-        stroke_peak=stroke, within_stroke_limit=jnp.asarray(within),
-        stroke_limited=jnp.asarray(active), stroke_limit=stroke_limit)
+        worst_ratio=jnp.asarray(np.max(ratio)),
+        converged=jnp.asarray(status == outcome_code(Outcome.ok)), stroke_peak=stroke,
+        within_stroke_limit=jnp.asarray(within), stroke_limited=jnp.asarray(active),
+        status=jnp.asarray(status), stroke_limit=stroke_limit)

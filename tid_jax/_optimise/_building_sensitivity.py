@@ -13,7 +13,9 @@ from .._model._building import BuildingTID, Quantity, log_tuned
 from .._model._checks import check_grid
 from .._orbit._building_orbit import building_settings
 from .._orbit._settings import SolverSettings
+from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
 from ._building_design import (
+    at_band_edge,
     frictionless,
     no_start,
     peak_derivatives,
@@ -167,7 +169,8 @@ class BuildingOptimum(eqx.Module):
     (`stiffness_elasticities`, `damping_elasticities`: by implicit differentiation of
     the optimum's conditions); the entries of k and c are 0, as the optimum does not
     depend on the tuning it starts from. `active`: the peaks active at the optimum (1 or
-    2); `converged`: the retune converged and every steady state was found."""
+    2); `converged`: the retune converged (its `status` ok) and every steady state was
+    found."""
 
     tid_stiffness: Float[Array, " amps"]
     tid_damping: Float[Array, " amps"]
@@ -185,9 +188,11 @@ class BuildingSensitivities(eqx.Module):
     relative change of the peak per relative change of each parameter of `names`
     (`parameter_names`: the TID's k, c, b, ff, cp, mt, a compliant device's series
     stiffness and backlash, the amplitude, every floor's mass and every storey's
-    stiffness, the damping matrix held); `converged` False where a
-    steady state was not found (its values NaN); `optimum`, at the retuned optimum
-    (None unless asked for)."""
+    stiffness, the damping matrix held); `optimum`, at the retuned optimum (None unless
+    asked for). `status`, codes of `Outcome` read by `status_messages()`:
+    `steady_states_failed` where a steady state was not found (the values NaN),
+    `peak_at_band_edge` where the peak is at an end of the band, else `ok`; `converged`
+    is `status == ok`."""
 
     amplitudes: Float[Array, " amps"]
     names: tuple[str, ...] = eqx.field(static=True)
@@ -195,7 +200,12 @@ class BuildingSensitivities(eqx.Module):
     omega_peak: Float[Array, " amps"]
     elasticities: Float[Array, "amps parameters"]
     converged: Bool[Array, " amps"]
+    status: Int[Array, " amps"]
     optimum: BuildingOptimum | None = None
+
+    def status_messages(self) -> list[str]:
+        """The meaning of `status`, one message per amplitude (`Outcome`'s)."""
+        return outcome_messages(self.status)
 
 
 def _keep(ok, values):
@@ -220,11 +230,16 @@ def building_sensitivities(system: BuildingTID, amplitudes, quantity: Quantity |
     rows = [_elasticities(system, quantity, jnp.asarray(a), omegas, settings, linear)
             for a in amplitudes]
     ok = np.asarray([bool(row[2]) for row in rows])
+    omega_peak = _keep(ok, [float(row[0].omega) for row in rows])
+    status = np.where(ok, np.where(at_band_edge(omega_peak, omegas),
+                                   outcome_code(Outcome.peak_at_band_edge),
+                                   outcome_code(Outcome.ok)),
+                      outcome_code(Outcome.steady_states_failed))
     return BuildingSensitivities(
         amplitudes=amplitudes, names=parameter_names(system),
-        peak=_keep(ok, [float(row[0].value) for row in rows]),
-        omega_peak=_keep(ok, [float(row[0].omega) for row in rows]),
-        elasticities=_keep(ok, jax.device_get([row[1] for row in rows])), converged=ok,
+        peak=_keep(ok, [float(row[0].value) for row in rows]), omega_peak=omega_peak,
+        elasticities=_keep(ok, jax.device_get([row[1] for row in rows])),
+        converged=status == outcome_code(Outcome.ok), status=status,
         optimum=(_optimum(system, quantity, amplitudes, omegas, settings, linear)
                  if optimum else None))
 

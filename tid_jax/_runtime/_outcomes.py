@@ -24,6 +24,12 @@ def outcome_message(enumeration: type[eqx.Enumeration], code) -> str:
     return enumeration[item]
 
 
+def outcome_messages(status) -> list[str]:
+    """The messages of the `Outcome` codes `status` (an int or an array of them), one per
+    entry in C order: what every result's `status_messages()` returns."""
+    return [outcome_message(Outcome, code) for code in np.ravel(np.asarray(status))]
+
+
 class Outcome(eqx.Enumeration):
     """How a solve or a design ended, the same codes on every result (`status`)."""
 

@@ -16,6 +16,7 @@ from .._optimise._building_sensitivity import building_sensitivities, storey_sti
 from .._orbit._building_orbit import building_response
 from .._orbit._settings import SolverSettings
 from .._runtime._io import write_json, write_toml
+from .._runtime._outcomes import Outcome, outcome_message
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
     PROG,
@@ -307,16 +308,13 @@ def _save_retune_plots(output, system, quantity, records, result, before, stroke
         "the TID"), output.path("retune_frequency_response.png"))
 
 
-def _retune_problem(result, i: int, found: bool) -> str | None:
-    """The status's start where the retune at amplitude `i` did not converge (None where
-    it did): which part, and what is left empty."""
-    if not bool(result.converged[i]):
-        return ("not converged: the search for k and c did not end at a minimax point, or a "
-                "steady state its peak rests on was not found (peak_after left empty)")
-    if not found:
-        return ("not converged: a steady state over the band with the retuned k and c was "
-                "not found (stroke_after_m from the others)")
-    return None
+def _retune_base(result, messages: list[str], i: int, found: bool) -> str:
+    """The status's start at amplitude `i`: the retune's message (`messages`, its
+    `status_messages()`), or where it is ok but a steady state of the strokes over the
+    band with the retuned k and c was not (`found` False), `steady_states_failed`'s."""
+    if bool(result.converged[i]) and not found:
+        return outcome_message(Outcome, Outcome.steady_states_failed)
+    return messages[i]
 
 
 def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.ndarray:
@@ -337,6 +335,7 @@ def _retune_records(system, quantity, result, before, stroke_before, stroke_afte
     the design's was)."""
     k_dh, c_dh = first_mode_tunings(system)["den_hartog"]
     bare = uncontrolled_peak(system, quantity, omegas)
+    messages = result.status_messages()
     records = []
     for i, amplitude in enumerate(np.asarray(result.amplitudes)):
         k, c = float(result.tid_stiffness[i]), float(result.tid_damping[i])
@@ -353,7 +352,7 @@ def _retune_records(system, quantity, result, before, stroke_before, stroke_afte
             stroke_before_m=finite(stroke_before[i]), stroke_after_m=finite(stroke_after[i]),
             stroke_limit_m=limit, within_stroke_limit=bool(stroke_after[i] <= limit),
             converged=ok, status=status(ok, stroke_problem(stroke_after[i], limit),
-                                        base=_retune_problem(result, i, found[i]))))
+                                        base=_retune_base(result, messages, i, found[i]))))
     return records
 
 
@@ -411,6 +410,7 @@ def run_sensitivity(args, inputs: dict) -> int:
     records = []
     for i, (amplitude, result) in enumerate(zip(amplitudes, results, strict=True)):
         peak = float(result.peak[0])
+        base = None if bool(result.converged[0]) else result.status_messages()[0]
         for j, name in enumerate(result.names):
             value, parameter_unit = parameters[name]
             value = float(amplitude) if value is None else value
@@ -424,7 +424,7 @@ def run_sensitivity(args, inputs: dict) -> int:
                 peak_unit=quantity.unit, peak=finite(peak), elasticity=finite(elasticity),
                 derivative_per_unit=finite(elasticity * peak / value) if value else 0.0,
                 stroke_m=finite(stroke[i]), converged=bool(result.converged[0]),
-                status=status(ok), **fields))
+                status=status(ok, base=base), **fields))
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
     save_config(inputs, output, "sensitivity")
     elasticities = np.asarray([result.elasticities[0] for result in results])
@@ -474,6 +474,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                   for name, s in (("before", system), ("after", robust))}
         step("the given tuning's peaks, and the strokes over the band")
     limit = stroke_limit
+    base = result.status_messages()[0]
     records = [row(ROBUST_COLUMNS, frequency_scale=math.sqrt(scale), amplitude=float(a),
                    amplitude_unit=amplitude_unit(system.load),
                    k_N_per_m=float(result.tid_stiffness), c_N_s_per_m=float(result.tid_damping),
@@ -487,7 +488,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                        result.stroke_peak[i, j] <= limit),
                    converged=bool(result.converged),
                    status=status(bool(result.converged),
-                                 stroke_problem(result.stroke_peak[i, j], limit)))
+                                 stroke_problem(result.stroke_peak[i, j], limit), base=base))
                for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
     save_records(output, "robust.csv", ROBUST_COLUMNS, records)
     save_config(inputs, output, "robust")
@@ -513,7 +514,7 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                "stroke_limited": bool(result.stroke_limited), "stroke_limit_m": stroke_limit,
                "within_stroke_limit": bool(result.within_stroke_limit),
                "max_stroke_m": finite(np.nanmax(stroke["after"])),
-               "status": status(bool(result.converged))}
+               "status": base}
     data = document("robust", inputs, system, quantity, frequencies_hz, output,
                      frequency_scales=[math.sqrt(s) for s in scales],
                      robust=summary, results=records)
