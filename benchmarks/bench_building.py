@@ -52,7 +52,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import tid_jax as tj  # noqa: E402
 from tid_jax._model._system import FRICTION_WIDTH_RATIO  # noqa: E402
-from tid_jax._orbit._building_orbit import building_settings, for_points  # noqa: E402
+from tid_jax._orbit._stiffness import for_points  # noqa: E402
+from tid_jax._response import batched  # noqa: E402
 
 STOREY_MASS = 3.0e5  # kg
 FIRST_MODE_HZ = 1.0
@@ -290,10 +291,9 @@ class Building:
 
 def smoothed_integrator(building):
     """The integrator the automatic choice takes for the smoothed building's points."""
-    settings = building_settings(building.smoothed, None)
     omegas = building.omegas
-    chosen = for_points(settings, building.smoothed, ROOF, np.full(omegas.shape, AMPLITUDE),
-                        omegas)
+    chosen = for_points(tj.SolverSettings(), batched(building.smoothed, omegas.size), omegas,
+                        np.full(omegas.shape, AMPLITUDE))
     return "Kvaerno5" if chosen.implicit else "Tsit5"
 
 

@@ -32,11 +32,10 @@ _API = {
     "_optimise._building_design": ("BuildingRetune", "Peak"),
     "_optimise._building_robust": ("BuildingRobust",),
     "_optimise._building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
-    "_orbit._building_orbit": ("BuildingResponse",),
     "_orbit._settings": ("SolverSettings",),
     "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_receptance": ("breakaway_amplitude", "linear_receptance"),
-    "_response": ("FrequencyResponse", "frequency_response"),
+    "_response": ("BuildingResponse", "FrequencyResponse", "frequency_response"),
     "_retune": ("RetuneResult", "RetuneSettings", "retune"),
     "_robust": ("RobustDesign", "RobustSettings", "TuningPerformance", "robust_tune",
                 "tuning_performance"),
@@ -134,9 +133,6 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         BuildingOptimum as BuildingOptimum,
         BuildingSensitivities as BuildingSensitivities,
     )
-    from ._orbit._building_orbit import (
-        BuildingResponse as BuildingResponse,
-    )
     from ._orbit._settings import (
         SolverSettings as SolverSettings,
     )
@@ -151,6 +147,7 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         linear_receptance as linear_receptance,
     )
     from ._response import (
+        BuildingResponse as BuildingResponse,
         FrequencyResponse as FrequencyResponse,
         frequency_response as frequency_response,
     )

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, uncontrolled_amplitude
 from ._model._checks import (
     check_grid,
     check_single_storey_quantity,
@@ -15,12 +15,12 @@ from ._model._checks import (
 )
 from ._model._dynamics import parameters
 from ._model._system import TIDSystem, compiler_options
-from ._orbit._building_orbit import BuildingResponse, building_response
 from ._orbit._eigen import eigenvalues
-from ._orbit._period import initial_state, transient
+from ._orbit._period import point_model, state_units, transient
 from ._orbit._settings import SolverSettings
 from ._orbit._steady_state import (
     moving_part,
+    one_by_one,
     refined_peak,
     shoot_queue,
     solve_orbit,
@@ -91,6 +91,7 @@ class _Solutions(eqx.Module):
     monodromy: Float[Array, "points states states"]
     stick_fraction: Float[Array, " points"]
     transitions: Int[Array, " points"]
+    unit: Float[Array, " points"]  # the unit of the scaled displacements, m
 
     def fields(self) -> dict:
         return {name: getattr(self, name) for name in _GRID_FIELDS}
@@ -128,42 +129,40 @@ def with_tuning(system: TIDSystem, stiffness, damping) -> TIDSystem:
 
 
 @compiled(options=compiler_options)
-def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
+def _points(systems, quantity, omegas, amplitudes, settings, warm, valid, use_warm):
     """Steady states at the points (`omegas[i]`, `amplitudes[i]`) of the systems `systems`
-    (one per point, its fields batched): shooting on work queues (`shoot_queue`,
-    `settings.chunk` lanes per device), from the equivalent linear steady state after
-    `settings.transient_periods` periods (integrated at `settings.coarse_rtol`) or, where
-    `use_warm`, from the scaled states `warm`; the last Newton iteration samples each
-    orbit and verifies its periodicity. Points where `valid` is False (padding) are
-    skipped."""
+    (one per point, its fields batched: `TIDSystem`s, or `BuildingTID`s measuring
+    `quantity`): shooting on work queues (`shoot_queue`, `settings.chunk` lanes per
+    device), from the equivalent linear steady state after `settings.transient_periods`
+    periods (integrated at `settings.coarse_rtol`) or, where `use_warm`, from the scaled
+    states `warm`; the last Newton iteration samples each orbit and verifies its
+    periodicity. Points where `valid` is False (padding) are skipped."""
     settings = settings.for_system(systems)
-    p = jax.vmap(lambda s, w, a: jnp.stack(parameters(s, a, w)))(systems, omegas, amplitudes)
+    paper = not isinstance(systems, BuildingTID)
+    each = jax.vmap if paper else one_by_one
+    p, linear, unit_q, unit = each(lambda s, w, a: point_model(s, quantity, a, w))(
+        systems, omegas, amplitudes)
 
-    def start(q, z, warm_start):
-        z = jnp.where(warm_start, z, initial_state(q, settings.compliant))
+    def start(q, z, warm_start, z_linear):
+        z = jnp.where(warm_start, z, z_linear)
         return transient(z, q, settings.coarse(),
                          jnp.where(warm_start, 0, settings.transient_periods))
 
     chunk = settings.chunk
 
-    def solve(q, w, use, v):
-        z0 = map_batch(lambda batch: start(*batch), (q, w, use), chunk, v)
+    def solve(q, w, use, z_linear, v):
+        z0 = map_batch(lambda batch: start(*batch), (q, w, use, z_linear), chunk, v)
         return shoot_queue(z0, q, settings, chunk, v)
 
-    shots = per_device(solve, p, warm, use_warm, valid)
+    shots = per_device(solve, p, warm, use_warm, linear, valid)
     samples, residual = shots.samples, shots.residual
-    static = amplitudes / systems.host_stiffness
-    units = _state_units(omegas, amplitudes, systems.host_stiffness, settings.states, jnp)
-    peak = jax.vmap(refined_peak)
     y_peaks = jax.vmap(lambda ys, events: y_peak(ys, events, settings))(samples.ys,
                                                                        samples.y_events)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(samples.xs), -1)
-    multipliers = eigenvalues(shots.monodromy)
     width = jax.vmap(lambda s, amplitude, omega: s.width_at(amplitude, omega))(
-        systems, amplitudes, omegas
-    )
-    # (exact friction: width 0, and the samples of a stuck terminal's velocity are 0)
-    stuck = jnp.abs(samples.ws * (omegas * static)[:, None]) <= 2 * width[:, None]
+        systems, amplitudes, omegas)
+    # (exact friction: width 0, and the samples of a stuck body's velocity are 0)
+    stuck = jnp.abs(samples.ws * (omegas * unit)[:, None]) <= 2 * width[:, None]
     if settings.exact_friction:  # counted by the period map, each one located
         transitions = jnp.round(samples.transitions).astype(int)
     else:
@@ -171,26 +170,36 @@ def _points(systems, omegas, amplitudes, settings, warm, valid, use_warm):
         transitions = jnp.sum(phase != jnp.roll(phase, 1, axis=-1), axis=-1)
     # The peaks of an orbit that was not found are unknown: NaN, never a plausible number.
     return _Solutions(
-        x_max=jnp.where(converged, peak(samples.xs) * static, jnp.nan),
-        y_max=jnp.where(converged, y_peaks * static, jnp.nan),
+        x_max=jnp.where(converged, jax.vmap(refined_peak)(samples.xs) * unit_q, jnp.nan),
+        y_max=jnp.where(converged, y_peaks * unit, jnp.nan),
         converged=converged,
-        stable=jnp.max(jnp.abs(eigenvalues(jax.vmap(moving_part)(shots.monodromy))),
+        stable=jnp.max(jnp.abs(each(lambda m: eigenvalues(moving_part(m)))(shots.monodromy)),
                        axis=-1) < 1,
-        state=shots.state * units,
+        state=shots.state * state_units(unit, omegas, warm.shape[-1], paper),
         residual=residual,
         newton_steps=shots.newton_steps,
-        floquet_multipliers=multipliers,
+        floquet_multipliers=each(eigenvalues)(shots.monodromy),
         monodromy=shots.monodromy,
-        stick_fraction=jnp.mean(stuck.astype(static.dtype), axis=-1),
+        stick_fraction=jnp.mean(stuck.astype(unit.dtype), axis=-1),
         transitions=transitions,
+        unit=unit,
     )
 
 
-def batched(system: TIDSystem, count: int) -> TIDSystem:
-    """`system` repeated `count` times: every field a NumPy array of `count` equal entries
-    (the batched form, one system per point, that `solve_points` takes; on the host, so
-    that no program is compiled, or loaded, for each count)."""
-    return jax.tree.map(lambda leaf: np.broadcast_to(np.asarray(leaf, float), (count,)), system)
+def batched(system, count: int):
+    """`system` (a `TIDSystem` or a `BuildingTID`) repeated `count` times: every field a
+    NumPy array of `count` equal entries (the batched form, one system per point, that
+    `solve_points` takes; on the host, so that no program is compiled, or loaded, for
+    each count)."""
+    return jax.tree.map(
+        lambda leaf: np.broadcast_to(np.asarray(leaf, float), (count,) + np.shape(leaf)), system)
+
+
+def _states(systems) -> int:
+    """The scaled states of `systems`' model."""
+    if isinstance(systems, BuildingTID):
+        return 2 * systems.coordinates
+    return 6 if systems.compliant else 4
 
 
 # Batches are solved in blocks of BLOCK points, the last one padded: padding costs little
@@ -216,7 +225,7 @@ def _on_host(tree):
     return jax.tree.map(np.asarray, tree)
 
 
-def _solve_blocks(settings, batch, warm=None) -> _Solutions:
+def _solve_blocks(settings, batch, quantity, warm=None) -> _Solutions:
     """`_points` on the flat `batch = (omegas, amplitudes, systems)` (NumPy arrays), block
     by block: every block is shot from the states `warm` if given (else from the linear
     state after a transient), so that one compiled program serves every kind of call.
@@ -225,7 +234,7 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
     count = omegas.shape[0]
     use_warm = np.full(count, warm is not None)
     if warm is None:
-        warm = np.zeros((count, settings.for_system(batch[2]).states), omegas.dtype)
+        warm = np.zeros((count, _states(batch[2])), omegas.dtype)
     outs = []
     arrays = settings.with_array_tolerances(batch[2])  # one program for any of their values
     for start, stop, size in _block_sizes(count):
@@ -233,21 +242,22 @@ def _solve_blocks(settings, batch, warm=None) -> _Solutions:
         valid = np.arange(start, start + size) < stop
         part = jax.tree.map(lambda a: a[index], (batch, warm, use_warm))
         out = sharded_batch(
-            lambda b, w, u, v: _points(b[2], b[0], b[1], arrays, w, v, u), *part, valid
-        )
+            lambda b, w, u, v: _points(b[2], quantity, b[0], b[1], arrays, w, v, u), *part,
+            valid)
         outs.append(jax.tree.map(lambda value, n=stop - start: np.asarray(value)[:n], out))
     return jax.tree.map(lambda *values: np.concatenate(values), *outs)
 
 
-def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSettings,
-                 warm=None) -> _Solutions:
+def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=None,
+                 quantity: Quantity = Quantity()) -> _Solutions:
     """Steady states at the flat lists of points (`omegas[i]`, `amplitudes[i]`) of the
-    systems `systems` (one per point: its fields are arrays, entry i for point i; see
-    `batched`), in batches; with `warm` (scaled states), point i is shot from `warm[i]`
-    (e.g. the orbit of a nearby design). A near miss (a finite periodicity residual above
-    the tolerance) is first shot on from its own last state, integrated 100 times more
-    accurately (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do
-    not converge are solved again, from the equivalent linear steady state
+    systems `systems` (one per point: `TIDSystem`s or `BuildingTID`s measuring
+    `quantity`, their fields arrays, entry i for point i; see `batched`), in batches; with
+    `warm` (scaled states), point i is shot from `warm[i]` (e.g. the orbit of a nearby
+    design). A near miss (a finite periodicity residual above the tolerance) is first
+    shot on from its own last state, integrated 100 times more accurately
+    (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do not
+    converge are solved again, from the equivalent linear steady state
     (`_period.initial_state`), with each of the fallbacks of `settings` fitted to the
     systems (`SolverSettings.fallbacks`) in turn until they do (a point where no period
     could be integrated skips the explicit integrations); the best attempt is kept. Each
@@ -255,7 +265,8 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
     NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     settings = for_points(settings, batch[2], batch[0], batch[1])
-    out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm))
+    paper = not isinstance(batch[2], BuildingTID)
+    out = _solve_blocks(settings, batch, quantity, None if warm is None else np.asarray(warm))
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out
     # on an orbit that converges slowly, or stalled at the integration error of its
     # period map) is shot on from its own last state, integrated 100 times more
@@ -266,9 +277,10 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
         if not near.size:
             break
         part = jax.tree.map(lambda b, near=near: b[near], batch)
-        own = out.state[near] / _state_units(part[0], part[1], part[2].host_stiffness,
-                                             out.state.shape[-1])
-        out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, own), near)
+        own = out.state[near] / state_units(out.unit[near], part[0], out.state.shape[-1],
+                                            paper, np)
+        out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, quantity, own),
+                           near)
     for fallback in settings.for_system(batch[2]).fallbacks():
         failed = ~out.converged
         if not (fallback.implicit or fallback.exact_friction):
@@ -279,17 +291,9 @@ def solve_points(systems: TIDSystem, omegas, amplitudes, settings: SolverSetting
         failed = np.flatnonzero(failed)
         if not failed.size:
             continue
-        retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch))
+        retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch), quantity)
         out = _keep_better(out, retry, failed)
     return out
-
-
-def _state_units(omegas, amplitudes, host_stiffness, states: int, xp=np):
-    """The units of the scaled states (`solve_orbit`: displacements in A / K, velocities
-    in omega A / K) at points (`omegas`, `amplitudes`) of hosts of stiffness
-    `host_stiffness` (broadcast together), `[..., states]`."""
-    static = amplitudes / host_stiffness
-    return xp.stack([static + 0 * omegas, static * omegas] * (states // 2), axis=-1)
 
 
 def _keep_better(out: _Solutions, retry: _Solutions, points) -> _Solutions:
@@ -334,9 +338,50 @@ def scaled_states(response: FrequencyResponse, host_stiffness,
     K is one value or one per amplitude (lane). With `xp=np`, computed on the host."""
     amplitudes, omegas, state = (xp.asarray(a) for a in (response.amplitudes,
                                                          response.omegas, response.state))
-    return state / _state_units(omegas, amplitudes[:, None],
-                                xp.reshape(xp.asarray(host_stiffness), (-1, 1)),
-                                state.shape[-1], xp)
+    unit = amplitudes[:, None] / xp.reshape(xp.asarray(host_stiffness), (-1, 1))
+    return state / state_units(unit, omegas, state.shape[-1], True, xp)
+
+
+class BuildingResponse(eqx.Module):
+    """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
+    peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
+    within the unit circle, the stuck stroke's family aside), `floquet_max`,
+    `transitions` per period, and `uncontrolled` (amplitudes x frequencies: the bare
+    structure's quantity)."""
+
+    amplitudes: Float[Array, " amps"]
+    omegas: Float[Array, " freqs"]
+    response_max: Float[Array, "amps freqs"]
+    stroke_max: Float[Array, "amps freqs"]
+    converged: Bool[Array, "amps freqs"]
+    stable: Bool[Array, "amps freqs"]
+    floquet_max: Float[Array, "amps freqs"]
+    transitions: Int[Array, "amps freqs"]
+    uncontrolled: Float[Array, "amps freqs"]
+
+
+def building_response(system: BuildingTID, omegas, amplitudes,
+                      quantity: Quantity = Quantity(),
+                      settings: SolverSettings | None = None) -> BuildingResponse:
+    """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
+    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, every point
+    solved by `solve_points`; a point whose orbit was not found has `converged` False
+    (its values NaN)."""
+    amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
+    omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))
+    quantity.floor_of(system.floors)
+    settings = SolverSettings() if settings is None else settings
+    a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
+    out = solve_points(batched(system, a.size), w, a, settings, quantity=quantity)
+    shape = (amplitudes.size, omegas.size)
+    floquet = np.max(np.abs(out.floquet_multipliers), axis=-1).reshape(shape)
+    bare = np.asarray(uncontrolled_amplitude(system, quantity, jnp.asarray(omegas)))
+    return BuildingResponse(
+        amplitudes=amplitudes, omegas=omegas, response_max=out.x_max.reshape(shape),
+        stroke_max=out.y_max.reshape(shape), converged=out.converged.reshape(shape),
+        stable=(out.converged & out.stable).reshape(shape), floquet_max=floquet,
+        transitions=out.transitions.reshape(shape),
+        uncontrolled=amplitudes[:, None] * bare[None, :])
 
 
 def frequency_response(

@@ -421,7 +421,7 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     # Frictionless, two stiffness scenarios: the free robust tuning's largest stroke peak
     # is 184 mm; at 165 mm the limit is active. Nelder-Mead (scipy) on the worst ratio
     # plus an exact penalty on the stroke (numpy's linear solve) is the reference, and
-    # the design's strokes are checked by shooting (`building_response`).
+    # the design's strokes are checked by shooting (`frequency_response`).
     system = tj.BuildingTID(building, B, 0.0, 4e4, 500.0, load="ground")
     scales = (0.95, 1.05)
     omegas = np.linspace(0.5, 1.6, 31) * float(building.modes()[0][0])

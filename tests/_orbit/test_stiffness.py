@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tid_jax._orbit._building_orbit import building_settings, for_points as building_points
 from tid_jax._orbit._stiffness import for_points
 from tid_jax._response import batched
 
@@ -31,8 +30,9 @@ def _omegas(system, count=5):
 
 def _chosen(system, amplitude, settings=None):
     omegas = _omegas(system)
-    return building_points(building_settings(system, settings), system, tj.Quantity(),
-                           np.full(omegas.shape, amplitude), omegas).implicit
+    settings = tj.SolverSettings() if settings is None else settings
+    return for_points(settings, batched(system, omegas.size), omegas,
+                      np.full(omegas.shape, amplitude)).implicit
 
 
 def test_automatic_choice_is_implicit_where_a_narrow_width_holds_the_inerter(building):

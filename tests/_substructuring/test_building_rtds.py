@@ -1,6 +1,6 @@
 """The virtual substructuring test of the inerter in a building: the structure, spring and
 damper numerical, the device physical along the stroke. Expected values come from the
-whole building (`building_response`, itself checked against the references), from the
+whole building (`frequency_response`, itself checked against the references), from the
 dynamic stiffness of the reference matrices (`reference/building_linear.py`) and from
 the paper's result that the conventional scheme is unstable for any delay."""
 

@@ -147,7 +147,7 @@ class Structure(eqx.Module):
     @property
     def floors(self) -> int:
         """n, the number of floors (degrees of freedom)."""
-        return self.mass_matrix.shape[0]
+        return self.mass_matrix.shape[-1]  # (a batch of structures: the last axis)
 
     def modes(self) -> tuple[np.ndarray, np.ndarray]:
         """Undamped natural frequencies (rad/s, ascending) and mass-normalised mode shapes

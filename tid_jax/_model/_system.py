@@ -274,9 +274,10 @@ def compiler_options(*args, **kwargs) -> dict:
     programs compiled in half the time. The rigid device's integrations of smoothed
     friction run about a third slower without them, and keep XLA's defaults (an empty
     dict)."""
-    systems = [leaf for leaf in jax.tree.leaves((args, kwargs),
-                                                is_leaf=lambda x: isinstance(x, TIDSystem))
-               if isinstance(leaf, TIDSystem)]
+    # (a `TIDSystem` or a `BuildingTID`: any model with both flags)
+    is_model = lambda x: hasattr(x, "exact_friction") and hasattr(x, "compliant")
+    systems = [leaf for leaf in jax.tree.leaves((args, kwargs), is_leaf=is_model)
+               if is_model(leaf)]
     if any(system.exact_friction or system.compliant for system in systems):
         return {"xla_cpu_use_fusion_emitters": False}
     return {}

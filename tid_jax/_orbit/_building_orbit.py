@@ -1,29 +1,23 @@
-"""Periodic steady states of a `BuildingTID` by shooting: the linear equivalent start,
-Newton's iterations on the period map (`_flow`, `_period`) with its monodromy matrix by
+"""One periodic steady state of a `BuildingTID` at a time, traceable and warm-started
+from a nearby orbit's state and monodromy matrix, for the building's designs: Newton's
+and chord iterations on the period map (`_flow`, `_period`) with its monodromy matrix by
 forward derivatives (exact friction) or the variational equations (smoothed friction),
-Floquet multipliers, and batches of them over amplitudes and frequencies
-(`building_response`)."""
+and Floquet multipliers. Batches of steady states go through `_response.solve_points`."""
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._model._building import BuildingTID, Quantity, friction_influence, uncontrolled_amplitude
-from .._model._checks import check_grid
+from .._model._building import BuildingTID, Quantity
 from ._eigen import eigenvalues
 from ._flow import flow, period, plant, projection_units
-from ._period import smoothed_field, smoothed_period
+from ._period import building_start, smoothed_period
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
 from ._steady_state import fixed_point_matrix, moving_part
-from ._stiffness import choose, explicit_steps
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
-# bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
-# end, closer than Newton's first step needs
-_BISECTIONS = 24
 CHUNK = 2  # orbits solved together (vectorised) in a batch
 _WARM_CHORDS = 6  # chord steps from a warm start before Newton's from the start again
 _ROUNDS = 2  # rounds of Newton steps, each followed by chord steps
@@ -33,37 +27,6 @@ _ROUNDS = 2  # rounds of Newton steps, each followed by chord steps
 # frequencies of the 10- and 30-storey buildings of `benchmarks/bench_building.py`: the
 # same steps, 41 -> 16 and 327 -> 121 ms per orbit); exact friction's are cheap.
 _NEWTON_STEPS = {True: 3, False: 1}  # by `settings.exact_friction`
-
-
-def initial_state(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
-    """The scaled state at phase 0 of the equivalent linear steady state: the friction
-    replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
-    stroke amplitude |R| it lets through (found by bisection), or the steady state with
-    the inerter stuck where the friction holds it."""
-    scale = system.static_scale()
-    free, influence = friction_influence(system, omega)
-    f = system.coordinates - 1  # the friction's coordinate
-
-    def added(log_amplitude):
-        """i omega times the equivalent damping at a stroke amplitude of e^log_amplitude."""
-        return 4j * system.friction_force / (jnp.pi * amplitude * jnp.exp(log_amplitude))
-
-    def bisect(_, bounds):
-        low, high = bounds
-        middle = 0.5 * (low + high)
-        stroke = free[f] / (1 + added(middle) * influence[f])
-        further = jnp.log(jnp.abs(stroke)) > middle
-        return jnp.where(further, middle, low), jnp.where(further, high, middle)
-
-    high = jnp.log(jnp.abs(free[f]))
-    low, high = jax.lax.fori_loop(0, _BISECTIONS, bisect, (high - 40.0, high))
-    damped = added(0.5 * (low + high))
-    slipping = free - influence * (damped * free[f] / (1 + damped * influence[f]))
-    holding = free[f] / influence[f]  # the friction force that holds it, per unit load
-    stuck = jnp.abs(holding) * amplitude < system.friction_force
-    u = jnp.where(stuck, (free - influence * holding).at[f].set(0.0), slipping) / scale
-    # load Im(e^{i theta}); response Im(U e^{i theta}); velocity in units of omega D
-    return jnp.concatenate([u.imag, u.real])
 
 
 def period_end(z, pl, fl, settings: SolverSettings):
@@ -222,7 +185,7 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
     tol = settings.exact_periodicity_tol if settings.exact_friction else settings.periodicity_tol
 
     def linear_start():
-        z = initial_state(system, amplitude, omega)
+        z = building_start(system, amplitude, omega)
         if settings.transient_periods:
             z = jax.lax.fori_loop(0, settings.transient_periods,
                                   lambda _, z: period_end(z, pl, fl, settings), z)
@@ -278,69 +241,3 @@ def solve_orbits(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
 def building_settings(system: BuildingTID, settings: SolverSettings | None) -> SolverSettings:
     settings = SolverSettings() if settings is None else settings
     return eqx.tree_at(lambda s: s.exact_friction, settings, system.exact_friction)
-
-
-@jax.jit
-def _explicit_steps(system: BuildingTID, quantity: Quantity, amplitudes, omegas):
-    """`_stiffness.explicit_steps` at each point (`amplitudes[i]`, `omegas[i]`)."""
-    def one(amplitude, omega):
-        model = plant(system, quantity, amplitude, omega)
-        z = initial_state(system, amplitude, omega)
-        return explicit_steps(smoothed_field, z, model, model.width, z[-1] == 0.0)
-
-    return jax.vmap(one)(amplitudes, omegas)
-
-
-def for_points(settings: SolverSettings, system: BuildingTID, quantity: Quantity,
-               amplitudes, omegas) -> SolverSettings:
-    """`settings` (fitted: `building_settings`) with `implicit` decided where it is None
-    (automatic, `_stiffness`) at the points (`amplitudes[i]`, `omegas[i]`)."""
-    if settings.implicit is not None or settings.exact_friction:
-        return settings
-    return choose(settings, _explicit_steps(system, quantity, jnp.asarray(amplitudes),
-                                            jnp.asarray(omegas)))
-
-
-class BuildingResponse(eqx.Module):
-    """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
-    peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
-    within the unit circle, the stuck stroke's family aside), `floquet_max`,
-    `transitions` per period, and `uncontrolled` (amplitudes x frequencies: the bare
-    structure's quantity)."""
-
-    amplitudes: Float[Array, " amps"]
-    omegas: Float[Array, " freqs"]
-    response_max: Float[Array, "amps freqs"]
-    stroke_max: Float[Array, "amps freqs"]
-    converged: Bool[Array, "amps freqs"]
-    stable: Bool[Array, "amps freqs"]
-    floquet_max: Float[Array, "amps freqs"]
-    transitions: Int[Array, "amps freqs"]
-    uncontrolled: Float[Array, "amps freqs"]
-
-
-def building_response(system: BuildingTID, omegas, amplitudes,
-                      quantity: Quantity = Quantity(),
-                      settings: SolverSettings | None = None) -> BuildingResponse:
-    """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
-    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, each point
-    solved by shooting from its linear equivalent; a point whose orbit was not found has
-    `converged` False (its values NaN)."""
-    amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
-    omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))
-    quantity.floor_of(system.floors)
-    settings = building_settings(system, settings)
-    a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
-    settings = for_points(settings, system, quantity, a, w)
-    orbits = solve_orbits(system, quantity, jnp.asarray(a), jnp.asarray(w), settings)
-    shape = (amplitudes.size, omegas.size)
-    ok = np.asarray(orbits.converged).reshape(shape)
-    value = lambda x: np.where(ok, np.asarray(x).reshape(shape), np.nan)
-    floquet = np.asarray(orbits.floquet_max).reshape(shape)
-    bare = np.asarray(uncontrolled_amplitude(system, quantity, jnp.asarray(omegas)))
-    return BuildingResponse(
-        amplitudes=amplitudes, omegas=omegas, response_max=value(orbits.response_max),
-        stroke_max=value(orbits.stroke_max), converged=ok,
-        stable=ok & (floquet < 1.0), floquet_max=floquet,
-        transitions=np.asarray(orbits.transitions).reshape(shape),
-        uncontrolled=amplitudes[:, None] * bare[None, :])

@@ -1,8 +1,10 @@
 """The period map Phi_T: the state one forcing period on from a state at phase 0, with the
 samples of the response over that period, its Jacobians (the monodromy matrix, by the
 variational equations or forward derivatives) and the transient before shooting; diffrax
-for smoothed friction, the closed-form stick-slip flow of `_flow` for exact friction (the
-paper's system as the one-storey `Plant`, `_flow.parameter_plant`)."""
+for smoothed friction, the closed-form stick-slip flow of `_flow` for exact friction. Each
+function takes the paper's parameter vector (its one-storey `Plant`,
+`_flow.parameter_plant`, with states in the paper's order) or any structure's `Plant`
+(`model`); `point_model` gives either, with its linear equivalent start, at a point."""
 
 import diffrax as dfx
 import jax
@@ -11,7 +13,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._model._dynamics import dead_zone
+from .._model._building import BuildingTID, Quantity, friction_influence
+from .._model._dynamics import dead_zone, parameters
 from . import _flow
 from ._settings import SolverSettings
 
@@ -42,18 +45,24 @@ def integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
     )
 
 
-def _phases(settings: SolverSettings, dtype):
-    return np.arange(settings.samples, dtype=dtype) * (2 * np.pi / settings.samples)
+def model(p, z) -> tuple[_flow.Plant, bool]:
+    """The `_flow.Plant` of the period map at `p` and whether states like `z` are in the
+    paper's order: `p` is a `Plant` (states in its own order, coordinates then their
+    velocities) or the paper's parameter vector (`_dynamics.PARAMETERS`; states (x, x', y,
+    y'[, q, q']), its one-storey plant `_flow.parameter_plant`)."""
+    if isinstance(p, _flow.Plant):
+        return p, False
+    return _flow.parameter_plant(p, compliant=z.shape[-1] == 6), True
 
 
 def flow(p, settings: SolverSettings) -> _flow.Flow | None:
-    """What every period at the parameters `p` shares, for the functions below
-    (`modes=`), computed once where many periods are integrated at the same `p`: with
-    exact friction the modes of the stick-slip flow (`_flow.flow`); None for smoothed
-    friction (its integrations share nothing)."""
+    """What every period at `p` (see `model`) shares, for the functions below (`modes=`),
+    computed once where many periods are integrated at the same `p`: with exact friction
+    the modes of the stick-slip flow (`_flow.flow`); None for smoothed friction (its
+    integrations share nothing)."""
     if not settings.exact_friction:
         return None
-    return _flow.flow(_flow.parameter_plant(p), settings.samples)
+    return _flow.flow(model(p, np.zeros(settings.states))[0], settings.samples)
 
 
 # The paper's state (x, x', y, y'), and (x, x', y, y', q, q') with a compliant device, in
@@ -62,24 +71,21 @@ def flow(p, settings: SolverSettings) -> _flow.Flow | None:
 _PLANT_ORDER = {4: np.array([0, 2, 1, 3]), 6: np.array([0, 2, 4, 1, 3, 5])}
 
 
-def to_plant(z):
-    return z[..., _PLANT_ORDER[z.shape[-1]]]
+def to_plant(z, paper: bool = True):
+    return z[..., _PLANT_ORDER[z.shape[-1]]] if paper else z
 
 
-def from_plant(z):
-    return z[..., np.argsort(_PLANT_ORDER[z.shape[-1]])]
+def from_plant(z, paper: bool = True):
+    return z[..., np.argsort(_PLANT_ORDER[z.shape[-1]])] if paper else z
 
 
-def _exact_period(z0, modes: _flow.Flow, keep_samples: bool = True):
-    """`_flow.period` in the paper's state order: samples of x, y and y', the state after
-    the period, the transitions and the largest |y| at a transition."""
-    values, z_end, transitions, y_events = _flow.period(to_plant(z0), modes, keep_samples)
-    return values, from_plant(z_end), transitions, y_events
-
-
-def _plant(p, z):
-    """The paper's system at `p` as the one-storey `Plant` of states like `z`."""
-    return _flow.parameter_plant(p, compliant=z.shape[-1] == 6)
+def _exact_period(z0, modes: _flow.Flow, paper: bool, keep_samples: bool = True):
+    """`_flow.period` in the order of the states `z0` (`paper`: the paper's): samples of
+    the quantity, the stroke and the friction's velocity, the state after the period, the
+    transitions and the largest |stroke| at a transition."""
+    values, z_end, transitions, events = _flow.period(to_plant(z0, paper), modes,
+                                                      keep_samples)
+    return values, from_plant(z_end, paper), transitions, events
 
 
 def _given_flow(p, settings: SolverSettings, given):
@@ -87,43 +93,43 @@ def _given_flow(p, settings: SolverSettings, given):
 
 
 def period_samples(z0, p, settings: SolverSettings, modes=None):
-    """x, y and the velocity of the friction's body (y' of a rigid device, q' of a
-    compliant one) sampled over one period from `z0`, the state after the period, the
-    largest |y| at a stick-slip transition and the number of transitions (exact friction;
-    else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
+    """The quantity (the paper's x), the stroke (y) and the velocity of the friction's body
+    (y' of a rigid device, q' of a compliant one) sampled over one period from `z0` at `p`
+    (see `model`), the state after the period (not finite where the integration failed),
+    the largest |stroke| at a stick-slip transition and the number of transitions (exact
+    friction; else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed
+    already."""
+    plant, paper = model(p, z0)
     if settings.exact_friction:
-        values, z_end, transitions, y_events = _exact_period(
-            z0, _given_flow(p, settings, modes))
-        return (values[:, 0], values[:, 1], values[:, 2], z_end, y_events,
-                transitions.astype(z0.dtype))
-    phases = _phases(settings, z0.dtype)
-    sol = integrate(
-        smoothed_field, to_plant(z0), _plant(p, z0), 2 * jnp.pi, settings,
-        dfx.SaveAt(ts=phases, t1=True), settings.max_steps,
-    )
-    ys = sol.ys  # (x, y, ..., y' or q'): the friction's velocity last
-    zero = jnp.zeros((), z0.dtype)
-    return ys[:-1, 0], ys[:-1, 1], ys[:-1, -1], from_plant(ys[-1]), zero, zero
+        values, z_end, transitions, events = _exact_period(
+            z0, _given_flow(p, settings, modes), paper)
+    else:
+        values, z_end, transitions, events = smoothed_period(to_plant(z0, paper), plant,
+                                                             settings)
+        z_end = from_plant(z_end, paper)
+    return (values[:, 0], values[:, 1], values[:, 2], z_end, events,
+            transitions.astype(z0.dtype))
 
 
 def period_tangents(z, p, settings: SolverSettings, modes=None):
-    """The state after one period from `z` and its Jacobian with respect to `z` (the
-    monodromy matrix), by the variational equations (their step sizes follow the error of
-    the state alone: accurate enough for Newton's iterations, whose answer does not depend
-    on them). With exact friction, the forward derivatives of the hybrid period map.
-    `modes`: the flow at `p` (`flow(p, settings)`), if computed already."""
+    """The state after one period from `z` at `p` (see `model`) and its Jacobian with
+    respect to `z` (the monodromy matrix), by the variational equations (their step sizes
+    follow the error of the state alone: accurate enough for Newton's iterations, whose
+    answer does not depend on them). With exact friction, the forward derivatives of the
+    hybrid period map. `modes`: the flow at `p` (`flow(p, settings)`), if computed
+    already."""
+    plant, paper = model(p, z)
     if settings.exact_friction:
         modes = _given_flow(p, settings, modes)
-        end = lambda z0: _exact_period(z0, modes, keep_samples=False)[1]
+        end = lambda z0: _exact_period(z0, modes, paper, keep_samples=False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
-            jnp.eye(4, dtype=z.dtype))
-    sol = integrate(
-        _field_and_tangents, (to_plant(z), jnp.eye(z.shape[0], dtype=z.dtype)), _plant(p, z),
-        2 * jnp.pi, settings, dfx.SaveAt(t1=True), settings.max_steps,
-    )
-    z_end, monodromy = (y[-1] for y in sol.ys)
-    # d z_end / d z in the paper's order: the rows and the columns permuted back
-    return from_plant(z_end), from_plant(from_plant(monodromy).T).T
+            jnp.eye(z.shape[0], dtype=z.dtype))
+    _, z_end, _, _, monodromy = smoothed_period(to_plant(z, paper), plant, settings,
+                                                keep_samples=False, tangents=True)
+    if paper:  # d z_end / d z in the paper's order: the rows and the columns permuted
+        back = np.argsort(_PLANT_ORDER[z.shape[-1]])
+        monodromy = monodromy[np.ix_(back, back)]
+    return from_plant(z_end, paper), monodromy
 
 
 def samples_and_jacobian(z, p, settings, directions=()):
@@ -212,30 +218,83 @@ def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
     return jnp.stack([part for z in parts for part in (z.imag, z.real)])
 
 
+# bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
+# end, closer than Newton's first step needs
+_BISECTIONS = 24
+
+
+def building_start(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
+    """`initial_state` of a `BuildingTID` at one point, in its plant's order (coordinates,
+    then their velocities), in units of its static scale: the friction
+    replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
+    stroke amplitude |R| it lets through (found by bisection), or the steady state with
+    the inerter stuck where the friction holds it."""
+    scale = system.static_scale()
+    free, influence = friction_influence(system, omega)
+    f = system.coordinates - 1  # the friction's coordinate
+
+    def added(log_amplitude):
+        """i omega times the equivalent damping at a stroke amplitude of e^log_amplitude."""
+        return 4j * system.friction_force / (jnp.pi * amplitude * jnp.exp(log_amplitude))
+
+    def bisect(_, bounds):
+        low, high = bounds
+        middle = 0.5 * (low + high)
+        stroke = free[f] / (1 + added(middle) * influence[f])
+        further = jnp.log(jnp.abs(stroke)) > middle
+        return jnp.where(further, middle, low), jnp.where(further, high, middle)
+
+    high = jnp.log(jnp.abs(free[f]))
+    low, high = jax.lax.fori_loop(0, _BISECTIONS, bisect, (high - 40.0, high))
+    damped = added(0.5 * (low + high))
+    slipping = free - influence * (damped * free[f] / (1 + damped * influence[f]))
+    holding = free[f] / influence[f]  # the friction force that holds it, per unit load
+    stuck = jnp.abs(holding) * amplitude < system.friction_force
+    u = jnp.where(stuck, (free - influence * holding).at[f].set(0.0), slipping) / scale
+    # load Im(e^{i theta}); response Im(U e^{i theta}); velocity in units of omega D
+    return jnp.concatenate([u.imag, u.real])
+
+
+def point_model(system, quantity: Quantity, amplitude, omega):
+    """The period map's model of `system` (a `TIDSystem` or a `BuildingTID`, measuring
+    `quantity`) at one point: `p` for the functions above (the paper's parameter vector,
+    or the building's `Plant`), the linear equivalent start in the order of its states
+    (`initial_state`, `building_start`), and the SI units of the scaled quantity and of
+    the stroke, the unit D of the scaled displacements (velocities in omega D)."""
+    if isinstance(system, BuildingTID):
+        unit_q, unit = _flow.projection_units(system, quantity, amplitude, omega)
+        return (_flow.plant(system, quantity, amplitude, omega),
+                building_start(system, amplitude, omega), unit_q, unit)
+    p = jnp.stack(parameters(system, amplitude, omega))
+    unit = amplitude / system.host_stiffness
+    return p, initial_state(p, system.compliant), unit, unit
+
+
+def state_units(unit, omega, states: int, paper: bool, xp=jnp):
+    """The SI units of scaled states at points of displacement unit `unit` and frequency
+    `omega` (broadcast together), `[..., states]`: in the paper's order (x, x', y, y'[,
+    q, q']) or a plant's (coordinates, then their velocities)."""
+    m = states // 2
+    columns = [unit + 0 * omega, unit * omega]
+    return xp.stack(columns * m if paper else [columns[0]] * m + [columns[1]] * m, axis=-1)
+
+
 def transient(z, p, settings: SolverSettings, periods=None):
     """Integrate `periods` (default `settings.transient_periods`, at most that; may be
-    traced) periods from `z` (keeps `z` if that fails)."""
+    traced) periods from `z` at `p` (see `model`); keeps `z` if that fails."""
     if settings.transient_periods == 0:
         return z
+    count = settings.transient_periods if periods is None else periods
+    plant, paper = model(p, z)
     if settings.exact_friction:
-        count = settings.transient_periods if periods is None else periods
         modes = flow(p, settings)
-
-        def step(_, z):
-            return _exact_period(z, modes, keep_samples=False)[1]
-
-        end = jax.lax.fori_loop(0, count, step, z)
-        return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
-    sol = integrate(
-        smoothed_field,
-        to_plant(z),
-        _plant(p, z),
-        2 * jnp.pi * (settings.transient_periods if periods is None else periods),
-        settings,
-        dfx.SaveAt(t1=True),
-        settings.max_steps * settings.transient_periods,
-    )
-    end = from_plant(sol.ys[-1])
+        end = jax.lax.fori_loop(
+            0, count, lambda _, z: _exact_period(z, modes, paper, keep_samples=False)[1], z)
+    else:
+        sol = integrate(smoothed_field, to_plant(z, paper), plant, 2 * jnp.pi * count,
+                        settings, dfx.SaveAt(t1=True),
+                        settings.max_steps * settings.transient_periods)
+        end = from_plant(sol.ys[-1], paper)
     return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
 
 

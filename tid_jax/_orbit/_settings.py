@@ -181,13 +181,10 @@ class SolverSettings(eqx.Module):
         return 6 if self.compliant else 4
 
     def for_system(self, system) -> "SolverSettings":
-        """These settings with the model of `system` (a `TIDSystem`): exact Coulomb
-        friction where its `friction_width` is 0, six states for a compliant device."""
+        """These settings with the model of `system` (a `TIDSystem` or a `BuildingTID`):
+        exact Coulomb friction where its `friction_width` is 0, a compliant device's
+        mechanism."""
         if self.compliant != system.compliant:
-            if system.compliant and system.exact_friction:
-                raise ValueError(
-                    "exact friction (friction_width=0) takes a rigid device; give a compliant "
-                    "device a friction_width > 0 or None")
             self = eqx.tree_at(lambda s: s.compliant, self, system.compliant)
         if self.exact_friction == system.exact_friction:
             return self

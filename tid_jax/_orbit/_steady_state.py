@@ -8,6 +8,7 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._eigen import eigenvalues
+from ._flow import Plant
 from ._period import (
     flow,
     initial_state,
@@ -18,6 +19,14 @@ from ._period import (
 )
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
+
+
+def one_by_one(function):
+    """`jax.vmap(function)` computed one entry after the other (`jax.lax.map`), for the
+    LAPACK calls (inverses, eigenvalues) of a large batch of plants with a building's
+    matrices: batched, XLA's CPU thread pool can be left waiting on itself (seen with
+    blocks of 512 three-storey buildings on two cores)."""
+    return lambda *args: jax.lax.map(lambda xs: function(*xs), args)
 
 
 class Orbit(eqx.Module):
@@ -315,7 +324,8 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     order = jnp.argsort(~valid, stable=True)
     count = jnp.sum(valid)
     # (the coarse settings integrate the same flows: they differ in tolerances alone)
-    modes = jax.vmap(lambda q: flow(q, settings))(p)
+    each = one_by_one if isinstance(p, Plant) else jax.vmap
+    modes = each(lambda q: flow(q, settings))(p)
     # Newton's stages, one after the other, as the iterations of a loop over their
     # tolerances: a compiled program holds one copy of the variational integration.
     stages = [(settings.rtol, settings.atol, settings.chord_residual)]
@@ -567,10 +577,11 @@ def solve_orbit(
 
 def y_peak(y_samples: Float[Array, " n"], y_events: Float[Array, ""],
            settings: SolverSettings) -> Float[Array, ""]:
-    """max |y| over a period: with exact friction, the largest of the samples and of y at
-    the transitions (where every extremum lies: y is not twice differentiable there, so
-    no parabola is fitted); else the refined peak of the samples."""
-    if settings.exact_friction:
+    """max |y| over a period: with exact friction on a rigid device (y the friction's
+    coordinate), the largest of the samples and of y at the transitions (where every
+    extremum lies: y is not twice differentiable there, so no parabola is fitted); else
+    the refined peak of the samples."""
+    if settings.exact_friction and not settings.compliant:
         return jnp.maximum(jnp.max(jnp.abs(y_samples)), y_events)
     return refined_peak(y_samples)
 

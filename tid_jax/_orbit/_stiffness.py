@@ -4,7 +4,7 @@ period needs for stability.
 
 The estimate at a point: the largest eigenvalue magnitude `rho` of the scaled field's
 Jacobian (phase units: one period is 2 pi) at the linear equivalent steady state's
-start (`_period.initial_state`, `_building_orbit.initial_state`), with the friction's
+start (`_period.point_model`), with the friction's
 body at rest where that state holds it stuck (where tanh(v / width) is steepest: the
 friction's slope ff / (width * inertance) in scaled units joins the linear part's
 eigenvalues), and slipping fast (the slope nil) elsewhere. A slipping body crosses the
@@ -16,16 +16,13 @@ period (fitted: 132 .. 19303 steps for widths 2e-3 .. 5e-6 m/s at 0.01 m/s2, whe
 estimate gives 137 .. 19000).
 """
 
-import functools as ft
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._model._dynamics import parameters
-from .._model._system import TIDSystem
-from ._flow import parameter_plant
-from ._period import initial_state, smoothed_field, to_plant
+from .._model._building import Quantity
+from ._period import model, point_model, smoothed_field, to_plant
 from ._settings import SolverSettings
 
 # Tsit5's stability boundary along the negative real axis, in steps: fitted, see above.
@@ -47,13 +44,13 @@ def explicit_steps(field, z, args, width, stuck):
     return 2 * jnp.pi * jnp.max(jnp.abs(jnp.linalg.eigvals(jacobian))) / _STABILITY
 
 
-@ft.partial(jax.jit, static_argnames="compliant")
-def _host_steps(systems: TIDSystem, omegas, amplitudes, compliant: bool):
+@jax.jit
+def _steps(systems, omegas, amplitudes):
     def one(system, omega, amplitude):
-        p = jnp.stack(parameters(system, amplitude, omega))
-        z = initial_state(p, compliant)  # the friction's body's velocity last
-        plant = parameter_plant(p, compliant)
-        return explicit_steps(smoothed_field, to_plant(z), plant, plant.width, z[-1] == 0.0)
+        p, z, _, _ = point_model(system, Quantity(), amplitude, omega)
+        plant, paper = model(p, z)  # (the friction's body's velocity last in either order)
+        return explicit_steps(smoothed_field, to_plant(z, paper), plant, plant.width,
+                              z[-1] == 0.0)
 
     return jax.vmap(one)(systems, omegas, amplitudes)
 
@@ -67,12 +64,11 @@ def choose(settings: SolverSettings, steps) -> SolverSettings:
 
 
 def for_points(settings: SolverSettings, systems, omegas, amplitudes) -> SolverSettings:
-    """`settings` with `implicit` decided where it is None (automatic): for the host
-    `systems` (one `TIDSystem` per point, fields batched) at the points (`omegas[i]`,
-    `amplitudes[i]`), the implicit integrator where the explicit one needs more than
+    """`settings` with `implicit` decided where it is None (automatic): for the `systems`
+    (one `TIDSystem` or `BuildingTID` per point, fields batched) at the points
+    (`omegas[i]`, `amplitudes[i]`), the implicit integrator where the explicit one needs more than
     `STIFF_STEPS` steps per period at most of them. Exact friction: unchanged."""
     fitted = settings.for_system(systems)
     if settings.implicit is not None or fitted.exact_friction:
         return settings
-    return choose(settings, _host_steps(systems, jnp.asarray(omegas),
-                                         jnp.asarray(amplitudes), fitted.compliant))
+    return choose(settings, _steps(systems, jnp.asarray(omegas), jnp.asarray(amplitudes)))

@@ -13,8 +13,8 @@ from .._model._structure import Structure
 from .._optimise._building_design import BUILDING_BAND, building_peaks, retune_building
 from .._optimise._building_robust import robust_building, scaled_structure
 from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
-from .._orbit._building_orbit import building_response
 from .._orbit._settings import SolverSettings
+from .._response import building_response
 from .._runtime._io import write_json, write_toml
 from .._runtime._outcomes import Outcome, outcome_message
 from ._building_config import BUILDING_TABLES, amplitude_value
