@@ -225,7 +225,8 @@ def _on_host(tree):
     return jax.tree.map(np.asarray, tree)
 
 
-def _solve_blocks(settings, batch, quantity, warm=None) -> _Solutions:
+def _solve_blocks(settings, batch, warm=None,
+                  quantity: Quantity = Quantity()) -> _Solutions:
     """`_points` on the flat `batch = (omegas, amplitudes, systems)` (NumPy arrays), block
     by block: every block is shot from the states `warm` if given (else from the linear
     state after a transient), so that one compiled program serves every kind of call.
@@ -266,7 +267,7 @@ def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=Non
     batch = _on_host((omegas, amplitudes, systems))
     settings = for_points(settings, batch[2], batch[0], batch[1])
     paper = not isinstance(batch[2], BuildingTID)
-    out = _solve_blocks(settings, batch, quantity, None if warm is None else np.asarray(warm))
+    out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm), quantity)
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out
     # on an orbit that converges slowly, or stalled at the integration error of its
     # period map) is shot on from its own last state, integrated 100 times more
@@ -279,7 +280,7 @@ def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=Non
         part = jax.tree.map(lambda b, near=near: b[near], batch)
         own = out.state[near] / state_units(out.unit[near], part[0], out.state.shape[-1],
                                             paper, np)
-        out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, quantity, own),
+        out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, own, quantity),
                            near)
     for fallback in settings.for_system(batch[2]).fallbacks():
         failed = ~out.converged
@@ -291,7 +292,8 @@ def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=Non
         failed = np.flatnonzero(failed)
         if not failed.size:
             continue
-        retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch), quantity)
+        retry = _solve_blocks(fallback, jax.tree.map(lambda b: b[failed], batch),
+                              quantity=quantity)
         out = _keep_better(out, retry, failed)
     return out
 

@@ -45,8 +45,10 @@ def test_ideal_actuator_reproduces_the_whole_building(layout):
                                           prediction=None, guessed_inertance=guess,
                                           sample_rate=rate, periods=30)
         assert bool(np.all(test.stable)) and bool(np.all(test.reference_converged))
-        np.testing.assert_allclose(test.reference_x_max, whole.response_max[0], rtol=1e-9)
-        np.testing.assert_allclose(test.reference_y_max, whole.stroke_max[0], rtol=1e-9)
+        # the test's reference orbits are the whole building's, solved one at a time:
+        # equal within the shooting tolerance (periodicity 1e-6 of the static scale)
+        np.testing.assert_allclose(test.reference_x_max, whole.response_max[0], rtol=1e-6)
+        np.testing.assert_allclose(test.reference_y_max, whole.stroke_max[0], rtol=1e-6)
         worst[rate] = max(np.max(_relative(test.x_max, whole.response_max[0])),
                           np.max(_relative(test.y_max, whole.stroke_max[0])))
         if rate == 8000.0:
@@ -101,7 +103,8 @@ def test_compliant_device_is_compared_with_the_whole_compliant_building():
                                       guessed_force="harmonic", sample_rate=8000.0,
                                       periods=30)
     assert bool(np.all(test.stable)) and bool(np.all(test.reference_converged))
-    np.testing.assert_allclose(test.reference_x_max, whole.response_max[0], rtol=1e-9)
+    # (the whole building's orbits solved one at a time: within the shooting tolerance)
+    np.testing.assert_allclose(test.reference_x_max, whole.response_max[0], rtol=1e-6)
     # (the zero-order hold's first-order error at 8 kHz, as on the single-storey host)
     assert np.max(_relative(test.x_max, whole.response_max[0])) < 3e-3
     assert np.max(_relative(test.y_max, whole.stroke_max[0])) < 3e-3
