@@ -156,7 +156,7 @@ def numpy_model(stiffnesses, system):
 
 def tid_run(system, omegas):
     r = tj.frequency_response(system, omegas, [AMPLITUDE], quantity=ROOF)
-    return np.asarray(r.response_max)[0], np.asarray(r.converged)[0]
+    return np.asarray(r.x_max)[0], np.asarray(r.converged)[0]
 
 
 def best_time(function, repeats=REPEATS):

@@ -35,7 +35,7 @@ _API = {
     "_orbit._settings": ("SolverSettings",),
     "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_receptance": ("breakaway_amplitude", "linear_receptance"),
-    "_response": ("BuildingResponse", "FrequencyResponse", "frequency_response"),
+    "_response": ("FrequencyResponse", "frequency_response"),
     "_retune": ("RetuneResult", "RetuneSettings", "retune"),
     "_robust": ("RobustDesign", "RobustSettings", "TuningPerformance", "robust_tune",
                 "tuning_performance"),
@@ -147,7 +147,6 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
         linear_receptance as linear_receptance,
     )
     from ._response import (
-        BuildingResponse as BuildingResponse,
         FrequencyResponse as FrequencyResponse,
         frequency_response as frequency_response,
     )

@@ -6,9 +6,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
-from ._model._building import BuildingTID, Quantity, uncontrolled_amplitude
+from ._model._building import BuildingTID, Quantity
 from ._model._checks import (
     check_grid,
+    check_precision,
     check_single_storey_quantity,
     check_steady_state_device,
     check_system,
@@ -32,19 +33,21 @@ from ._runtime._sharding import map_batch, per_device, sharded_batch
 
 
 class FrequencyResponse(eqx.Module):
-    """Steady-state response of eq. (12), with smoothed or exact friction, on a grid of
-    forcing amplitudes x frequencies. Arrays have shape `(n_amplitudes, n_frequencies)` (axes of
-    scalar inputs dropped). SI units.
+    """Steady-state response of eq. (12), or of a TID in a building, with smoothed or
+    exact friction, on a grid of load amplitudes x frequencies. Arrays have shape
+    `(n_amplitudes, n_frequencies)` (axes of scalar inputs dropped). SI units.
 
-    - `omegas` (rad/s), `amplitudes` (N): the grid.
-    - `x_max`, `y_max`: peak |x| and |y| over one steady period, m; NaN where the orbit
-      did not converge.
+    - `omegas` (rad/s), `amplitudes` (N; a building's ground acceleration m/s2): the grid.
+    - `x_max`: peak |x| over one steady period, m (a building's: of its `Quantity`, in its
+      unit); `y_max`: the terminal's (the device's stroke) peak |y|, m; NaN where the
+      orbit did not converge.
     - `converged`: the periodic orbit was found and verified (|Phi_T(z0) - z0| small).
     - `stable`: all Floquet multipliers inside the unit circle (only meaningful if
       converged), but for the multiplier 1 of a terminal stuck for the whole period (exact
       friction), along whose position the orbits form a neutral family.
     - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s,
-      and for a compliant device its mechanism's (q, q').
+      and for a compliant device its mechanism's (q, q'); a building's: its coordinates
+      (floors, then the device's), then their velocities.
     - `residual`: periodicity residual, in units of the static displacement A / K.
     - `newton_steps`: shooting iterations used.
     - `floquet_multipliers`: eigenvalues of the monodromy matrix.
@@ -313,20 +316,23 @@ def _keep_better(out: _Solutions, retry: _Solutions, points) -> _Solutions:
     return jax.tree.map(kept, out, retry)
 
 
-def lane_response(systems: TIDSystem, amplitudes, omegas, settings,
-                  warm=None) -> FrequencyResponse:
+def lane_response(systems: TIDSystem | BuildingTID, amplitudes, omegas, settings,
+                  warm=None, quantity: Quantity = Quantity()) -> FrequencyResponse:
     """`FrequencyResponse` over lanes x frequencies: lane i is the system `systems[i]` (its
     fields batched, see `batched`) at the amplitude `amplitudes[i]` over the frequencies
     `omegas` (one grid for every lane, or one row per lane), every lane in one batch;
     with `warm` (scaled states, lanes x frequencies), each steady state is shot from its
-    state there."""
+    state there. A building's response is that of `quantity`."""
     amplitudes, omegas = np.asarray(amplitudes), np.asarray(omegas)
     shape = amplitudes.shape + omegas.shape[-1:]
     flat = lambda a: np.broadcast_to(a, shape).reshape(-1)
-    lanes = jax.tree.map(lambda leaf: flat(np.asarray(leaf)[:, None]), systems)
+    lanes = jax.tree.map(
+        lambda leaf: np.broadcast_to(np.asarray(leaf)[:, None], shape + np.shape(leaf)[1:])
+        .reshape((-1,) + np.shape(leaf)[1:]), systems)
     if warm is not None:
         warm = np.asarray(warm).reshape((-1,) + warm.shape[2:])
-    out = solve_points(lanes, flat(omegas), flat(amplitudes[:, None]), settings, warm)
+    out = solve_points(lanes, flat(omegas), flat(amplitudes[:, None]), settings, warm,
+                       quantity)
     # (placed on the device as they are: `jnp.asarray` would compile a program per shape)
     out = jax.tree.map(lambda value: jax.device_put(value.reshape(shape + value.shape[1:])), out)
     return FrequencyResponse(omegas=jax.device_put(omegas),
@@ -344,48 +350,6 @@ def scaled_states(response: FrequencyResponse, host_stiffness,
     return state / state_units(unit, omegas, state.shape[-1], True, xp)
 
 
-class BuildingResponse(eqx.Module):
-    """Steady states over amplitudes x frequencies (SI): `response_max` (the quantity's
-    peak over a period), `stroke_max` (m), `converged`, `stable` (Floquet multipliers
-    within the unit circle, the stuck stroke's family aside), `floquet_max`,
-    `transitions` per period, and `uncontrolled` (amplitudes x frequencies: the bare
-    structure's quantity)."""
-
-    amplitudes: Float[Array, " amps"]
-    omegas: Float[Array, " freqs"]
-    response_max: Float[Array, "amps freqs"]
-    stroke_max: Float[Array, "amps freqs"]
-    converged: Bool[Array, "amps freqs"]
-    stable: Bool[Array, "amps freqs"]
-    floquet_max: Float[Array, "amps freqs"]
-    transitions: Int[Array, "amps freqs"]
-    uncontrolled: Float[Array, "amps freqs"]
-
-
-def building_response(system: BuildingTID, omegas, amplitudes,
-                      quantity: Quantity = Quantity(),
-                      settings: SolverSettings | None = None) -> BuildingResponse:
-    """Steady-state peaks of `quantity` at `omegas` (rad/s) x `amplitudes` (N for a
-    force, m/s2 for a ground acceleration), arrays amplitudes x frequencies, every point
-    solved by `solve_points`; a point whose orbit was not found has `converged` False
-    (its values NaN)."""
-    amplitudes = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), float))
-    omegas = np.atleast_1d(np.asarray(check_grid("omegas", omegas), float))
-    quantity.floor_of(system.floors)
-    settings = SolverSettings() if settings is None else settings
-    a, w = (grid.reshape(-1) for grid in np.meshgrid(amplitudes, omegas, indexing="ij"))
-    out = solve_points(batched(system, a.size), w, a, settings, quantity=quantity)
-    shape = (amplitudes.size, omegas.size)
-    floquet = np.max(np.abs(out.floquet_multipliers), axis=-1).reshape(shape)
-    bare = np.asarray(uncontrolled_amplitude(system, quantity, jnp.asarray(omegas)))
-    return BuildingResponse(
-        amplitudes=amplitudes, omegas=omegas, response_max=out.x_max.reshape(shape),
-        stroke_max=out.y_max.reshape(shape), converged=out.converged.reshape(shape),
-        stable=(out.converged & out.stable).reshape(shape), floquet_max=floquet,
-        transitions=out.transitions.reshape(shape),
-        uncontrolled=amplitudes[:, None] * bare[None, :])
-
-
 def frequency_response(
     system: TIDSystem | BuildingTID,
     omegas: ArrayLike,
@@ -393,7 +357,7 @@ def frequency_response(
     *,
     quantity: Quantity | None = None,
     settings: SolverSettings | None = None,
-) -> FrequencyResponse | BuildingResponse:
+) -> FrequencyResponse:
     """Steady-state response at every (amplitude, frequency) pair, found by shooting on the
     forcing period (all points solved in one batched call); with smoothed friction, or
     exact Coulomb friction where `system.friction_width` is 0.
@@ -410,30 +374,31 @@ def frequency_response(
       displacement (`as_building` measures any other quantity).
     - `settings`: `SolverSettings` of the shooting solver.
 
-    **Returns:** for a `TIDSystem` a `FrequencyResponse`, arrays `(n_amplitudes,
-    n_frequencies)` with the axis of a scalar input dropped; for a `BuildingTID` a
-    `BuildingResponse`, arrays amplitudes x frequencies. Points that fail to converge are
-    flagged in `converged`.
+    **Returns:** a `FrequencyResponse`, arrays `(n_amplitudes, n_frequencies)` with the
+    axis of a scalar input dropped. Points that fail to converge are flagged in
+    `converged`.
     """
-    if isinstance(system, BuildingTID):
-        return building_response(system, omegas, amplitudes,
-                                 Quantity() if quantity is None else quantity, settings)
-    check_single_storey_quantity(quantity)
     settings = SolverSettings() if settings is None else settings
-    check_system(system)
-    check_steady_state_device(system, "frequency_response")
+    if isinstance(system, BuildingTID):
+        check_precision()
+        quantity = Quantity() if quantity is None else quantity
+        quantity.floor_of(system.floors)
+    else:
+        check_single_storey_quantity(quantity)
+        check_system(system)
+        check_steady_state_device(system, "frequency_response")
+        quantity = Quantity()
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)
-    amps = jnp.asarray(np.atleast_1d(amplitude_array), dtype=dtype)
+    amps = np.atleast_1d(np.asarray(amplitude_array, dtype))
     response = lane_response(batched(system, amps.size), amps,
-                             jnp.asarray(np.atleast_1d(omega_array), dtype=dtype), settings)
-    out = {name: getattr(response, name) for name in _GRID_FIELDS}
+                             np.atleast_1d(np.asarray(omega_array, dtype)), settings,
+                             quantity=quantity)
     index = (0 if amplitude_array.ndim == 0 else slice(None),
              0 if omega_array.ndim == 0 else slice(None))
-    out = {key: value[index] for key, value in out.items()}
     return FrequencyResponse(
         omegas=jnp.asarray(omega_array, dtype=dtype),
         amplitudes=jnp.asarray(amplitude_array, dtype=dtype),
-        **out,
+        **{name: getattr(response, name)[index] for name in _GRID_FIELDS},
     )

@@ -45,8 +45,8 @@ def test_linear_steady_state_matches_the_dynamic_stiffness(building, layout):
                                                 **reference)
     top = building_linear.response_amplitude(omegas[::4], M, K, C, kind="displacement",
                                              **reference)
-    np.testing.assert_allclose(orbits.response_max[0], 3.0 * top, rtol=1e-6)
-    np.testing.assert_allclose(orbits.stroke_max[0], 3.0 * stroke, rtol=1e-6)
+    np.testing.assert_allclose(orbits.x_max[0], 3.0 * top, rtol=1e-6)
+    np.testing.assert_allclose(orbits.y_max[0], 3.0 * stroke, rtol=1e-6)
 
 
 def test_exact_coulomb_matches_the_event_driven_reference(building):
@@ -67,9 +67,9 @@ def test_exact_coulomb_matches_the_event_driven_reference(building):
                 cp=DEVICE["parasitic_damping"], mt=DEVICE["terminal_mass"],
                 ks=DEVICE["series_stiffness"])
             assert reference["converged"]
-            assert mine.response_max[a, r] == pytest.approx(reference["response_max"],
+            assert mine.x_max[a, r] == pytest.approx(reference["response_max"],
                                                             rel=1e-4)
-            assert mine.stroke_max[a, r] == pytest.approx(reference["stroke_max"], rel=1e-4,
+            assert mine.y_max[a, r] == pytest.approx(reference["stroke_max"], rel=1e-4,
                                                           abs=1e-6 * reference["response_max"])
     transitions = np.asarray(mine.transitions)
     assert 0 in transitions and transitions.max() >= 4  # stuck, slipping and stick-slip
@@ -94,9 +94,9 @@ def test_one_storey_compliant_building_matches_the_physical_reference(system, ba
     for i, omega in enumerate(omegas):
         reference = compliant_peaks(dict(fields, omega=float(omega)))
         assert reference["converged"]
-        assert float(response.response_max[0, i]) == pytest.approx(reference["x_max"],
+        assert float(response.x_max[0, i]) == pytest.approx(reference["x_max"],
                                                                     rel=1e-6)
-        assert float(response.stroke_max[0, i]) == pytest.approx(reference["y_max"], rel=1e-5)
+        assert float(response.y_max[0, i]) == pytest.approx(reference["y_max"], rel=1e-5)
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -120,7 +120,7 @@ def test_breakaway_amplitude_is_where_the_stuck_mechanism_slips(building):
     above = tj.frequency_response(system, [omega], [1.05 * breakaway])
     assert int(below.transitions[0, 0]) == 0 and int(above.transitions[0, 0]) > 0
     # held, the mechanism leaves the terminal on the series spring: it still moves
-    assert float(below.stroke_max[0, 0]) > 0
+    assert float(below.y_max[0, 0]) > 0
 
 
 @pytest.mark.parametrize("friction_width, backlash", [(0.0, 0.0), (None, 5e-4)])

@@ -75,7 +75,7 @@ def test_the_implicit_choice_finds_the_stuck_orbit_of_exact_friction(building):
     exact = tj.frequency_response(system.replace(friction_width=0.0), omegas, [HELD])
     assert np.all(automatic.converged) and np.all(exact.converged)
     assert np.all(exact.transitions == 0)
-    np.testing.assert_allclose(automatic.response_max, exact.response_max, rtol=1e-3)
+    np.testing.assert_allclose(automatic.x_max, exact.x_max, rtol=1e-3)
 
 
 def test_implicit_and_explicit_steady_states_agree(building):
@@ -85,5 +85,5 @@ def test_implicit_and_explicit_steady_states_agree(building):
                               settings=tj.SolverSettings(implicit=choice))
         for choice in (False, True))
     assert np.all(explicit.converged) and np.all(implicit.converged)
-    np.testing.assert_allclose(implicit.response_max, explicit.response_max, rtol=1e-5)
-    np.testing.assert_allclose(implicit.stroke_max, explicit.stroke_max, rtol=1e-5)
+    np.testing.assert_allclose(implicit.x_max, explicit.x_max, rtol=1e-5)
+    np.testing.assert_allclose(implicit.y_max, explicit.y_max, rtol=1e-5)

@@ -96,7 +96,7 @@ def test_frf_of_a_building_with_a_compliant_device_is_the_library_s(tmp_path):
     ok = np.asarray(data["converged"])
     assert ok.sum() >= 8 and np.array_equal(ok, mine.converged)
     np.testing.assert_allclose(np.asarray(data["response_max"], float)[ok],
-                               mine.response_max[ok], rtol=1e-9)
+                               mine.x_max[ok], rtol=1e-9)
 
 
 @pytest.mark.parametrize("change, message", [

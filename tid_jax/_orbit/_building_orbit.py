@@ -174,7 +174,7 @@ def peak_of(samples):
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
                 settings: SolverSettings, newton_steps: int | None = None, start=None,
                 cold=None) -> BuildingOrbit:
-    """The periodic steady state at one point (traceable; see `building_response`):
+    """The periodic steady state at one point (traceable; see `frequency_response`):
     `newton_steps` Newton steps (default: 3 with exact friction, 1 smoothed), then chord
     steps (`_newton`), from the linear equivalent
     state or from `start`, the state and monodromy matrix of a nearby orbit (with a

@@ -153,7 +153,7 @@ def building_scale(system: BuildingTID, quantity: Quantity, omegas) -> np.ndarra
 def building_reference(system: BuildingTID, quantity: Quantity, omegas, amplitudes,
                        settings: SolverSettings):
     """The whole building's steady states at the pairs `(omegas, amplitudes)` (the
-    device's model of `building_response`): peaks of the quantity and the stroke, their
+    device's model of `frequency_response`): peaks of the quantity and the stroke, their
     first harmonics' phases and whether each was found."""
     orbits = solve_orbits(system, quantity, amplitudes, omegas, settings)
     return (orbits.response_max, orbits.stroke_max,

@@ -344,7 +344,7 @@ def simulate_substructuring(
     - `reference`: also solve the whole system (`frequency_response`'s model) and report
       amplitude and phase errors; a compliant device is compared with the whole system
       of its rigid counterpart (no series stiffness or backlash), the design the test
-      checks. A building is compared with its own whole system (`building_response`'s
+      checks. A building is compared with its own whole system (`frequency_response`'s
       model, the compliant device included).
     - `settings`: `SolverSettings` of that whole-system solve.
 

@@ -14,7 +14,7 @@ from .._optimise._building_design import BUILDING_BAND, building_peaks, retune_b
 from .._optimise._building_robust import robust_building, scaled_structure
 from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
 from .._orbit._settings import SolverSettings
-from .._response import building_response
+from .._response import frequency_response
 from .._runtime._io import write_json, write_toml
 from .._runtime._outcomes import Outcome, outcome_message
 from ._building_config import BUILDING_TABLES, amplitude_value
@@ -145,10 +145,10 @@ def strokes(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
     """The largest stroke (m) over the band of `omegas` at each amplitude with the
     system's tuning, whether every steady state there was found, and the response's
     peaks over a period (amplitudes x frequencies, SI)."""
-    response = building_response(system, omegas, amplitudes, quantity, settings)
+    response = frequency_response(system, omegas, amplitudes, quantity=quantity,
+                                  settings=settings)
     ok = np.all(np.asarray(response.converged), axis=1)
-    return (np.nanmax(np.asarray(response.stroke_max), axis=1), ok,
-            np.asarray(response.response_max))
+    return (np.nanmax(np.asarray(response.y_max), axis=1), ok, np.asarray(response.x_max))
 
 
 def amplitude_label(system: BuildingTID) -> str:
@@ -206,37 +206,39 @@ def run_frf(args, inputs: dict) -> int:
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "frequency response at {amplitudes} amplitude(s) x {frequencies} "
         "frequencies")
-    response = building_response(system, omegas, amplitudes, quantity,
-                                 SolverSettings(**inputs[SOLVER_TABLE]))
+    response = frequency_response(system, omegas, amplitudes, quantity=quantity,
+                                  settings=SolverSettings(**inputs[SOLVER_TABLE]))
+    peak, stroke = np.asarray(response.x_max), np.asarray(response.y_max)
+    stable = np.asarray(response.converged & response.stable)
+    uncontrolled = amplitudes[:, None] * np.asarray(
+        uncontrolled_amplitude(system, quantity, omegas))[None, :]
     bare = amplitudes * uncontrolled_peak(system, quantity, omegas)
     unit = amplitude_unit(system.load)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     records = [row(FRF_COLUMNS, amplitude=float(a), amplitude_unit=unit,
                    frequency_Hz=float(f), k_N_per_m=k, c_N_s_per_m=c, peak_unit=quantity.unit,
-                   peak=finite(response.response_max[i, j]),
-                   uncontrolled_peak=float(response.uncontrolled[i, j]),
-                   peak_over_uncontrolled=ratio(response.response_max[i, j], bare[i]),
-                   stroke_m=finite(response.stroke_max[i, j]),
+                   peak=finite(peak[i, j]), uncontrolled_peak=float(uncontrolled[i, j]),
+                   peak_over_uncontrolled=ratio(peak[i, j], bare[i]),
+                   stroke_m=finite(stroke[i, j]),
                    transitions=int(response.transitions[i, j]),
-                   stable=bool(response.stable[i, j]),
+                   stable=bool(stable[i, j]),
                    converged=bool(response.converged[i, j]),
                    status=status(bool(response.converged[i, j]),
-                                 "" if response.stable[i, j] else "unstable"))
+                                 "" if stable[i, j] else "unstable"))
                for i, a in enumerate(amplitudes) for j, f in enumerate(frequencies_hz)]
     save_records(output, "frf.csv", FRF_COLUMNS, records)
     save_config(inputs, output, "frf")
     plot.save_figure(plot.plot_building_response(
-        frequencies_hz, amplitudes, response.response_max, response.uncontrolled,
+        frequencies_hz, amplitudes, peak, uncontrolled,
         ylabel=f"{quantity.describe(system.floors)} [{quantity.unit}]",
         amplitude_unit=unit), output.path("frf.png"))
     summary = frf_summary(records, amplitudes, omegas.size)
     data = document("frf", inputs, system, quantity, frequencies_hz, output,
                      amplitudes=amplitudes.tolist(),
-                     response_max=np.asarray(response.response_max).tolist(),
-                     uncontrolled=np.asarray(response.uncontrolled).tolist(),
-                     y_max_m=np.asarray(response.stroke_max).tolist(),
+                     response_max=peak.tolist(), uncontrolled=uncontrolled.tolist(),
+                     y_max_m=stroke.tolist(),
                      converged=np.asarray(response.converged).tolist(),
-                     stable=np.asarray(response.stable).tolist(),
+                     stable=stable.tolist(),
                      transitions=np.asarray(response.transitions).tolist(), summary=summary,
                      results=records)
     write_json(output.path("frf.json"), data)
