@@ -101,24 +101,34 @@ class _Solutions(eqx.Module):
 
 
 def point_response(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     omega,
     amplitude,
     settings: SolverSettings,
     z_init=None,
     monodromy_init=None,
     directions: tuple[int, ...] = (),
+    quantity: Quantity = Quantity(),
 ):
     """Single (omega, amplitude) point: the orbit (shooting from the scaled state `z_init`
     if given, with chord iterations first if `monodromy_init` is given; see `solve_orbit`)
-    and its peaks |x|, |y| in metres."""
+    and its peaks |x|, |y| in SI (a building's: of `quantity`, and the stroke; its
+    `z_init` default the linear steady state after `settings.transient_periods`
+    periods). Differentiable with respect to the system's fields (implicit
+    differentiation through the orbit)."""
     settings = settings.for_system(system)
-    p = parameters(system, amplitude, omega)
+    if isinstance(system, BuildingTID):
+        p, linear, unit_q, unit = point_model(system, quantity, amplitude, omega)
+        if z_init is None:
+            z_init = transient(linear, jax.lax.stop_gradient(p), settings)
+    else:
+        p = parameters(system, amplitude, omega)
+        unit_q = unit = amplitude / system.host_stiffness
     orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
-    scale = amplitude / system.host_stiffness
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
-    peaks = (refined_peak(orbit.x_samples), y_peak(orbit.y_samples, orbit.y_events, settings))
-    x_max, y_max = (_finite_or_inf(peak * scale) for peak in peaks)
+    peaks = (refined_peak(orbit.x_samples) * unit_q,
+             y_peak(orbit.y_samples, orbit.y_events, settings) * unit)
+    x_max, y_max = (_finite_or_inf(peak) for peak in peaks)
     return orbit, x_max, y_max
 
 

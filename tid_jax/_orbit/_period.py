@@ -134,16 +134,18 @@ def period_tangents(z, p, settings: SolverSettings, modes=None):
 
 def samples_and_jacobian(z, p, settings, directions=()):
     """One integration of a period from `z` with tangents along the state directions
-    and the parameters `p[i]`, `i` in `directions`, differentiating the integration itself
-    (so that the derivatives are those of the computed samples, to rounding): `(xs, ys,
-    ws, z_end)`, their Jacobians with respect to `z` (that of `z_end` is the monodromy
-    matrix) and with respect to those parameters (last axis of size `len(directions)`)."""
+    and the parameters `p[i]`, `i` in `directions` (the paper's parameter vector; a
+    `Plant` takes none), differentiating the integration itself (so that the derivatives
+    are those of the computed samples, to rounding): `(xs, ys, ws, z_end)`, their
+    Jacobians with respect to `z` (that of `z_end` is the monodromy matrix) and with
+    respect to those parameters (last axis of size `len(directions)`)."""
     index = jnp.asarray(directions, dtype=int)
-    fn = lambda z0, q: period_samples(z0, p.at[index].set(q), settings)
+    fn = lambda z0, q: period_samples(z0, p.at[index].set(q) if directions else p, settings)
     n = z.shape[0]
     basis = jnp.eye(n + len(directions), dtype=z.dtype)
+    given = p[index] if directions else jnp.zeros(0, z.dtype)
     primal, tangents = jax.vmap(
-        lambda t: jax.jvp(fn, (z, p[index]), (t[:n], t[n:])), out_axes=(None, 0)
+        lambda t: jax.jvp(fn, (z, given), (t[:n], t[n:])), out_axes=(None, 0)
     )(basis)
     tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
     return primal, tuple(t[..., :n] for t in tangents), tuple(t[..., n:] for t in tangents)

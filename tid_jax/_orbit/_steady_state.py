@@ -494,8 +494,11 @@ def _orbit_jvp(static, directions, primals, tangents):
     arrays, orbit, *p = primals
     _, _, *p_dot = tangents
     settings = eqx.combine(arrays, static)
-    active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
     tangent_out = jax.tree.map(jnp.zeros_like, orbit)
+    if isinstance(p[0], Plant):
+        return orbit, eqx.tree_at(lambda o: (o.z, o.samples), tangent_out,
+                                  _plant_tangents(orbit, p[0], p_dot[0], settings))
+    active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
     if not active:
         return orbit, tangent_out
 
@@ -518,6 +521,23 @@ def _orbit_jvp(static, directions, primals, tangents):
     return orbit, tangent_out
 
 
+def _plant_tangents(orbit: _Periodic, plant: Plant, plant_dot: Plant,
+                    settings: SolverSettings):
+    """The tangents of a periodic `orbit`'s state and samples along the tangent
+    `plant_dot` of its `plant`: dz* = (I - dPhi/dz)^{-1} dPhi/dplant . plant_dot, the
+    last factor one integration of a period along `plant_dot` (linear in it)."""
+    plant_dot = jax.tree.map(
+        lambda t, x: jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t, plant_dot,
+        plant, is_leaf=lambda t: isinstance(t, SymbolicZero))
+    of_state = orbit.state_jacobians
+    if of_state is None:
+        of_state = _sample_jacobians(orbit.z, plant, settings, ())[1]
+    _, along = jax.jvp(lambda q: period_samples(orbit.z, q, settings), (plant,), (plant_dot,))
+    along = Samples(*along)
+    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), along.z_end)
+    return z_dot, jax.tree.map(lambda j, a: j @ z_dot + a, of_state, along)
+
+
 _orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
 
 
@@ -532,9 +552,10 @@ def solve_orbit(
     the sequence of its scalars, which lets derivatives skip the parameters that do not
     depend on the differentiated inputs), by shooting from `z_init` (scaled state;
     default the equivalent linear steady state, `_period.initial_state`, followed by
-    `settings.transient_periods` periods).
-    Differentiable with respect to `p` (implicit differentiation), not with respect to
-    `z_init`.
+    `settings.transient_periods` periods); or at a structure's `Plant` (`_period.model`),
+    from a given `z_init`.
+    Differentiable with respect to `p` (implicit differentiation; a `Plant`'s arrays,
+    hence any structure's fields by name), not with respect to `z_init`.
 
     With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
     at slightly different parameters), chord iterations without tangents bring `z_init`
@@ -542,8 +563,14 @@ def solve_orbit(
     `directions`, reuse the Jacobians formed with the orbit's samples; the state's are
     returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at nearby
     parameters."""
-    scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
-    p_const = jax.lax.stop_gradient(jnp.stack(scalars))
+    if isinstance(p, Plant):
+        if z_init is None or directions:
+            raise ValueError("a Plant's orbit is shot from a given z_init, and its "
+                             "derivatives come from its own tangents (no directions)")
+        scalars, p_const = [p], jax.lax.stop_gradient(p)
+    else:
+        scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
+        p_const = jax.lax.stop_gradient(jnp.stack(scalars))
     if z_init is None:
         z_init = transient(initial_state(p_const, settings.compliant), p_const,
                            settings)
