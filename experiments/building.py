@@ -79,7 +79,7 @@ def main() -> None:
     for name, tuning in designs.items():
         drifts[name] = np.asarray([
             float(tj.peaks(system.replace(tid_stiffness=k, tid_damping=c), None, [a],
-                           quantity=drift).value[0])
+                           quantity=drift).x_peak[0])
             for a, (k, c) in zip(amplitudes, tuning, strict=True)])
         print(f"drifts: {name}", flush=True)
 

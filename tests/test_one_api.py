@@ -77,8 +77,8 @@ def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system)
     amplitudes = [100.0, 1000.0]
     mine, paper = tj.peaks(building, omegas, amplitudes), tj.peaks(system, omegas, amplitudes)
     assert np.all(mine.converged) and np.all(paper.converged)
-    np.testing.assert_allclose(mine.value, paper.x_peak, rtol=1e-5)
-    np.testing.assert_allclose(mine.omega, paper.omega_x, rtol=1e-3)
+    np.testing.assert_allclose(mine.x_peak, paper.x_peak, rtol=1e-5)
+    np.testing.assert_allclose(mine.omega_x, paper.omega_x, rtol=1e-3)
 
 
 def test_random_and_recorded_loads_take_the_paper_system_as_its_one_storey_building(system):

@@ -13,9 +13,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._model._building import BuildingTID, Quantity
-from ._model._checks import check_grid, check_single_storey_quantity, check_system
+from ._model._checks import (
+    check_grid,
+    check_precision,
+    check_single_storey_quantity,
+    check_system,
+)
 from ._model._system import TIDSystem, compiler_options
-from ._optimise._building_design import BAND_POINTS, Peak, building_peaks, first_mode_band
+from ._optimise._building_design import BAND_POINTS, first_mode_band
 from ._orbit._sampled_peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -37,6 +42,7 @@ from ._response import (
     lane_response,
     point_response,
     scaled_states,
+    static_units,
 )
 from ._runtime._cache import compiled
 
@@ -86,9 +92,10 @@ def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init
 
 
 class Peaks(eqx.Module):
-    """Peak steady-state responses over a frequency band, per amplitude (SI): of the host,
-    the maximum in continuous frequency; of the inerter terminal (the stroke), the grid's
-    refined by a parabola (see `response_peaks`)."""
+    """Peak steady-state responses over a frequency band, per amplitude (SI): of the host
+    (a building's measured quantity, in its unit), the maximum in continuous frequency;
+    of the inerter terminal (the stroke), the grid's refined by a parabola (see
+    `response_peaks`)."""
 
     amplitudes: Float[Array, " amps"]
     x_peak: Float[Array, " amps"]  # m, NaN where a steady state in the band did not converge
@@ -116,20 +123,20 @@ class Located(NamedTuple):
     converged: np.ndarray
 
 
-def locate_peaks(systems: TIDSystem, response: FrequencyResponse,
-                 settings: SolverSettings) -> Located:
+def locate_peaks(systems: TIDSystem | BuildingTID, response: FrequencyResponse,
+                 settings: SolverSettings, quantity: Quantity = Quantity()) -> Located:
     """The `REFINED_PEAKS` highest local maxima of |x| of each lane of a `lane_response` of
     the systems `systems` (lanes x frequencies), each located in continuous frequency by
     `PEAK_NEWTON_STEPS` Newton steps on its slope (`_peaks.newton_peak`): every step's
     stencils of every lane solved in one batch, each steady state shot from the grid's
-    orbits, interpolated."""
+    orbits, interpolated. A building's response is that of `quantity`."""
     response = _lane_grids(response)
     omegas, states, converged, index, centre, valid, lower, upper, interior = _in_chunks(
-        _selection, response, np.asarray(systems.host_stiffness))
+        _selection, response, static_units(systems), not isinstance(systems, BuildingTID))
     estimate = np.full(centre.shape, np.nan)
     for _ in range(PEAK_NEWTON_STEPS):
         at, warm = _in_chunks(_stencils, centre, interior, states, omegas, STENCIL_POINTS)
-        values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
+        values, ok = _solve_at(systems, response.amplitudes, at, settings, warm, quantity)
         converged &= ok
         estimate, centre = _in_chunks(_newton_steps, values, at, lower, upper, interior)
     return Located(omegas, states, index, estimate, centre, valid, interior, converged)
@@ -160,27 +167,29 @@ def _in_chunks(program, *args):
     return jax.tree.map(lambda *chunks: np.concatenate(chunks)[:lanes], *parts)
 
 
-def _solve_at(systems, amplitudes, at, settings, warm):
-    """|x| (m) at the frequencies `at` (lanes x ...) of each lane, shot from `warm`, and
-    whether every one of a lane converged."""
+def _solve_at(systems, amplitudes, at, settings, warm, quantity: Quantity):
+    """|x| (m; a building's `quantity`) at the frequencies `at` (lanes x ...) of each
+    lane, shot from `warm`, and whether every one of a lane converged."""
     at = np.asarray(at)
-    solved = lane_response(systems, amplitudes, at.reshape(at.shape[0], -1), settings, warm)
+    solved = lane_response(systems, amplitudes, at.reshape(at.shape[0], -1), settings, warm,
+                           quantity)
     return (np.asarray(solved.x_max).reshape(at.shape),
             np.all(np.asarray(solved.converged), axis=-1))
 
 
-def response_peaks(systems: TIDSystem, response: FrequencyResponse,
-                   settings: SolverSettings) -> Peaks:
+def response_peaks(systems: TIDSystem | BuildingTID, response: FrequencyResponse,
+                   settings: SolverSettings, quantity: Quantity = Quantity()) -> Peaks:
     """`Peaks` of a `lane_response` of the systems `systems` (lanes x frequencies): the
     true maxima over frequency of |x| (`locate_peaks`, then the response at each located
     frequency), and of |y| the grid's (`_peaks.grid_peak`: the stroke over frequency
     can have corners, where the highest of the terminal's excursions within a period
     changes, which Newton steps on its slope would miss). NaN where a steady state in the
-    band, or of a stencil, did not converge."""
-    found = locate_peaks(systems, response, settings)
+    band, or of a stencil, did not converge. A building's response is that of
+    `quantity`."""
+    found = locate_peaks(systems, response, settings, quantity)
     at, warm = _in_chunks(_stencils, found.centre, found.interior, found.states,
                           found.omegas, 1)
-    values, ok = _solve_at(systems, response.amplitudes, at, settings, warm)
+    values, ok = _solve_at(systems, response.amplitudes, at, settings, warm, quantity)
     peaks_found = _in_chunks(_peaks_found, _lane_grids(response), found.omegas, found.index,
                              found.valid, found.centre, found.estimate, values[..., 0],
                              found.converged & ok)
@@ -189,12 +198,13 @@ def response_peaks(systems: TIDSystem, response: FrequencyResponse,
 
 
 @compiled
-def _selection(response: FrequencyResponse, host_stiffness):
+def _selection(response: FrequencyResponse, units, paper: bool):
     """The grid's part of `response_peaks`, one program: the lanes' frequencies and scaled
-    states, whether every steady state converged, and the `REFINED_PEAKS` highest local
-    maxima of each lane with their brackets."""
+    states (units `static_units`, in the paper's order where `paper`), whether every
+    steady state converged, and the `REFINED_PEAKS` highest local maxima of each lane
+    with their brackets."""
     omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
-    states = scaled_states(response, host_stiffness)
+    states = scaled_states(response, units, paper)
     converged = jnp.all(response.converged, axis=-1)
     # Selection only: an orbit that was not found makes the lane's peaks NaN below.
     grid = jnp.where(response.converged, response.x_max, 0.0)
@@ -261,13 +271,12 @@ def peaks(
     *,
     quantity: Quantity | None = None,
     settings: SolverSettings | None = None,
-) -> Peaks | Peak:
-    """Peak responses over a frequency band for each amplitude. Of a `TIDSystem`: the
-    host's and the inerter's displacement; the host's the maximum in continuous frequency
-    (each of the highest local maxima on the grid located by Newton steps on the slope of
-    the response, see `_peaks`), the inerter's the grid's refined by a parabola. Of a
-    `BuildingTID`: its `quantity`'s, each of the two highest peaks on the grid refined by
-    the vertices of parabolas through steady states. All amplitudes in one batch.
+) -> Peaks:
+    """Peak responses over a frequency band for each amplitude: of the host's displacement
+    (a building's `quantity`) and of the inerter's (the stroke); the first the maximum in
+    continuous frequency (each of the highest local maxima on the grid located by Newton
+    steps on the slope of the response, see `_peaks`), the stroke the grid's refined by a
+    parabola. All amplitudes in one batch.
 
     **Arguments:**
 
@@ -279,19 +288,23 @@ def peaks(
       displacement).
     - `settings`: `SolverSettings` of the steady states.
 
-    **Returns:** `Peaks` (a `TIDSystem`) or `Peak` (a `BuildingTID`), one entry per
-    amplitude.
+    **Returns:** `Peaks`, one entry per amplitude (a building's `x_peak` that of its
+    `quantity`, in its unit; `y_peak` the device's stroke, m).
     """
-    if isinstance(system, BuildingTID):
-        return building_peaks(system, amplitudes, Quantity() if quantity is None else quantity,
-                              omegas, settings)
-    check_single_storey_quantity(quantity)
     settings = SolverSettings() if settings is None else settings
-    check_system(system)
+    if isinstance(system, BuildingTID):
+        check_precision()
+        quantity = Quantity() if quantity is None else quantity
+        quantity.floor_of(system.floors)
+    else:
+        check_single_storey_quantity(quantity)
+        check_system(system)
+        quantity = Quantity()
     band = _band(system, omegas)
-    amps = jnp.asarray(np.atleast_1d(check_grid("amplitudes", amplitudes)), band.dtype)
+    amps = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), band.dtype))
     systems = batched(system, amps.size)
-    return response_peaks(systems, lane_response(systems, amps, band, settings), settings)
+    return response_peaks(systems, lane_response(systems, amps, band, settings,
+                                                 quantity=quantity), settings, quantity)
 
 
 def peak_response(

@@ -349,17 +349,24 @@ def lane_response(systems: TIDSystem | BuildingTID, amplitudes, omegas, settings
                              amplitudes=jax.device_put(amplitudes), **out.fields())
 
 
-def scaled_states(response: FrequencyResponse, host_stiffness,
-                  xp=jnp) -> Float[Array, "amps freqs 4"]:
-    """The orbits' states of a `response` over amplitudes x frequencies in the scaled units
-    of `solve_orbit` (displacements in A / K, velocities in omega A / K); `host_stiffness`
-    K is one value or one per amplitude (lane). With `xp=np`, computed on the host."""
+def static_units(systems) -> np.ndarray:
+    """The unit of each lane's scaled displacements per unit load amplitude (`systems`
+    batched, see `batched`): 1 / K of a `TIDSystem`, a building's `static_scale`."""
+    if isinstance(systems, BuildingTID):
+        return np.asarray(jax.vmap(lambda system: system.static_scale())(systems))
+    return 1 / np.asarray(systems.host_stiffness)
+
+
+def scaled_states(response: FrequencyResponse, units, paper: bool = True,
+                  xp=jnp) -> Float[Array, "amps freqs s"]:
+    """The orbits' states of a `response` over lanes (amplitudes) x frequencies in the
+    scaled units of `solve_orbit` (displacements in A d, velocities in omega A d, d
+    `static_units`: one value or one per lane), in the paper's order of states or
+    (not `paper`, a building's) a plant's. With `xp=np`, computed on the host."""
     amplitudes, omegas, state = (xp.asarray(a) for a in (response.amplitudes,
                                                          response.omegas, response.state))
-    unit = amplitudes[:, None] / xp.reshape(xp.asarray(host_stiffness), (-1, 1))
-    return state / state_units(unit, omegas, state.shape[-1], True, xp)
-
-
+    unit = amplitudes[:, None] * xp.reshape(xp.asarray(units), (-1, 1))
+    return state / state_units(unit, omegas, state.shape[-1], paper, xp)
 def frequency_response(
     system: TIDSystem | BuildingTID,
     omegas: ArrayLike,

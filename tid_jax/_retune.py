@@ -428,7 +428,7 @@ def _initial_design(systems: TIDSystem, amplitudes):
 def _initial_orbits(start: FrequencyResponse, systems: TIDSystem, k0, c0):
     """The first stage's warm start: the initial tuning, and per frequency its orbit's
     scaled state, monodromy matrix and (zero) state derivatives."""
-    states = scaled_states(start, systems.host_stiffness)
+    states = scaled_states(start, 1 / systems.host_stiffness)
     return (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
             jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
 

@@ -334,7 +334,7 @@ def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction
         for h in (-step, step):
             changed_system, amplitude = changed(name, math.exp(h))
             peaks.append(float(tj.peaks(changed_system, None, [amplitude],
-                                        quantity=quantity).value[0]))
+                                        quantity=quantity).x_peak[0]))
         difference = (math.log(peaks[1]) - math.log(peaks[0])) / (2 * step)
         mine = result.elasticities[0, result.names.index(name)]
         assert mine == pytest.approx(difference, abs=2e-4), name
@@ -400,7 +400,7 @@ def test_robust_tuning_beats_each_amplitudes_own_in_the_worst_case(building):
         for j, scale in enumerate((0.95, 1.05)):
             tuned = system.replace(structure=tj.Structure(*_scaled_matrices(building, scale)),
                                    tid_stiffness=k, tid_damping=c)
-            peaks = np.asarray(tj.peaks(tuned, None, amplitudes).value)
+            peaks = np.asarray(tj.peaks(tuned, None, amplitudes).x_peak)
             worst = max(worst, float(np.max(peaks / robust.best[:, j])))
         assert float(robust.worst_ratio) <= worst * (1 + 1e-6)
     # one scenario: the robust tuning is its retune
@@ -446,7 +446,7 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     def worst(x):
         tuned = [s.replace(tid_stiffness=math.exp(x[0]), tid_damping=math.exp(x[1]))
                  for s in systems]
-        ratio = max(float(tj.peaks(t, omegas, [1.0]).value[0])
+        ratio = max(float(tj.peaks(t, omegas, [1.0]).x_peak[0])
                     / float(result.best[0, j]) for j, t in enumerate(tuned))
         stroke = max(float(np.max(_linear_strokes(t, omegas))) for t in tuned)
         return ratio, stroke
@@ -460,7 +460,9 @@ def test_stroke_limited_robust_tuning_is_feasible_and_nelder_mead_s(building):
     ratio, stroke = worst(found.x)
     assert stroke <= limit * (1 + 1e-6)
     ours = worst(np.log([k, c]))
-    assert ours[0] == pytest.approx(float(result.worst_ratio), rel=1e-9)
+    # (`tj.peaks` shoots each steady state, its peak over a period from samples refined
+    # by a parabola, where the frictionless design solves them in closed form)
+    assert ours[0] == pytest.approx(float(result.worst_ratio), rel=1e-6)
     # the same worst ratio within 0.2% (ours aims 0.1% inside the limit), no better than
     # the free design's
     assert float(result.worst_ratio) <= ratio * (1 + 2e-3)

@@ -210,7 +210,7 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
     host's peaks located in continuous frequency (`locate_peaks`)."""
     lanes = changed_system(batched(system, len(thetas)), thetas.T, scales)
     response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init)
-    states = scaled_states(response, lanes.host_stiffness, np)
+    states = scaled_states(response, 1 / lanes.host_stiffness, xp=np)
     xs, ys, converged = (np.asarray(a) for a in (response.x_max, response.y_max,
                                                  response.converged))
     if locate:
