@@ -33,9 +33,9 @@ from .._orbit._building_orbit import (
     solve_orbit,
 )
 from .._orbit._flow import flow, plant, projection_units
+from .._orbit._implicit import fixed_point_matrix
 from .._orbit._sampled_peaks import local_peaks
 from .._orbit._settings import SolverSettings
-from .._orbit._steady_state import fixed_point_matrix
 from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
 
 # The default band of a building's design: these multiples of the bare structure's
@@ -443,12 +443,6 @@ def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, ma
     return np.exp(x), search(x)[3], Outcome.ok if ok else Outcome.not_stationary, references
 
 
-@eqx.filter_jit
-def _peaks_at(system, quantity, amplitudes, omegas, settings, linear):
-    return jax.vmap(lambda a: peak_over_frequency(system, quantity, a, omegas, settings,
-                                                  linear).peak)(amplitudes)
-
-
 def at_band_edge(omega_peak, omegas) -> np.ndarray:
     """Whether each peak frequency `omega_peak` (rad/s) is at an end of the band `omegas`
     (`peak_over_frequency` holds a peak there exactly, its refinement clipped to the
@@ -461,18 +455,6 @@ def frictionless(system: BuildingTID) -> bool:
     """Whether the system is linear: no friction and no backlash."""
     return bool(np.all(np.asarray(system.friction_force) == 0)
                 and np.all(np.asarray(system.backlash) == 0))
-
-
-def building_peaks(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(),
-                   omegas=None, settings: SolverSettings | None = None) -> Peak:
-    """The peak of `quantity` over the band of `omegas` (default `first_mode_band`; at
-    least `BAND_POINTS` frequencies over their range) at each amplitude, with the
-    system's own tuning."""
-    amplitudes = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(float)
-    omegas = search_grid(system, omegas)
-    quantity.floor_of(system.floors)
-    return _peaks_at(system, quantity, jnp.asarray(amplitudes), jnp.asarray(omegas),
-                     building_settings(system, settings), frictionless(system))
 
 
 def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(), *,

@@ -12,10 +12,10 @@ from jaxtyping import Array, Bool, Float, Int
 from .._model._building import BuildingTID, Quantity
 from ._eigen import eigenvalues
 from ._flow import flow, period, plant, projection_units
+from ._implicit import fixed_point_matrix, moving_part
 from ._period import building_start, smoothed_period
 from ._sampled_peaks import parabola_top
 from ._settings import SolverSettings
-from ._steady_state import fixed_point_matrix, moving_part
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
 CHUNK = 2  # orbits solved together (vectorised) in a batch

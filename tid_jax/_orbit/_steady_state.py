@@ -1,20 +1,24 @@
-import functools as ft
 from collections.abc import Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._eigen import eigenvalues
 from ._flow import Plant
+from ._implicit import (
+    Periodic,
+    Samples,
+    fixed_point_matrix,
+    sample_jacobians,
+    with_orbit_derivatives,
+)
 from ._period import (
     flow,
     initial_state,
     period_samples,
     period_tangents,
-    samples_and_jacobian,
     transient,
 )
 from ._sampled_peaks import parabola_top
@@ -48,29 +52,6 @@ class Orbit(eqx.Module):
 
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
-
-
-def _held(monodromy: Float[Array, "states states"]) -> Bool[Array, "states 1"]:
-    """The coordinates that the period returns unchanged whatever the start (rows of
-    `monodromy` that are unit rows): the position of an inerter terminal stuck for the
-    whole period (exact friction), along which the periodic orbits form a family."""
-    eye = jnp.eye(monodromy.shape[-1], dtype=monodromy.dtype)
-    return jnp.all(eye - monodromy == 0, axis=-1, keepdims=True)
-
-
-def fixed_point_matrix(monodromy: Float[Array, "states states"]) -> Float[Array, "states states"]:
-    """`I - monodromy`, the Jacobian of the periodicity residual, with the rows of held
-    coordinates (`_held`) replaced by unit rows: of the family of periodic orbits, the
-    one through the current value is kept."""
-    eye = jnp.eye(monodromy.shape[-1], dtype=monodromy.dtype)
-    return jnp.where(_held(monodromy), eye, eye - monodromy)
-
-
-def moving_part(monodromy: Float[Array, "states states"]) -> Float[Array, "states states"]:
-    """`monodromy` with the rows of held coordinates (`_held`) zeroed: their multiplier 1
-    becomes 0 and the others are unchanged, so that its multipliers judge the stability
-    of the motion about the family of orbits."""
-    return jnp.where(_held(monodromy), 0.0, monodromy)
 
 
 def _limited(z, update):
@@ -364,35 +345,6 @@ def _residual(samples, z):
     return jnp.where(finite, jnp.max(jnp.abs(samples.z_end - z)), jnp.inf)
 
 
-class Samples(eqx.Module):
-    """x, y, y' sampled over the period from the orbit's state, and the state after it."""
-
-    xs: Float[Array, " samples"]
-    ys: Float[Array, " samples"]
-    ws: Float[Array, " samples"]
-    z_end: Float[Array, " states"]
-    y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction)
-    transitions: Float[Array, ""]  # their number (exact friction; else 0, not counted)
-
-
-class _Periodic(eqx.Module):
-    """A periodic orbit as it passes through `_with_orbit_derivatives`: the state, its
-    samples, the monodromy matrix and, where the shooting formed them, the samples'
-    Jacobians with respect to the state (`state_jacobians`) and to `p[directions]`
-    (`parameter_jacobians`), each a `Samples` of Jacobians."""
-
-    z: Float[Array, " states"]
-    samples: Samples
-    monodromy: Float[Array, "states states"]
-    state_jacobians: Samples | None
-    parameter_jacobians: Samples | None
-
-
-def _sample_jacobians(z, p, settings: SolverSettings, directions):
-    primal, of_state, of_parameters = samples_and_jacobian(z, p, settings, directions)
-    return Samples(*primal), Samples(*of_state), Samples(*of_parameters)
-
-
 class _TangentNewton(eqx.Module):
     z: Float[Array, " states"]
     update: Float[Array, " states"]
@@ -403,7 +355,7 @@ class _TangentNewton(eqx.Module):
 
 
 def _tangent_newton(z, p, settings: SolverSettings, directions) -> _TangentNewton:
-    samples, of_state, of_parameters = _sample_jacobians(z, p, settings, directions)
+    samples, of_state, of_parameters = sample_jacobians(z, p, settings, directions)
     residual = samples.z_end - z
     update = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), residual)
     finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(samples.xs))
@@ -460,85 +412,14 @@ def _shoot(z0, p, settings: SolverSettings, directions=()):
         )
         samples = jax.tree.map(lambda value, jacobian: value + jacobian @ last.update,
                                last.samples, last.of_state)
-        orbit = _Periodic(last.z + last.update, samples, last.of_state.z_end, last.of_state,
+        orbit = Periodic(last.z + last.update, samples, last.of_state.z_end, last.of_state,
                           last.of_parameters)
         return orbit, last.residual, steps
     modes = flow(p, settings)
     last, steps = _iterate(lambda z: _newton(z, p, settings, modes), z0, settings)
     z = last.z  # as in `shoot_queue`: the last iterate evaluated, without its update
     samples, residual = verified_samples(z, p, settings, modes)
-    return _Periodic(z, samples, last.monodromy, None, None), residual, steps
-
-
-def _with_orbit_derivatives(settings: SolverSettings, directions, orbit, *p):
-    """Identity on a converged `orbit`; its JVP is the implicit derivative of the orbit
-    with respect to the parameters `p`, using the Jacobians that `_shoot` formed with
-    respect to `p[i]`, `i` in `directions`, where it can. The settings' arrays (their
-    tolerances in a compiled program that takes them as arguments:
-    `SolverSettings.with_array_tolerances`) pass as inputs, never differentiated."""
-    arrays, static = eqx.partition(settings, eqx.is_array)
-    return _orbit_identity(static, directions, arrays, orbit, *p)
-
-
-@ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _orbit_identity(static, directions, arrays, orbit, *p):
-    del static, directions, arrays, p
-    return orbit
-
-
-def _orbit_jvp(static, directions, primals, tangents):
-    # z* = Phi_T(z*, p) gives dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp, and the samples follow by
-    # the chain rule. Only parameters with non-zero tangents are differentiated, and every
-    # Jacobian is formed from primals alone: the tangent map is an explicit matrix product,
-    # which reverse mode can transpose.
-    arrays, orbit, *p = primals
-    _, _, *p_dot = tangents
-    settings = eqx.combine(arrays, static)
-    tangent_out = jax.tree.map(jnp.zeros_like, orbit)
-    if isinstance(p[0], Plant):
-        return orbit, eqx.tree_at(lambda o: (o.z, o.samples), tangent_out,
-                                  _plant_tangents(orbit, p[0], p_dot[0], settings))
-    active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
-    if not active:
-        return orbit, tangent_out
-
-    if orbit.parameter_jacobians is not None and set(active) <= set(directions):
-        columns = jnp.asarray([directions.index(i) for i in active], dtype=int)
-        of_state = orbit.state_jacobians
-        of_parameters = jax.tree.map(lambda j: j[..., columns], orbit.parameter_jacobians)
-    else:
-        _, of_state, of_parameters = _sample_jacobians(
-            orbit.z, jnp.stack(p), settings, tuple(active)
-        )
-    p_active_dot = jnp.stack([p_dot[i] for i in active])
-    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_parameters.z_end)
-    z_dot = z_dot @ p_active_dot
-    samples_dot = jax.tree.map(
-        lambda j_state, j_parameters: j_state @ z_dot + j_parameters @ p_active_dot,
-        of_state, of_parameters,
-    )
-    tangent_out = eqx.tree_at(lambda o: (o.z, o.samples), tangent_out, (z_dot, samples_dot))
-    return orbit, tangent_out
-
-
-def _plant_tangents(orbit: _Periodic, plant: Plant, plant_dot: Plant,
-                    settings: SolverSettings):
-    """The tangents of a periodic `orbit`'s state and samples along the tangent
-    `plant_dot` of its `plant`: dz* = (I - dPhi/dz)^{-1} dPhi/dplant . plant_dot, the
-    last factor one integration of a period along `plant_dot` (linear in it)."""
-    plant_dot = jax.tree.map(
-        lambda t, x: jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t, plant_dot,
-        plant, is_leaf=lambda t: isinstance(t, SymbolicZero))
-    of_state = orbit.state_jacobians
-    if of_state is None:
-        of_state = _sample_jacobians(orbit.z, plant, settings, ())[1]
-    _, along = jax.jvp(lambda q: period_samples(orbit.z, q, settings), (plant,), (plant_dot,))
-    along = Samples(*along)
-    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), along.z_end)
-    return z_dot, jax.tree.map(lambda j, a: j @ z_dot + a, of_state, along)
-
-
-_orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
+    return Periodic(z, samples, last.monodromy, None, None), residual, steps
 
 
 def solve_orbit(
@@ -578,7 +459,7 @@ def solve_orbit(
     if monodromy_init is not None:
         z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
     orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
-    orbit = _with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
+    orbit = with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit.samples.xs))
     monodromy = jax.lax.stop_gradient(orbit.monodromy)
     if directions:

@@ -10,10 +10,11 @@ import numpy as np
 from .. import plot
 from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
 from .._model._structure import Structure
-from .._optimise._building_design import BUILDING_BAND, building_peaks, retune_building
+from .._optimise._building_design import BUILDING_BAND, retune_building, search_grid
 from .._optimise._building_robust import robust_building, scaled_structure
 from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
 from .._orbit._settings import SolverSettings
+from .._peaks import peaks
 from .._response import frequency_response
 from .._runtime._io import write_json, write_toml
 from .._runtime._outcomes import Outcome, outcome_message
@@ -326,8 +327,14 @@ def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.n
     if np.allclose([float(system.tid_stiffness), float(system.tid_damping)], [k, c],
                    rtol=1e-12):
         return np.asarray(result.den_hartog_peak)
-    return np.asarray(building_peaks(system, amplitudes, quantity, omegas=omegas,
-                                     settings=settings).value)
+    return _peaks_over(system, quantity, amplitudes, omegas, settings)
+
+
+def _peaks_over(system, quantity, amplitudes, omegas, settings) -> np.ndarray:
+    """The peaks of `quantity` over the band of `omegas` (None: the first mode's; at
+    least `BAND_POINTS` frequencies, as the designs search it) at each amplitude."""
+    return np.asarray(peaks(system, search_grid(system, omegas), amplitudes,
+                            quantity=quantity, settings=settings).x_peak)
 
 
 def _retune_records(system, quantity, result, before, stroke_before, stroke_after,
@@ -468,9 +475,8 @@ def run_robust(args, inputs: dict, tolerance: float) -> int:
                                  omegas=band, stroke_limit=stroke_limit,
                                  settings=settings, progress=step)
         robust = tuned(system, result.tid_stiffness, result.tid_damping)
-        given = np.stack([np.asarray(building_peaks(
-            scaled(system, scale), amplitudes, quantity, omegas=band,
-            settings=settings).value) for scale in scales], axis=1)
+        given = np.stack([_peaks_over(scaled(system, scale), quantity, amplitudes, band,
+                                      settings) for scale in scales], axis=1)
         stroke = {name: np.stack([strokes(scaled(s, scale), quantity, amplitudes, omegas,
                                           settings)[0] for scale in scales], axis=1)
                   for name, s in (("before", system), ("after", robust))}
