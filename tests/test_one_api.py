@@ -72,13 +72,16 @@ def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system)
     mine, paper = (tj.breakaway_amplitude(s, omegas) for s in (building, system))
     np.testing.assert_allclose(mine.amplitude, paper.amplitude, rtol=1e-10)
     assert float(mine.minimum) == pytest.approx(float(paper.minimum), rel=1e-6)
-    # the peak over the band with exact friction: both the maximum in continuous
-    # frequency, each by its own refinement
+    # the peak over the band with exact friction: the same finder (the maximum in
+    # continuous frequency, the stroke's grid peak), within the shooting's tolerance
     amplitudes = [100.0, 1000.0]
     mine, paper = tj.peaks(building, omegas, amplitudes), tj.peaks(system, omegas, amplitudes)
+    assert type(mine) is type(paper) is tj.Peaks  # one result type, one set of names
     assert np.all(mine.converged) and np.all(paper.converged)
-    np.testing.assert_allclose(mine.x_peak, paper.x_peak, rtol=1e-5)
-    np.testing.assert_allclose(mine.omega_x, paper.omega_x, rtol=1e-3)
+    for name in ("x_peak", "y_peak", "omega_x", "omega_y"):
+        np.testing.assert_allclose(getattr(mine, name), getattr(paper, name), rtol=1e-6,
+                                   err_msg=name)
+    assert type(tj.frequency_response(building, omegas, 100.0)) is tj.FrequencyResponse
 
 
 def test_random_and_recorded_loads_take_the_paper_system_as_its_one_storey_building(system):
