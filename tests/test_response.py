@@ -324,7 +324,8 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     import jax
 
     from tid_jax._model._dynamics import parameter_vector
-    from tid_jax._orbit._steady_state import SolverSettings, refined_peak, settled_state
+    from tid_jax._orbit._sampled_peaks import refined_peak
+    from tid_jax._orbit._steady_state import SolverSettings, settled_state
 
     omega, k, c = float(system.host_frequency), float(system.tid_stiffness), float(
         system.tid_damping)

@@ -19,10 +19,10 @@ from ._model._system import TIDSystem, compiler_options
 from ._orbit._eigen import eigenvalues
 from ._orbit._implicit import moving_part
 from ._orbit._period import point_model, state_units, transient
+from ._orbit._sampled_peaks import refined_peak
 from ._orbit._settings import SolverSettings
 from ._orbit._steady_state import (
     one_by_one,
-    refined_peak,
     shoot_queue,
     solve_orbit,
     y_peak,

@@ -140,7 +140,7 @@ def test_elasticities_in_the_device_terms_are_differences(building, friction_wid
     for name in ("series_stiffness", "terminal_mass") + (("backlash",) if backlash else ()):
         value = float(getattr(system, name))
         peaks = [float(tj.peaks(system.replace(**{name: value * np.exp(h)}), omegas,
-                                [amplitude]).value[0])
+                                [amplitude]).x_peak[0])
                  for h in (step, -step)]
         difference = (peaks[0] - peaks[1]) / (2 * step) / float(sens.peak[0])
         assert float(sens.elasticities[0, names.index(name)]) == pytest.approx(

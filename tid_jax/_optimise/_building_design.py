@@ -27,14 +27,13 @@ from .._model._building import (
 from .._model._checks import check_grid
 from .._orbit._building_orbit import (
     building_settings,
-    peak_of,
     period_end,
     period_samples,
     solve_orbit,
 )
 from .._orbit._flow import flow, plant, projection_units
 from .._orbit._implicit import fixed_point_matrix
-from .._orbit._sampled_peaks import local_peaks
+from .._orbit._sampled_peaks import local_peaks, refined_peak
 from .._orbit._settings import SolverSettings
 from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
 
@@ -224,7 +223,7 @@ def peak_derivatives(system: BuildingTID, quantity: Quantity, amplitude, omega, 
             newton = state + jax.scipy.linalg.lu_solve(lu, period_end(state, pl, fl, settings)
                                                        - state)
             samples = period_samples(newton, pl, fl, settings)[0][:, 0]
-            return peak_of(samples) * projection_units(changed, quantity, a, omega)[0]
+            return refined_peak(samples) * projection_units(changed, quantity, a, omega)[0]
     origin = jnp.zeros(count, dtype=state.dtype)
     return jax.vmap(lambda t: jax.jvp(value, (origin,), (t,))[1])(
         jnp.eye(count, dtype=state.dtype))

@@ -20,12 +20,13 @@ from .._orbit._sampled_peaks import (
     interpolated,
     located_peak,
     newton_iterates,
+    refined_peak,
     smooth_log_peak,
     stencil,
     top_peaks,
 )
 from .._orbit._settings import SolverSettings
-from .._orbit._steady_state import refined_peak, settled_state
+from .._orbit._steady_state import settled_state
 from .._response import point_response, with_tuning
 from .._runtime._cache import compiled
 from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo

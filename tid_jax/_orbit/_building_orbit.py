@@ -14,7 +14,7 @@ from ._eigen import eigenvalues
 from ._flow import flow, period, plant, projection_units
 from ._implicit import fixed_point_matrix, moving_part
 from ._period import building_start, smoothed_period
-from ._sampled_peaks import parabola_top
+from ._sampled_peaks import refined_peak
 from ._settings import SolverSettings
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
@@ -162,15 +162,6 @@ class BuildingOrbit(eqx.Module):
     monodromy: Float[Array, "s s"]  # of the period map, at the last Newton step
 
 
-def peak_of(samples):
-    """The largest |sample| of a periodic sequence, refined by a parabola."""
-    values = jnp.abs(samples)
-    i = jnp.argmax(values)
-    count = samples.shape[0]
-    left, right = values[(i - 1) % count], values[(i + 1) % count]
-    return parabola_top(left, values[i], right)
-
-
 def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
                 settings: SolverSettings, newton_steps: int | None = None, start=None,
                 cold=None) -> BuildingOrbit:
@@ -208,12 +199,12 @@ def solve_orbit(system: BuildingTID, quantity: Quantity, amplitude, omega,
     converged = (residual <= 10 * tol) & jnp.all(jnp.isfinite(values))
     return BuildingOrbit(
         state=state,
-        response_max=peak_of(values[:, 0]) * unit_q,
+        response_max=refined_peak(values[:, 0]) * unit_q,
         # every extremum of a rigid device's stroke that has events is at one (r' = 0)
         # or on a stuck segment, where the samples hold it
         stroke_max=jnp.where((transitions > 0) & (not system.compliant),
                              jnp.maximum(jnp.max(jnp.abs(values[:, 1])), stroke_events),
-                             peak_of(values[:, 1])) * unit_r,
+                             refined_peak(values[:, 1])) * unit_r,
         quantity_samples=values[:, 0] * unit_q,
         stroke_samples=values[:, 1] * unit_r,
         transitions=transitions,

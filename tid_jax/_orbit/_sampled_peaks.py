@@ -35,6 +35,17 @@ def parabola_top(left, mid, right):
     return jnp.where(is_top, mid - (right - left) ** 2 / (8 * safe), mid)
 
 
+def refined_peak(samples: Float[Array, " n"]) -> Float[Array, ""]:
+    """max |s(phase)| over a period from periodic samples, refined by the vertex of the
+    parabola through the largest sample and its two neighbours."""
+
+    def top(s):
+        i = jnp.argmax(s)
+        return parabola_top(s[i - 1], s[i], s[(i + 1) % s.shape[0]])
+
+    return jnp.maximum(top(samples), top(-samples))
+
+
 def parabola_vertices(values: Float[Array, " freqs"], omegas: Float[Array, " freqs"]):
     """At every interior sample of `values` on the (possibly non-uniform) grid `omegas`
     where the samples are concave, the vertex of the parabola through it and its

@@ -21,7 +21,7 @@ from ._period import (
     period_tangents,
     transient,
 )
-from ._sampled_peaks import parabola_top
+from ._sampled_peaks import refined_peak
 from ._settings import SolverSettings
 
 
@@ -492,15 +492,3 @@ def y_peak(y_samples: Float[Array, " n"], y_events: Float[Array, ""],
     if settings.exact_friction and not settings.compliant:
         return jnp.maximum(jnp.max(jnp.abs(y_samples)), y_events)
     return refined_peak(y_samples)
-
-
-def refined_peak(samples: Float[Array, " n"]) -> Float[Array, ""]:
-    """max |s(phase)| over a period from periodic samples, refined by the vertex of the
-    parabola through the largest sample and its two neighbours."""
-
-    def top(s):
-        i = jnp.argmax(s)
-        return parabola_top(s[i - 1], s[i], s[(i + 1) % s.shape[0]])
-
-    return jnp.maximum(top(samples), top(-samples))
-
