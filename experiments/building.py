@@ -47,6 +47,7 @@ def main() -> None:
 
     from tid_jax import plot
     from tid_jax._runtime._io import write_csv
+    from tid_jax.cli._building import uncontrolled_peak
 
     shape = np.linspace(1.0, 0.5, STOREYS)
     masses = np.full(STOREYS, STOREY_MASS)
@@ -72,9 +73,11 @@ def main() -> None:
                "first-mode H-infinity": [tunings["h_infinity"]] * amplitudes.size,
                "retuned (whole structure)": list(zip(result.tid_stiffness,
                                                      result.tid_damping, strict=True))}
-    roof = {"first-mode Den Hartog": result.den_hartog_peak,
-            "first-mode H-infinity": result.h_infinity_peak,
-            "retuned (whole structure)": result.peak}
+    roof = {name: np.asarray([
+        float(tj.peaks(system.replace(tid_stiffness=k, tid_damping=c), None, [a]).x_peak[0])
+        for a, (k, c) in zip(amplitudes, designs[name], strict=True)])
+        for name in ("first-mode Den Hartog", "first-mode H-infinity")}
+    roof["retuned (whole structure)"] = np.asarray(result.x_peak)
     drifts = {}
     for name, tuning in designs.items():
         drifts[name] = np.asarray([
@@ -85,6 +88,7 @@ def main() -> None:
 
     args.out.mkdir(parents=True, exist_ok=True)
     header = ["amplitude_m_per_s2", "uncontrolled_roof_m", "retuned_converged"]
+    bare = uncontrolled_peak(system, tj.Quantity(), np.asarray(tj.default_omegas(system)))
     for name in designs:
         key = name.split(" (")[0].replace("first-mode ", "").replace("-", "_").replace(
             " ", "_").lower()
@@ -92,7 +96,7 @@ def main() -> None:
                    f"{key}_drift_{storey}_m"]
     rows = []
     for i, a in enumerate(amplitudes):
-        row = [a, result.uncontrolled[i]]
+        row = [a, a * bare]
         for name, tuning in designs.items():
             row += [tuning[i][0], tuning[i][1], roof[name][i], drifts[name][i]]
         rows.append([f"{float(v):.6g}" for v in row])
@@ -120,9 +124,9 @@ def main() -> None:
     plot.save_figure(fig, args.out / "building.png")
     print(f"wrote {args.out / 'building.csv'} and {args.out / 'building.png'}")
     for i, a in enumerate(amplitudes):
-        print(f"A = {a:4.2f} m/s2: roof {100 * result.peak[i]:.3g} cm retuned, "
-              f"{100 * result.h_infinity_peak[i]:.3g} cm H-infinity, "
-              f"{100 * result.den_hartog_peak[i]:.3g} cm Den Hartog"
+        print(f"A = {a:4.2f} m/s2: roof {100 * result.x_peak[i]:.3g} cm retuned, "
+              f"{100 * roof['first-mode H-infinity'][i]:.3g} cm H-infinity, "
+              f"{100 * roof['first-mode Den Hartog'][i]:.3g} cm Den Hartog"
               + ("" if result.converged[i] else " (retune not converged)"))
 
 

@@ -20,7 +20,7 @@ from ._model._checks import (
     check_system,
 )
 from ._model._system import TIDSystem, compiler_options
-from ._optimise._building_design import BAND_POINTS, first_mode_band
+from ._optimise._building_design import first_mode_band
 from ._orbit._sampled_peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -59,9 +59,9 @@ LANE_CHUNK = 16
 
 def default_omegas(system: TIDSystem | BuildingTID,
                    n: int | None = None) -> Float[Array, " freqs"]:
-    """The default frequency band: 0.65-1.4 times the host frequency of a `TIDSystem`
-    (`n` default `DEFAULT_FREQUENCIES`), or 0.5-1.6 times a `BuildingTID`'s first
-    natural frequency (`n` default `BAND_POINTS`).
+    """The default frequency band: `n` (default `DEFAULT_FREQUENCIES`) frequencies over
+    0.65-1.4 times the host frequency of a `TIDSystem`, or over 0.5-1.6 times a
+    `BuildingTID`'s first natural frequency.
 
     **Arguments:**
 
@@ -72,9 +72,9 @@ def default_omegas(system: TIDSystem | BuildingTID,
     """
     if n is not None and not (isinstance(n, int) and n >= 5):
         raise ValueError(f"n must be an integer >= 5, got {n!r}")
-    if isinstance(system, BuildingTID):
-        return jnp.asarray(first_mode_band(system, BAND_POINTS if n is None else n))
     n = DEFAULT_FREQUENCIES if n is None else n
+    if isinstance(system, BuildingTID):
+        return jnp.asarray(first_mode_band(system, n))
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 

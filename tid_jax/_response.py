@@ -208,7 +208,7 @@ def batched(system, count: int):
         lambda leaf: np.broadcast_to(np.asarray(leaf, float), (count,) + np.shape(leaf)), system)
 
 
-def _states(systems) -> int:
+def state_count(systems) -> int:
     """The scaled states of `systems`' model."""
     if isinstance(systems, BuildingTID):
         return 2 * systems.coordinates
@@ -248,7 +248,7 @@ def _solve_blocks(settings, batch, warm=None,
     count = omegas.shape[0]
     use_warm = np.full(count, warm is not None)
     if warm is None:
-        warm = np.zeros((count, _states(batch[2])), omegas.dtype)
+        warm = np.zeros((count, state_count(batch[2])), omegas.dtype)
     outs = []
     arrays = settings.with_array_tolerances(batch[2])  # one program for any of their values
     for start, stop, size in _block_sizes(count):

@@ -13,22 +13,20 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, building_breakaway, first_mode_tunings
 from ._model._checks import (
     check_grid,
     check_optimiser_options,
+    check_precision,
     check_single_storey_quantity,
     check_steady_state_device,
     check_system,
     is_positive,
 )
-from ._model._dynamics import PARAMETERS
 from ._model._linear import den_hartog_tuning, host_breakaway
 from ._model._system import TIDSystem
-from ._optimise._building_design import BuildingRetune, retune_building
 from ._optimise._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
 from ._optimise._retune_stage import compile_stage, stage_lanes
-from ._orbit._period import initial_state
 from ._orbit._settings import SolverSettings
 from ._peaks import Peaks, _band, response_peaks
 from ._response import (
@@ -37,6 +35,8 @@ from ._response import (
     batched,
     lane_response,
     scaled_states,
+    state_count,
+    static_units,
     with_tuning,
 )
 from ._runtime._outcomes import Outcome, outcome_code, outcome_messages
@@ -132,11 +132,12 @@ class RetuneResult(eqx.Module):
                                           np.ravel(self.damping_at_bound), strict=True)]
 
 
-def _check_lanes(systems, amplitudes, omegas, warm, settings):
+def _check_lanes(systems, amplitudes, omegas, warm, settings, quantity: Quantity):
     """The check's `lane_response` of the lanes (each steady state shot from `warm`) and
     its `response_peaks`, as NumPy arrays."""
-    response = lane_response(systems, amplitudes, omegas, settings, warm)
-    return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings)))
+    response = lane_response(systems, amplitudes, omegas, settings, warm, quantity)
+    return jax.tree.map(np.asarray, (response, response_peaks(systems, response, settings,
+                                                              quantity)))
 
 
 
@@ -171,9 +172,10 @@ def retune(
     retune_settings: RetuneSettings = RetuneSettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> RetuneResult | BuildingRetune:
+) -> RetuneResult:
     """Retune the TID for each forcing amplitude: the `tid_stiffness` k > 0 and
-    `tid_damping` c >= 0 minimising the peak steady-state host displacement over a band.
+    `tid_damping` c >= 0 minimising the peak steady-state host displacement (a building's
+    `quantity`) over a band.
 
     The amplitudes are optimised one after another (each with its frequencies batched, or
     spread over processes by `map_lanes`) by one compiled
@@ -202,10 +204,8 @@ def retune(
     there the inerter never slips, and the smoothed model's optimum would be an ever stiffer
     spring and damper to ground.
 
-    A `BuildingTID` is retuned for the whole structure by `retune_building` (SLSQP on the
-    two highest peaks of its `quantity`, default the top floor's displacement, and their
-    exact derivatives; `max_steps` default 100, `tol` on the log peak default 1e-6), one
-    amplitude after another, and returns a `BuildingRetune`.
+    A `BuildingTID` is retuned in the same way for its `quantity` (default the top floor's
+    displacement), its design variables relative to the first mode's Den Hartog tuning.
 
     **Arguments:**
 
@@ -232,40 +232,28 @@ def retune(
     - `map_lanes`: how the independent amplitudes are mapped (default: one after another
       in this process; a `ProcessMap` spreads them over processes).
 
-    **Returns:** a `RetuneResult` (a `BuildingRetune` for a `BuildingTID`).
+    **Returns:** a `RetuneResult`.
     """
     if isinstance(system, BuildingTID):
-        return _retune_building(system, amplitudes, omegas=omegas, quantity=quantity,
-                                settings=settings, max_steps=max_steps, tol=tol,
-                                progress=progress, map_lanes=map_lanes)
-    check_single_storey_quantity(quantity)
+        check_precision()
+        quantity = Quantity() if quantity is None else quantity
+        quantity.floor_of(system.floors)
+    else:
+        check_single_storey_quantity(quantity)
+        quantity = Quantity()
+        check_system(system)
+        check_steady_state_device(system, "retune")
     settings = SolverSettings() if settings is None else settings
     max_steps = 60 if max_steps is None else max_steps
     tol = 1e-4 if tol is None else tol
-    check_system(system)
-    check_steady_state_device(system, "retune")
     band = _band(system, omegas)
     amps = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(band.dtype)
     check_retune_options(max_steps, tol, retune_settings)
     bands = np.broadcast_to(np.asarray(band), amps.shape + band.shape)
     result = optimal_tunings(batched(system, amps.size), amps, bands, settings=settings,
                              max_steps=max_steps, tol=tol, retune_settings=retune_settings,
-                             progress=progress, map_lanes=map_lanes)
+                             progress=progress, map_lanes=map_lanes, quantity=quantity)
     return eqx.tree_at(lambda r: r.check_omegas, result, result.check_omegas[0])
-
-
-def _retune_building(system: BuildingTID, amplitudes, *, omegas, quantity, settings,
-                     max_steps, tol, progress, map_lanes) -> BuildingRetune:
-    """`retune` of a building (`retune_building`), its `progress` a one-line message per
-    amplitude."""
-    if map_lanes is not serial:
-        raise ValueError("a BuildingTID's retune runs in this process: leave map_lanes out")
-    report = None if progress is None else (
-        lambda done, total: progress(f"amplitude {done} of {total} retuned"))
-    return retune_building(system, amplitudes, Quantity() if quantity is None else quantity,
-                           omegas=omegas, settings=settings,
-                           rtol=1e-6 if tol is None else tol,
-                           max_steps=100 if max_steps is None else max_steps, progress=report)
 
 
 def check_retune_options(max_steps, tol, retune_settings) -> None:
@@ -286,22 +274,25 @@ def optimal_tunings(
     retune_settings: RetuneSettings,
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
+    quantity: Quantity = Quantity(),
 ) -> RetuneResult:
     """The optimiser of `retune` on lanes: lane i retunes the system `systems[i]` (its
-    fields batched, see `_response.batched`) at the amplitude `amplitudes[i]` over the
-    frequencies `bands[i]`: the lanes are optimised one per task of `map_lanes`, their
+    fields batched, see `_response.batched`; `TIDSystem`s, or `BuildingTID`s measuring
+    `quantity`) at the amplitude `amplitudes[i]` over the frequencies `bands[i]`: the lanes are optimised one per task of `map_lanes`, their
     initial orbits and their check solved in one batch each, in this process.
     `check_omegas` of the result is one check grid per lane."""
     say = progress if progress is not None else (lambda message: None)
     amps = jax.device_put(np.asarray(amplitudes))
     refinement = retune_settings.check_refinement
-    k_ref, c_ref, k0, c0, u, hessian_inv = _initial_design(systems, amps)
+    k_ref, c_ref = reference_tunings(systems)
+    k0, c0, u, hessian_inv = _initial_design(systems, amps, k_ref, c_ref)
+    references = np.stack([k_ref, c_ref], axis=-1)
     # Below the breakaway amplitude the inerter never slips: those lanes keep the initial
     # tuning (status `stuck`), and only the others are optimised.
     stuck = _below_breakaway(systems, amps, bands)
     moving = np.flatnonzero(~stuck)
     stages = [_stage_options(stage, retune_settings.sharpness, tol, settings, max_steps,
-                             retune_settings)
+                             retune_settings, quantity)
               for stage in range(1, len(retune_settings.sharpness) + 1)]
     # With worker processes, this process's threads only wait for them: a worker compiles
     # the stages' program while this process solves the initial tuning, and the stages
@@ -310,27 +301,30 @@ def optimal_tunings(
     workers, compiling = process_count(map_lanes) > 1, None
     with concurrent.futures.ThreadPoolExecutor(2) as waiting:
         if workers and moving.size:
-            placeholder = _lanes_of(moving[:1], (systems, amps, bands, u, _placeholder_orbits(
-                k0, c0, bands, settings), hessian_inv))
+            placeholder = _lanes_of(moving[:1], (systems, amps, references, bands, u,
+                                                  _placeholder_orbits(systems, k0, c0, bands),
+                                                  hessian_inv))
             compiling = waiting.submit(map_lanes, compile_stage, [(placeholder, stages[0])])
-        start = lane_response(systems, amps, bands, settings)
+        start = lane_response(systems, amps, bands, settings, quantity=quantity)
         say(f"initial tuning solved on {bands.shape[-1]} frequencies x {amps.size} lanes")
         orbits = _initial_orbits(start, systems, k0, c0)
         initial = _check_inputs(systems, amps, bands, orbits[1], refinement)
         # On the host here: the stages' thread then only slices NumPy arrays and waits.
-        lanes = jax.tree.map(np.asarray, (systems, amps, bands, u, orbits, hessian_inv))
+        lanes = jax.tree.map(np.asarray, (systems, amps, references, bands, u, orbits,
+                                          hessian_inv))
         run = ft.partial(_stages, lanes, moving, stages, retune_settings.sharpness, say,
                          map_lanes)
         if workers:
             # (the stages wait for the program: the other workers then load it)
             staged = waiting.submit(_after, compiling, run)
-            initial_check = _check_lanes(*initial, settings)
+            initial_check = _check_lanes(*initial, settings, quantity)
             u, orbits, ok, iterations = staged.result()
         else:
             u, orbits, ok, iterations = run()
-            initial_check = _check_lanes(*initial, settings)
+            initial_check = _check_lanes(*initial, settings, quantity)
     k, c, retuned = _retuned(systems, u, k_ref, c_ref)
-    checked = _check_lanes(*_check_inputs(retuned, amps, bands, orbits[1], refinement), settings)
+    checked = _check_lanes(*_check_inputs(retuned, amps, bands, orbits[1], refinement),
+                           settings, quantity)
     both, found = jax.tree.map(lambda *a: np.concatenate(a), initial_check, checked)
     result = _checked_result(both, found, k0, c0, k, c, ok, iterations, c_ref, stuck,
                              retune_settings.damping_bound_ratio)
@@ -348,15 +342,17 @@ def _after(future: concurrent.futures.Future | None, function: Callable):
 
 def _stages(lanes, moving, stages, sharpnesses, say, map_lanes):
     """The continuation stages of the lanes `moving` of `lanes` (systems, amplitudes,
-    bands, designs, orbits, inverse Hessians), one lane per task of `map_lanes`: the
-    designs, orbits, convergence and iterations of every lane (the others' unchanged)."""
-    systems, amps, bands, u, orbits, hessian_inv = lanes
+    reference tunings, bands, designs, orbits, inverse Hessians), one lane per task of
+    `map_lanes`: the designs, orbits, convergence and iterations of every lane (the
+    others' unchanged)."""
+    systems, amps, references, bands, u, orbits, hessian_inv = lanes
     ok = np.zeros(amps.shape, bool)
     iterations = np.zeros(amps.shape, dtype=int)
     for stage, (sharpness, options) in enumerate(zip(sharpnesses, stages, strict=True), start=1):
         steps = np.zeros(moving.size, int)
         if moving.size:
-            these = _lanes_of(moving, (systems, amps, bands, u, orbits, hessian_inv))
+            these = _lanes_of(moving, (systems, amps, references, bands, u, orbits,
+                                       hessian_inv))
             # One lane per call: one compiled program serves any number of lanes.
             parts = map_lanes(stage_lanes, [
                 (jax.tree.map(lambda a, i=i: a[i : i + 1], these), options)
@@ -373,11 +369,10 @@ def _stages(lanes, moving, stages, sharpnesses, say, map_lanes):
     return u, orbits, ok, iterations
 
 
-def _placeholder_orbits(k0, c0, bands, settings: SolverSettings):
+def _placeholder_orbits(systems, k0, c0, bands):
     """Orbits of the shapes and types `_initial_orbits` gives, all states zero: the stages'
     program compiled for them is the program of the stages on the real orbits."""
-    size = jax.eval_shape(lambda q: initial_state(q, settings.compliant),
-                          jax.ShapeDtypeStruct((len(PARAMETERS),), bands.dtype)).shape[0]
+    size = state_count(systems)
     states = np.zeros(bands.shape + (size,), bands.dtype)
     return (np.stack([np.asarray(k0), np.asarray(c0)], axis=-1), states,
             np.zeros(states.shape + (size,), bands.dtype),
@@ -385,7 +380,7 @@ def _placeholder_orbits(k0, c0, bands, settings: SolverSettings):
 
 
 def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
-                   retune_settings: RetuneSettings) -> dict:
+                   retune_settings: RetuneSettings, quantity: Quantity) -> dict:
     """The options of `stage_lanes` at the continuation stage `stage` (from 1)."""
     sharpness = sharpnesses[stage - 1]
     # Stages before the last only bring the design near the optimum.
@@ -399,7 +394,7 @@ def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
         tol=float(stage_tol), design_newton_steps=retune_settings.design_newton_steps,
         max_rejected_steps=retune_settings.max_rejected_steps,
         small_cuts_end=stage < len(sharpnesses),
-        max_design_step=float(retune_settings.max_design_step),
+        max_design_step=float(retune_settings.max_design_step), quantity=quantity,
     )
 
 
@@ -408,12 +403,25 @@ def _lanes_of(lanes, values):
     return jax.tree.map(lambda a: np.asarray(a)[lanes], values)
 
 
+def reference_tunings(systems) -> tuple[np.ndarray, np.ndarray]:
+    """The design variables' reference tuning (k, c) of each lane (`systems` batched):
+    Den Hartog's of a `TIDSystem`, the first mode's of a `BuildingTID`
+    (`first_mode_tunings`)."""
+    if isinstance(systems, BuildingTID):
+        systems = _on_host(systems)
+        count = np.shape(systems.inertance)[0]
+        return tuple(np.asarray(t) for t in zip(*(
+            first_mode_tunings(jax.tree.map(lambda a, i=i: a[i], systems))["den_hartog"]
+            for i in range(count))))
+    return tuple(np.asarray(t) for t in den_hartog_tuning(
+        np.asarray(systems.host_mass), np.asarray(systems.host_stiffness),
+        np.asarray(systems.inertance)))
+
+
 @eqx.filter_jit
-def _initial_design(systems: TIDSystem, amplitudes):
-    """Den Hartog's tuning of each lane (the design variables' reference), the initial
-    tuning, its design variables and BFGS's first inverse Hessian (the identity)."""
-    k_ref, c_ref = den_hartog_tuning(systems.host_mass, systems.host_stiffness,
-                                     systems.inertance)
+def _initial_design(systems, amplitudes, k_ref, c_ref):
+    """The initial tuning of each lane, its design variables (relative to the reference
+    tuning `k_ref`, `c_ref`) and BFGS's first inverse Hessian (the identity)."""
     # Strongly typed, as every later design is: one program serves every stage.
     k0 = jnp.asarray(systems.tid_stiffness, amplitudes.dtype)
     c0 = jnp.asarray(systems.tid_damping, amplitudes.dtype)
@@ -421,14 +429,19 @@ def _initial_design(systems: TIDSystem, amplitudes):
     # variables and would never be left.
     u = design_of_tuning(k0, jnp.maximum(c0, 0.05 * c_ref), k_ref, c_ref)
     eye = jnp.eye(2, dtype=amplitudes.dtype)
-    return k_ref, c_ref, k0, c0, u, jnp.broadcast_to(eye, amplitudes.shape + (2, 2))
+    return k0, c0, u, jnp.broadcast_to(eye, amplitudes.shape + (2, 2))
+
+
+def _initial_orbits(start: FrequencyResponse, systems, k0, c0):
+    """The first stage's warm start: the initial tuning, and per frequency its orbit's
+    scaled state, monodromy matrix and (zero) state derivatives."""
+    return _orbits_of(start, static_units(systems), k0, c0,
+                      not isinstance(systems, BuildingTID))
 
 
 @eqx.filter_jit
-def _initial_orbits(start: FrequencyResponse, systems: TIDSystem, k0, c0):
-    """The first stage's warm start: the initial tuning, and per frequency its orbit's
-    scaled state, monodromy matrix and (zero) state derivatives."""
-    states = scaled_states(start, 1 / systems.host_stiffness)
+def _orbits_of(start: FrequencyResponse, units, k0, c0, paper: bool):
+    states = scaled_states(start, units, paper)
     return (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
             jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
 
@@ -461,14 +474,19 @@ def _set_lanes(values, lanes, new):
     return jax.tree.map(put, values, new)
 
 
-def _below_breakaway(systems: TIDSystem, amplitudes, bands):
+def _below_breakaway(systems, amplitudes, bands):
     """Whether each lane's amplitude is below its system's smallest breakaway amplitude
-    over its band (`host_breakaway`): the inerter then never slips."""
+    over its band (`host_breakaway`, `building_breakaway`): the inerter then never
+    slips."""
     systems, bands = _on_host((systems, bands))
-    minimum = [
-        float(host_breakaway(jax.tree.map(lambda a: a[i], systems), bands[i]).minimum)
-        for i in range(amplitudes.shape[0])
-    ]
+
+    def smallest(system, band):
+        if isinstance(system, BuildingTID):
+            return float(np.min(building_breakaway(system, band)))
+        return float(host_breakaway(system, band).minimum)
+
+    minimum = [smallest(jax.tree.map(lambda a, i=i: a[i], systems), bands[i])
+               for i in range(amplitudes.shape[0])]
     return np.asarray(amplitudes) < np.asarray(minimum)
 
 

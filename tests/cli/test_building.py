@@ -206,9 +206,18 @@ def test_retune_of_a_frictionless_building_keeps_k_and_c_in_json(tmp_path):
     data = json.loads(stdout)
     results = data["results"]
     assert len(results) == 2 and all(r["converged"] for r in results)
-    for r, h_infinity in zip(results, data["h_infinity_peaks"], strict=True):
+    # the first mode's H-infinity tuning, over the same band
+    system = tj.BuildingTID(tj.Structure.shear_building(
+        [2000.0, 2000.0, 1500.0], [1.5e6, 1.25e6, 1.0e6], damping_ratio=0.02), 275.0, 0.0,
+        1.0, 0.0, load="ground")
+    k, c = tj.first_mode_tunings(system)["h_infinity"]
+    h_infinity_peaks = tj.peaks(system.replace(tid_stiffness=k, tid_damping=c),
+                                2 * np.pi * np.asarray(data["frequencies_hz"]),
+                                [r["amplitude"] for r in results],
+                                quantity=tj.Quantity("drift", 1)).x_peak
+    for r, h_infinity in zip(results, np.asarray(h_infinity_peaks), strict=True):
         assert r["k_N_per_m"] > 0 and r["c_N_s_per_m"] > 0 and r["status"].startswith("ok")
-        assert r["peak_after"] <= h_infinity * (1 + 1e-9)
+        assert r["peak_after"] <= h_infinity * (1 + 1e-6)
         assert r["peak_after"] <= r["peak_before"] * (1 + 1e-9)  # below Den Hartog's
         assert r["peak_before"] == pytest.approx(r["peak_after"] / r["peak_after_over_before"])
         assert r["stroke_after_m"] > 0 and r["amplitude_unit"] == "m/s2"
@@ -251,11 +260,12 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
 
 
 def test_building_rows_say_the_result_s_outcome_as_host_rows_do(tmp_path):
-    # frictionless, a band below the first mode (2 Hz): the retuned peak at its upper end;
-    # a stroke limit of 0.1 mm that no robust design meets
+    # frictionless, a band below the first mode (2 Hz): the retuned peak at its upper end,
+    # which an ever stiffer spring lowers (no optimum); a stroke limit of 0.1 mm that no
+    # robust design meets
     text = CONFIG.replace("friction_force = 135.0", "friction_force = 0.0").replace(
         'amplitudes = ["0.1g", 2.0]', "amplitudes = [2.0]")
-    edge = outcome_message(tj.Outcome, outcome_code(tj.Outcome.peak_at_band_edge))
+    edge = outcome_message(tj.Outcome, outcome_code(tj.Outcome.not_stationary))
     status, stdout, stderr = run(["retune", "--config", _config(
         tmp_path, text.replace("n_frequencies = 7", "n_frequencies = 7\nband_hz = [1.0, 1.5]")),
         "--out", tmp_path / "retune", "--json", "--quiet"])

@@ -11,8 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._model._dynamics import parameters
-from .._model._linear import den_hartog_tuning
+from .._model._building import BuildingTID, Quantity
 from .._model._system import compiler_options
 from .._orbit._sampled_peaks import (
     REFINED_PEAKS,
@@ -26,7 +25,8 @@ from .._orbit._sampled_peaks import (
     top_peaks,
 )
 from .._orbit._settings import SolverSettings
-from .._orbit._steady_state import settled_state
+from .._orbit._period import point_model
+from .._orbit._steady_state import one_by_one, settled_state
 from .._response import point_response, with_tuning
 from .._runtime._cache import compiled
 from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
@@ -35,11 +35,12 @@ from ._stall import cut_within_tolerance
 
 
 @compiled(options=compiler_options)
-def optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_step, settings,
-                   max_steps, tol, design_newton_steps, max_rejected_steps, max_design_step,
-                   small_cuts_end):
+def optimise_stage(systems, amplitudes, references, u0, z0, h0, omegas, sharpness, first_step,
+                   settings, max_steps, tol, design_newton_steps, max_rejected_steps,
+                   max_design_step, small_cuts_end, quantity):
     """BFGS on one lane (every array with a leading axis of one lane: the system
-    `systems[0]`, its fields batched, at `amplitudes[0]` over the frequencies `omegas[0]`)
+    `systems[0]`, its fields batched, measuring `quantity`, at `amplitudes[0]` over the
+    frequencies `omegas[0]`, its design variables relative to the tuning `references[0]`)
     from the design `u0[0]` and inverse Hessian `h0[0]` on the smooth log peak, shooting
     from the orbits `z0` of a nearby design (its tuning (k, c) and, per frequency, the
     scaled state, monodromy matrix and state derivatives with respect to (k, c)); returns
@@ -53,7 +54,7 @@ def optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_ste
                                                    first_step=first_step))
     lane = ft.partial(_optimise_lane, solver=solver, sharpness=sharpness, settings=settings,
                       max_steps=max_steps, max_rejected_steps=max_rejected_steps,
-                      small_cuts_end=small_cuts_end)
+                      small_cuts_end=small_cuts_end, quantity=quantity)
 
     # One lane per call: its optimiser stops when it converges, and its integrations wait
     # only for its own stiffest steady state. Batching the loops of the optimiser, with
@@ -63,13 +64,13 @@ def optimise_stage(systems, amplitudes, u0, z0, h0, omegas, sharpness, first_ste
     # smoothed friction took five times as long on 4 simulated CPU devices as on one),
     # and optimistix's BFGS cannot yet run on each device on its own (in a `shard_map`:
     # lineax issue 185).
-    args = (systems, amplitudes, omegas, u0, z0, h0)
+    args = (systems, amplitudes, references, omegas, u0, z0, h0)
     return jax.tree.map(lambda a: a[None], lane(*jax.tree.map(lambda a: a[0], args)))
 
 
 def stage_lanes(lanes, options: dict):
-    """One stage (`optimise_stage`) of the lane `(systems, amplitudes, bands, designs,
-    orbits, inverse Hessians)` (NumPy arrays, with a leading axis of one lane), its
+    """One stage (`optimise_stage`) of the lane `(systems, amplitudes, references, bands,
+    designs, orbits, inverse Hessians)` (NumPy arrays, with a leading axis of one lane), its
     results as NumPy arrays: a task of `map_lanes`."""
     return jax.tree.map(np.asarray, optimise_stage(*_stage_arguments(lanes, options)))
 
@@ -83,17 +84,40 @@ def compile_stage(lanes, options: dict) -> None:
 
 def _stage_arguments(lanes, options: dict):
     """The arguments of `optimise_stage` for `stage_lanes`."""
-    systems, amplitudes, bands, u, z, h = lanes
-    return (systems, amplitudes, u, z, h, bands, jnp.asarray(options["sharpness"]),
+    systems, amplitudes, references, bands, u, z, h = lanes
+    return (systems, amplitudes, references, u, z, h, bands, jnp.asarray(options["sharpness"]),
             jnp.asarray(options["first_step"]), options["settings"], options["max_steps"],
             jnp.asarray(options["tol"]), options["design_newton_steps"],
             jnp.asarray(options["max_rejected_steps"]), options["max_design_step"],
-            jnp.asarray(options["small_cuts_end"]))
+            jnp.asarray(options["small_cuts_end"]), options["quantity"])
+
+
+def static_unit(system):
+    """The unit of the scaled displacements per unit load amplitude: 1 / K of a
+    `TIDSystem`, a building's `static_scale` (traceable)."""
+    if isinstance(system, BuildingTID):
+        return system.static_scale()
+    return 1 / system.host_stiffness
+
+
+def _tuning_derivatives(system: BuildingTID, quantity: Quantity, omega, amplitude,
+                        settings: SolverSettings, z):
+    """The derivatives of a building's orbit through the scaled state `z` (converged) with
+    respect to its tuning (k, c): forward mode through its shooting (one Newton
+    iteration from the orbit, and the implicit derivative along each of k and c)."""
+    system, z = jax.lax.stop_gradient((system, z))
+
+    def state(tuning):
+        tuned = with_tuning(system, tuning[0], tuning[1])
+        return point_response(tuned, omega, amplitude, settings, z, quantity=quantity)[0].state
+
+    return jax.jacfwd(state)(jnp.stack([system.tid_stiffness, system.tid_damping]))
 
 
 
-def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
-    """Host peaks (m) at every frequency, the true maxima over frequency of the highest
+def _design_sweep(system, quantity: Quantity, omegas, u, amplitude, reference, warm,
+                  settings: SolverSettings):
+    """Peaks (SI; the host's displacement, a building's `quantity`) at every frequency, the true maxima over frequency of the highest
     of them, and the orbits of the design `u`, from the orbits `warm` of a nearby
     design (its tuning, then per frequency the scaled state, monodromy matrix and state
     derivatives with respect to the tuning): every steady state is predicted to first
@@ -106,20 +130,20 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     (interpolated), which give its derivatives and renew the monodromy matrices at
     those grid points.
     Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
-    k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness,
-                                     system.inertance)
-    k, c = tuning_of_design(u, k_ref, c_ref)
+    paper = not isinstance(system, BuildingTID)
+    k, c = tuning_of_design(u, reference[0], reference[1])
     tuned = with_tuning(system, k, c)
     warm_tuning, states, monodromies, derivatives = warm
     change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
-    scale = amplitude / system.host_stiffness
+    # (a building's matrices: one at a time, see `one_by_one`)
+    each = jax.vmap if paper else one_by_one
 
     def settle(omega, z0, monodromy):
-        p = jax.lax.stop_gradient(jnp.stack(parameters(tuned, amplitude, omega)))
+        p, _, unit, _ = jax.lax.stop_gradient(point_model(tuned, quantity, amplitude, omega))
         z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
-        return z, jnp.nan_to_num(refined_peak(x_samples) * scale, nan=jnp.inf)
+        return z, jnp.nan_to_num(refined_peak(x_samples) * unit, nan=jnp.inf)
 
-    states, xs = jax.vmap(settle)(omegas, states + derivatives @ change, monodromies)
+    states, xs = each(settle)(omegas, states + derivatives @ change, monodromies)
     index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
     lower, upper, interior = bracket(index, omegas)
 
@@ -128,7 +152,7 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
         # One vmap over every stencil point (a nested one would batch the solves' loops
         # twice over when traced).
         args = (at, interpolated(states, omegas, at), nearby)
-        z, x = jax.vmap(settle)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        z, x = each(settle)(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
         return x.reshape(at.shape), z.reshape(at.shape + z.shape[1:])
 
     no_states = jnp.zeros(stencil(centre, interior).shape + states.shape[1:], states.dtype)
@@ -141,9 +165,14 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
     start = jax.vmap(interpolated)(stencil_states, at, centre[:, None])[:, 0]
 
     def full(omega, z0):
+        if paper:
+            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
+                                              directions=DESIGN_PARAMETERS)
+            return x_max, (orbit.monodromy, orbit.state_derivatives)
         orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
-                                          directions=DESIGN_PARAMETERS)
-        return x_max, (orbit.monodromy, orbit.state_derivatives)
+                                          quantity=quantity)
+        return x_max, (orbit.monodromy, _tuning_derivatives(
+            tuned, quantity, omega, amplitude, settings, orbit.state))
 
     values, (m_new, d_new) = jax.vmap(full)(centre, start)
     peak = located_peak(estimate, values)
@@ -152,17 +181,18 @@ def _design_sweep(system, omegas, u, amplitude, warm, settings: SolverSettings):
         jax.lax.stop_gradient(jnp.stack([k, c])), *orbits)
 
 
-def _optimise_lane(system, amplitude, omegas, u_start, z_start, h_start, *, solver,
-                   sharpness, settings: SolverSettings, max_steps, max_rejected_steps,
-                   small_cuts_end):
+def _optimise_lane(system, amplitude, reference, omegas, u_start, z_start, h_start, *,
+                   solver, sharpness, settings: SolverSettings, max_steps,
+                   max_rejected_steps, small_cuts_end, quantity: Quantity):
     """BFGS on one lane of `optimise_stage`: `(u, steps, converged, orbits, inverse
     Hessian)`."""
     options = dict(autodiff_mode="fwd")
     tags = frozenset()
 
     def traced_objective(u, warm):
-        (xs, (index, peak)), orbits = _design_sweep(system, omegas, u, amplitude, warm, settings)
-        static = amplitude / system.host_stiffness
+        (xs, (index, peak)), orbits = _design_sweep(system, quantity, omegas, u, amplitude,
+                                                    reference, warm, settings)
+        static = amplitude * static_unit(system)
         objective = smooth_log_peak(xs / static, omegas, sharpness, (index, peak / static))
         return objective, jax.lax.stop_gradient(orbits)
 

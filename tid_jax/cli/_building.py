@@ -10,14 +10,14 @@ import numpy as np
 from .. import plot
 from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
 from .._model._structure import Structure
-from .._optimise._building_design import BUILDING_BAND, retune_building, search_grid
+from .._optimise._building_design import BUILDING_BAND, search_grid
 from .._optimise._building_robust import robust_building, scaled_structure
 from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
 from .._orbit._settings import SolverSettings
-from .._peaks import peaks
-from .._response import frequency_response
+from .._peaks import DEFAULT_FREQUENCIES, peaks
+from .._response import _on_host, frequency_response
+from .._retune import RetuneSettings, retune
 from .._runtime._io import write_json, write_toml
-from .._runtime._outcomes import Outcome, outcome_message
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
     PROG,
@@ -252,32 +252,22 @@ def run_retune(args, inputs: dict) -> int:
     system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
         args, inputs, "retuning {amplitudes} amplitude(s) over {frequencies} frequencies")
     settings = SolverSettings(**inputs[SOLVER_TABLE])
-    with output.steps(amplitudes.size + 1) as step:
-        result = retune_building(
-            system, amplitudes, quantity, omegas=omegas, settings=settings,
-            progress=lambda done, total: step(f"amplitude {done}/{total} retuned"))
-        before = _given_peaks(system, quantity, amplitudes, omegas, settings, result)
-        stroke_before, _, response_before = strokes(system, quantity, amplitudes, omegas,
-                                                    settings)
-        after = [strokes(system.replace(tid_stiffness=float(result.tid_stiffness[i]),
-                                        tid_damping=float(result.tid_damping[i])),
-                         quantity, amplitudes[i:i + 1], omegas, settings)
-                 for i in range(amplitudes.size)]
-        step("strokes over the band before and after retuning")
-    stroke_after = np.asarray([float(s[0][0]) for s in after])
-    response_after = np.concatenate([s[2] for s in after])
-    records = _retune_records(system, quantity, result, before, stroke_before, stroke_after,
-                              [bool(s[1][0]) for s in after], inputs["stroke_limit"], omegas)
+    # (a coarser design grid can miss or merge a building's peaks)
+    if omegas.size < DEFAULT_FREQUENCIES:
+        omegas = np.linspace(omegas[0], omegas[-1], DEFAULT_FREQUENCIES)
+        frequencies_hz = omegas / (2 * math.pi)
+    with output.steps(RetuneSettings().progress_steps()) as step:
+        result = retune(system, amplitudes, omegas=omegas, quantity=quantity,
+                        settings=settings, progress=step, map_lanes=args.map_lanes)
+    result = _on_host(result)  # read entry by entry below: no array operation each
+    records = _retune_records(system, quantity, result, inputs["stroke_limit"], omegas)
     save_records(output, "retune.csv", RETUNE_COLUMNS, records)
     save_config(inputs, output, "retune")
-    _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
-                       stroke_after, (frequencies_hz, response_before, response_after),
-                       inputs["stroke_limit"])
+    _save_retune_plots(output, system, quantity, records, result, inputs["stroke_limit"])
     tunings = first_mode_tunings(system)
     data = document("retune", inputs, system, quantity, frequencies_hz, output,
                      first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
                                          for name, (k, c) in tunings.items()},
-                     h_infinity_peaks=np.asarray(result.h_infinity_peak).tolist(),
                      results=records)
     write_json(output.path("retune.json"), data)
     title = (f"Retuned per amplitude: {describe(system, quantity)}; k_DH, c_DH: the first "
@@ -286,48 +276,29 @@ def run_retune(args, inputs: dict) -> int:
         RETUNE_TABLE, records, limit_cm=100 * inputs["stroke_limit"]))
 
 
-def _save_retune_plots(output, system, quantity, records, result, before, stroke_before,
-                       stroke_after, responses, limit) -> None:
+def _save_retune_plots(output, system, quantity, records, result, limit) -> None:
     """The paper's Figures 7 (k and c, peaks and strokes against amplitude) and 6 (the
-    response over the band before and after retuning, `responses` = (Hz, before, after))
-    for the building."""
+    response over the band before and after retuning, on the retune's check grid) for
+    the building."""
     amplitudes = np.asarray(result.amplitudes)
     k_ratio = [r["k_over_k_den_hartog"] for r in records]
     c_ratio = [r["c_over_c_den_hartog"] for r in records]
     peak_label = f"peak {quantity.describe(system.floors)} [{quantity.unit}]"
     described = textwrap.fill(describe(system, quantity), 110)
     plot.save_figure(plot.plot_retune_summary(
-        amplitudes, k_ratio, c_ratio, before, np.asarray(result.peak), stroke_before,
-        stroke_after, stroke_limit=limit, converged=np.asarray(result.converged),
+        amplitudes, k_ratio, c_ratio, np.asarray(result.x_peak_initial),
+        np.asarray(result.x_peak), np.asarray(result.y_peak_initial),
+        np.asarray(result.y_peak), stroke_limit=limit, converged=np.asarray(result.converged),
         amplitude_label=amplitude_label(system), peak_label=peak_label,
         reference="first-mode Den Hartog",
         title=f"TID retuned for each amplitude\n{described}"),
         output.path("retune_summary.png"))
-    frequencies_hz, response_before, response_after = responses
     plot.save_figure(plot.plot_retune_responses(
-        frequencies_hz, amplitudes, response_before, response_after, k_ratio, c_ratio,
-        ylabel=peak_label, amplitude_unit=amplitude_unit(system.load),
+        np.asarray(result.check_omegas) / (2 * math.pi), amplitudes,
+        np.asarray(result.x_response_initial), np.asarray(result.x_response), k_ratio,
+        c_ratio, ylabel=peak_label, amplitude_unit=amplitude_unit(system.load),
         title=f"{quantity.describe(system.floors).capitalize()} before and after retuning "
         "the TID"), output.path("retune_frequency_response.png"))
-
-
-def _retune_base(result, messages: list[str], i: int, found: bool) -> str:
-    """The status's start at amplitude `i`: the retune's message (`messages`, its
-    `status_messages()`), or where it is ok but a steady state of the strokes over the
-    band with the retuned k and c was not (`found` False), `steady_states_failed`'s."""
-    if bool(result.converged[i]) and not found:
-        return outcome_message(Outcome, Outcome.steady_states_failed)
-    return messages[i]
-
-
-def _given_peaks(system, quantity, amplitudes, omegas, settings, result) -> np.ndarray:
-    """The peaks with the given tuning: the first-mode Den Hartog tuning's (the default)
-    from `result`, else found now."""
-    k, c = first_mode_tunings(system)["den_hartog"]
-    if np.allclose([float(system.tid_stiffness), float(system.tid_damping)], [k, c],
-                   rtol=1e-12):
-        return np.asarray(result.den_hartog_peak)
-    return _peaks_over(system, quantity, amplitudes, omegas, settings)
 
 
 def _peaks_over(system, quantity, amplitudes, omegas, settings) -> np.ndarray:
@@ -337,31 +308,33 @@ def _peaks_over(system, quantity, amplitudes, omegas, settings) -> np.ndarray:
                             quantity=quantity, settings=settings).x_peak)
 
 
-def _retune_records(system, quantity, result, before, stroke_before, stroke_after,
-                    found, limit, omegas) -> list[dict]:
-    """One record per amplitude, keyed by `RETUNE_COLUMNS`: the design, its peak before
-    and after, their ratios and the strokes over the band (`found`: every steady state of
-    the design's was)."""
+def _retune_records(system, quantity, result, limit, omegas) -> list[dict]:
+    """One record per amplitude of a `RetuneResult`, keyed by `RETUNE_COLUMNS`: the design,
+    its peak before (the given tuning's) and after, their ratios and the strokes."""
     k_dh, c_dh = first_mode_tunings(system)["den_hartog"]
+    # the given tuning is Den Hartog's (the default): its peak is the "before"
+    given_is_den_hartog = np.allclose([float(system.tid_stiffness), float(system.tid_damping)],
+                                      [k_dh, c_dh], rtol=1e-12)
     bare = uncontrolled_peak(system, quantity, omegas)
     messages = result.status_messages()
     records = []
     for i, amplitude in enumerate(np.asarray(result.amplitudes)):
         k, c = float(result.tid_stiffness[i]), float(result.tid_damping[i])
-        after, ok = float(result.peak[i]), bool(result.converged[i]) and found[i]
+        before, after = float(result.x_peak_initial[i]), float(result.x_peak[i])
+        stroke_after, ok = float(result.y_peak[i]), bool(result.converged[i])
         records.append(row(
             RETUNE_COLUMNS, amplitude=float(amplitude), amplitude_unit=amplitude_unit(
                 system.load), k_N_per_m=k, c_N_s_per_m=c, k_over_k_den_hartog=k / k_dh,
             c_over_c_den_hartog=c / c_dh, peak_unit=quantity.unit,
-            peak_before=finite(before[i]), peak_after=finite(after),
+            peak_before=finite(before), peak_after=finite(after),
             peak_frequency_after_Hz=finite(float(result.omega_peak[i]) / (2 * math.pi)),
-            peak_after_over_before=ratio(after, before[i]),
-            peak_after_over_den_hartog=ratio(after, result.den_hartog_peak[i]),
+            peak_after_over_before=ratio(after, before),
+            peak_after_over_den_hartog=ratio(after, before) if given_is_den_hartog else None,
             peak_after_over_uncontrolled=ratio(after, amplitude * bare),
-            stroke_before_m=finite(stroke_before[i]), stroke_after_m=finite(stroke_after[i]),
-            stroke_limit_m=limit, within_stroke_limit=bool(stroke_after[i] <= limit),
-            converged=ok, status=status(ok, stroke_problem(stroke_after[i], limit),
-                                        base=_retune_base(result, messages, i, found[i]))))
+            stroke_before_m=finite(result.y_peak_initial[i]), stroke_after_m=finite(
+                stroke_after), stroke_limit_m=limit, within_stroke_limit=stroke_after <= limit,
+            converged=ok, status=status(ok, stroke_problem(stroke_after, limit),
+                                        base=messages[i])))
     return records
 
 
