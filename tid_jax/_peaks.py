@@ -12,11 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_grid,
-    check_precision,
-    check_single_storey_quantity,
     check_system,
 )
 from ._model._system import TIDSystem, compiler_options
@@ -292,14 +290,7 @@ def peaks(
     `quantity`, in its unit; `y_peak` the device's stroke, m).
     """
     settings = SolverSettings() if settings is None else settings
-    if isinstance(system, BuildingTID):
-        check_precision()
-        quantity = Quantity() if quantity is None else quantity
-        quantity.floor_of(system.floors)
-    else:
-        check_single_storey_quantity(quantity)
-        check_system(system)
-        quantity = Quantity()
+    quantity = checked_quantity(system, quantity)
     band = _band(system, omegas)
     amps = np.atleast_1d(np.asarray(check_grid("amplitudes", amplitudes), band.dtype))
     systems = batched(system, amps.size)

@@ -6,13 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_grid,
-    check_precision,
-    check_single_storey_quantity,
-    check_steady_state_device,
-    check_system,
 )
 from ._model._dynamics import parameters
 from ._model._system import TIDSystem, compiler_options
@@ -396,15 +392,7 @@ def frequency_response(
     `converged`.
     """
     settings = SolverSettings() if settings is None else settings
-    if isinstance(system, BuildingTID):
-        check_precision()
-        quantity = Quantity() if quantity is None else quantity
-        quantity.floor_of(system.floors)
-    else:
-        check_single_storey_quantity(quantity)
-        check_system(system)
-        check_steady_state_device(system, "frequency_response")
-        quantity = Quantity()
+    quantity = checked_quantity(system, quantity, "frequency_response")
     omega_array = check_grid("omegas", omegas)
     amplitude_array = check_grid("amplitudes", amplitudes)
     dtype = jnp.result_type(float)

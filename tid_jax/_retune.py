@@ -13,14 +13,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._model._building import BuildingTID, Quantity, building_breakaway, first_mode_tunings
+from ._model._building import (
+    BuildingTID,
+    Quantity,
+    building_breakaway,
+    checked_quantity,
+    first_mode_tunings,
+)
 from ._model._checks import (
     check_grid,
     check_optimiser_options,
-    check_precision,
-    check_single_storey_quantity,
-    check_steady_state_device,
-    check_system,
     is_positive,
 )
 from ._model._linear import den_hartog_tuning, host_breakaway
@@ -234,15 +236,7 @@ def retune(
 
     **Returns:** a `RetuneResult`.
     """
-    if isinstance(system, BuildingTID):
-        check_precision()
-        quantity = Quantity() if quantity is None else quantity
-        quantity.floor_of(system.floors)
-    else:
-        check_single_storey_quantity(quantity)
-        quantity = Quantity()
-        check_system(system)
-        check_steady_state_device(system, "retune")
+    quantity = checked_quantity(system, quantity, "retune")
     settings = SolverSettings() if settings is None else settings
     max_steps = 60 if max_steps is None else max_steps
     tol = 1e-4 if tol is None else tol

@@ -36,7 +36,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._checks import check_grid
+from ._checks import (
+    check_grid,
+    check_precision,
+    check_single_storey_quantity,
+    check_steady_state_device,
+    check_system,
+)
 from ._linear import den_hartog_tuning
 from ._structure import Structure
 from ._system import FRICTION_WIDTH_RATIO, TIDSystem, check_values, is_compliant
@@ -300,6 +306,24 @@ def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
                        parasitic_damping=system.parasitic_damping,
                        terminal_mass=system.terminal_mass,
                        series_stiffness=system.series_stiffness, backlash=system.backlash)
+
+
+def checked_quantity(system, quantity: "Quantity | None", purpose: str | None = None
+                     ) -> "Quantity":
+    """The `quantity` a verb measures on `system` (a `BuildingTID`: default the top floor's
+    displacement; a `TIDSystem`: its host's, the only one), after the checks of both
+    (double precision, the quantity's floor; with `purpose`, that the steady-state
+    solvers take a `TIDSystem`'s device)."""
+    if isinstance(system, BuildingTID):
+        check_precision()
+        quantity = Quantity() if quantity is None else quantity
+        quantity.floor_of(system.floors)
+        return quantity
+    check_single_storey_quantity(quantity)
+    check_system(system)
+    if purpose is not None:
+        check_steady_state_device(system, purpose)
+    return Quantity()
 
 
 def building_of(system: "BuildingTID | TIDSystem", load: str) -> BuildingTID:
