@@ -82,6 +82,15 @@ def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system)
         np.testing.assert_allclose(getattr(mine, name), getattr(paper, name), rtol=1e-6,
                                    err_msg=name)
     assert type(tj.frequency_response(building, omegas, 100.0)) is tj.FrequencyResponse
+    # the retune: the same optimiser, from the same reference tuning (Den Hartog's on the
+    # one mode), to the same design and peaks
+    mine, paper = (tj.retune(s, [600.0], omegas=omegas) for s in (building, system))
+    assert type(mine) is type(paper) is tj.RetuneResult
+    for name in ("status", "iterations"):
+        assert np.array_equal(np.asarray(getattr(mine, name)), np.asarray(getattr(paper, name)))
+    for name in ("tid_stiffness", "tid_damping", "x_peak", "y_peak", "x_peak_initial"):
+        np.testing.assert_allclose(getattr(mine, name), getattr(paper, name), rtol=1e-10,
+                                   err_msg=name)
 
 
 def test_random_and_recorded_loads_take_the_paper_system_as_its_one_storey_building(system):
