@@ -5,14 +5,13 @@ maxima refined by parabolas through ever closer frequencies, their exact derivat
 highest: the minimax of the two peaks by SLSQP (scipy) on its epigraph form, shared
 with the robust design (`minimax`)."""
 
-from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
 from .._model._building import (
     BuildingTID,
@@ -22,7 +21,6 @@ from .._model._building import (
     log_tuned,
     log_tuning_of,
     quantity_amplitude,
-    uncontrolled_amplitude,
 )
 from .._model._checks import check_grid
 from .._orbit._building_orbit import (
@@ -35,7 +33,7 @@ from .._orbit._flow import flow, plant, projection_units
 from .._orbit._implicit import fixed_point_matrix
 from .._orbit._sampled_peaks import local_peaks, refined_peak
 from .._orbit._settings import SolverSettings
-from .._runtime._outcomes import Outcome, outcome_code, outcome_messages
+from .._runtime._outcomes import Outcome
 
 # The default band of a building's design: these multiples of the bare structure's
 # first natural frequency.
@@ -239,30 +237,15 @@ def peak_gradient(system: BuildingTID, quantity: Quantity, amplitude, omega, sta
 
 
 class BuildingRetune(eqx.Module):
-    """The retuned TID per amplitude (SI): `tid_stiffness` k (N/m), `tid_damping` c
-    (N s/m), `peak` (of the quantity over the band), `omega_peak` (rad/s), `uncontrolled`
-    (the bare structure's peak over the band at that amplitude), the first-mode tunings'
-    peaks `den_hartog_peak`, `h_infinity_peak`, and `status`, codes of `Outcome` read by
-    `status_messages()`: `steady_states_failed` where no first-mode tuning's steady states
-    were all found (no search; the H-infinity tuning returned), `not_stationary` where the
-    search ended neither by its tolerance nor at a first-order minimax point (`peak` NaN
-    for both), `peak_at_band_edge` where the design's peak is at an end of the band, else
-    `ok`; `converged` is `status == ok`."""
+    """The minimax tuning per amplitude (SI): `tid_stiffness` k (N/m), `tid_damping` c
+    (N s/m), `peak` (of the quantity over the band; NaN where the search did not end at
+    a first-order minimax point), and `converged`: where it did, within the band (not at
+    an end of it)."""
 
-    amplitudes: Float[Array, " amps"]
     tid_stiffness: Float[Array, " amps"]
     tid_damping: Float[Array, " amps"]
     peak: Float[Array, " amps"]
-    omega_peak: Float[Array, " amps"]
-    uncontrolled: Float[Array, " amps"]
     converged: Bool[Array, " amps"]
-    den_hartog_peak: Float[Array, " amps"]
-    h_infinity_peak: Float[Array, " amps"]
-    status: Int[Array, " amps"]
-
-    def status_messages(self) -> list[str]:
-        """The meaning of `status`, one message per amplitude (`Outcome`'s)."""
-        return outcome_messages(self.status)
 
 
 @eqx.filter_jit
@@ -421,14 +404,12 @@ def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, ma
                 linear):
     """The retune at one amplitude (`minimax` of one scenario), from the better of the
     first mode's tunings and within `_RANGE` of its H-infinity tuning. Returns the
-    tuning, its `Peak`, the `Outcome` of the search (ok, not_stationary, or
-    steady_states_failed where no start was found) and the peaks of the first-mode
-    tunings (`tunings`: name -> (k, c))."""
+    tuning, its `Peak` and the `Outcome` of the search (ok, not_stationary, or
+    steady_states_failed where no start was found); `tunings`: name -> (k, c)."""
     search = BandSearch(system, quantity, amplitude, omegas, settings, linear)
-    references, starts = {}, {}
+    starts = {}
     for name, tuning in tunings.items():
         logs, _, ok, _ = search(np.log(np.asarray(tuning, float)))
-        references[name] = np.exp(logs.max()) if ok else np.nan
         starts[name] = logs.max() if ok else np.inf
     centre = np.log(np.asarray(tunings["h_infinity"], float))
     first = min(starts, key=starts.get)
@@ -437,9 +418,9 @@ def _retune_one(system, quantity, amplitude, omegas, tunings, settings, rtol, ma
         found = minimax([search], [0.0], np.log(np.asarray(tunings[first], float)), centre,
                         rtol, max_steps)
     if found is None:
-        return np.exp(centre), None, Outcome.steady_states_failed, references
+        return np.exp(centre), None, Outcome.steady_states_failed
     x, _, ok = found
-    return np.exp(x), search(x)[3], Outcome.ok if ok else Outcome.not_stationary, references
+    return np.exp(x), search(x)[3], Outcome.ok if ok else Outcome.not_stationary
 
 
 def at_band_edge(omega_peak, omegas) -> np.ndarray:
@@ -458,18 +439,15 @@ def frictionless(system: BuildingTID) -> bool:
 
 def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quantity(), *,
                     omegas=None, settings: SolverSettings | None = None,
-                    rtol: float = 1e-6, max_steps: int = 100,
-                    progress: Callable[[int, int], None] | None = None) -> BuildingRetune:
+                    rtol: float = 1e-6, max_steps: int = 100) -> BuildingRetune:
     """The TID's (k, c) that minimise the peak of `quantity` over the band of `omegas`
     (default `first_mode_band`; at least `BAND_POINTS` frequencies over their range) at
-    each of `amplitudes`: the whole structure and the
-    friction seen by each steady state, the two highest peaks over frequency and their
-    exact derivatives (`peak_gradient`) given to SLSQP (scipy) in the epigraph form
-    (`_retune_one`), from the first mode's exact H-infinity tuning
-    (`first_mode_tunings`) and within a factor `_RANGE` of it; `rtol`: the search's
-    tolerance on the log peak. With the peaks of the first-mode Den Hartog and
-    H-infinity tunings for comparison. `progress(done, total)` is called after each
-    amplitude."""
+    each of `amplitudes`, the minimax point that the building's robust design and
+    sensitivities start from: the whole structure and the friction seen by each steady
+    state, the two highest peaks over frequency and their exact derivatives
+    (`peak_gradient`) given to SLSQP (scipy) in the epigraph form (`_retune_one`), from
+    the better of the first mode's tunings (`first_mode_tunings`) and within a factor
+    `_RANGE` of its H-infinity one; `rtol`: the search's tolerance on the log peak."""
     amplitudes = np.atleast_1d(check_grid("amplitudes", amplitudes)).astype(float)
     omegas = search_grid(system, omegas)
     quantity.floor_of(system.floors)
@@ -477,25 +455,14 @@ def retune_building(system: BuildingTID, amplitudes, quantity: Quantity = Quanti
     tunings = first_mode_tunings(system)
     linear = frictionless(system)
     w = jnp.asarray(omegas)
-    rows = []
-    for i, amplitude in enumerate(amplitudes):
-        rows.append(_retune_one(system, quantity, jnp.asarray(amplitude), w, tunings,
-                                settings, rtol, max_steps, linear))
-        if progress is not None:
-            progress(i + 1, amplitudes.size)
+    rows = [_retune_one(system, quantity, jnp.asarray(amplitude), w, tunings, settings, rtol,
+                        max_steps, linear) for amplitude in amplitudes]
     tuning = np.asarray([row[0] for row in rows])
-    found = [row[1] for row in rows]
-    status = np.asarray([outcome_code(row[2]) for row in rows])
-    searched = status == outcome_code(Outcome.ok)
-    omega_peak = np.asarray([np.nan if p is None else float(p.omega) for p in found])
-    status = np.where(searched & at_band_edge(omega_peak, omegas),
-                      outcome_code(Outcome.peak_at_band_edge), status)
-    reference = {name: np.asarray([row[3][name] for row in rows]) for name in tunings}
-    bare = np.max(np.asarray(uncontrolled_amplitude(system, quantity, w)))
+    searched = np.asarray([row[2] == Outcome.ok for row in rows])
+    omega_peak = np.asarray([np.nan if row[1] is None else float(row[1].omega)
+                             for row in rows])
     return BuildingRetune(
-        amplitudes=amplitudes, tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
-        peak=np.asarray([float(p.value) if o else np.nan
-                         for p, o in zip(found, searched, strict=True)]),
-        omega_peak=omega_peak, uncontrolled=amplitudes * bare,
-        converged=status == outcome_code(Outcome.ok), den_hartog_peak=reference["den_hartog"],
-        h_infinity_peak=reference["h_infinity"], status=status)
+        tid_stiffness=tuning[:, 0], tid_damping=tuning[:, 1],
+        peak=np.asarray([float(row[1].value) if ok else np.nan
+                         for row, ok in zip(rows, searched, strict=True)]),
+        converged=searched & ~at_band_edge(omega_peak, omegas))
