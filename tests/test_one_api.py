@@ -32,6 +32,10 @@ def test_no_public_function_is_written_for_one_kind_of_structure():
     pairs = [(name, other) for name in names for other in names if name != other and (
         other in (f"building_{name}", f"{name}_building", f"building{name}"))]
     assert not pairs
+    # and no result or settings type of one kind: the structure's own type names it
+    results = [name for name in names if inspect.isclass(getattr(tj, name))
+               and re.search("Building|Host|Storey", name) and name != "BuildingTID"]
+    assert not results, f"public types for one kind of structure: {results}"
 
 
 def test_the_arguments_run_system_frequencies_amplitudes():

@@ -29,8 +29,6 @@ _API = {
     "_model._structure": ("Structure",),
     "_model._system": ("DEFAULT_FRICTION_WIDTH", "PAPER_AMPLITUDES", "PAPER_STROKE", "TIDSystem"),
     "_optimise._best_tunings": ("BestTunings", "best_tunings"),
-    "_optimise._building_robust": ("BuildingRobust",),
-    "_optimise._building_sensitivity": ("BuildingOptimum", "BuildingSensitivities"),
     "_orbit._settings": ("SolverSettings",),
     "_peaks": ("Peaks", "default_omegas", "peak_response", "peaks"),
     "_receptance": ("breakaway_amplitude", "linear_receptance"),
@@ -120,13 +118,6 @@ if TYPE_CHECKING:  # the names as IDEs and type checkers see them; loaded lazily
     from ._optimise._best_tunings import (
         BestTunings as BestTunings,
         best_tunings as best_tunings,
-    )
-    from ._optimise._building_robust import (
-        BuildingRobust as BuildingRobust,
-    )
-    from ._optimise._building_sensitivity import (
-        BuildingOptimum as BuildingOptimum,
-        BuildingSensitivities as BuildingSensitivities,
     )
     from ._orbit._settings import (
         SolverSettings as SolverSettings,

@@ -18,7 +18,6 @@ from ._model._checks import (
     check_system,
 )
 from ._model._system import TIDSystem, compiler_options
-from ._optimise._building_design import first_mode_band
 from ._orbit._sampled_peaks import (
     PEAK_NEWTON_STEPS,
     REFINED_PEAKS,
@@ -34,6 +33,7 @@ from ._orbit._sampled_peaks import (
     true_peaks,
 )
 from ._orbit._settings import SolverSettings
+from ._orbit._steady_state import one_by_one
 from ._response import (
     FrequencyResponse,
     batched,
@@ -48,6 +48,16 @@ from ._runtime._cache import compiled
 # for TID frequencies from well below to 25% above Den Hartog's.
 BAND = (0.65, 1.4)
 DEFAULT_FREQUENCIES = 61
+# The default band of a building: these multiples of the bare structure's first natural
+# frequency.
+BUILDING_BAND = (0.5, 1.6)
+
+
+def first_mode_band(system: BuildingTID, points: int = DEFAULT_FREQUENCIES) -> np.ndarray:
+    """`points` frequencies (rad/s) over `BUILDING_BAND` of the first mode."""
+    return np.linspace(*BUILDING_BAND, points) * system.structure.modes()[0][0]
+
+
 # The peaks' programs (`_selection`, `_stencils`, `_newton_steps`, `_peaks_found`) run on
 # chunks of this many lanes (`_in_chunks`), so that one compiled program serves any
 # number of lanes: a run meets many (a retune's checks, a design's stencils, their
@@ -76,17 +86,22 @@ def default_omegas(system: TIDSystem | BuildingTID,
     return jnp.asarray(np.linspace(*BAND, n) * float(system.host_frequency))
 
 
-def sweep(system: TIDSystem, amplitude, omegas, settings: SolverSettings, z_init=None):
-    """Peak |x|, |y| (m), convergence and the orbits' scaled states at every frequency for
-    one amplitude, shooting from `z_init` (one state per frequency) if given."""
+def sweep(system: TIDSystem | BuildingTID, amplitude, omegas, settings: SolverSettings,
+          z_init=None, quantity: Quantity = Quantity()):
+    """Peak |x| (a building's `quantity`), |y| (m), convergence and the orbits' scaled
+    states at every frequency for one amplitude, shooting from `z_init` (one state per
+    frequency) if given."""
 
     def one(omega, z0):
-        orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z0)
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings, z0,
+                                             quantity=quantity)
         return x_max, y_max, orbit.converged, orbit.state
 
+    # (a building's LAPACK calls one frequency after another: `one_by_one`)
+    each = one_by_one if isinstance(system, BuildingTID) else jax.vmap
     if z_init is None:
-        return jax.vmap(lambda omega: one(omega, None))(omegas)
-    return jax.vmap(one)(omegas, z_init)
+        return each(lambda omega: one(omega, None))(omegas)
+    return each(one)(omegas, z_init)
 
 
 class Peaks(eqx.Module):

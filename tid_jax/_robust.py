@@ -9,17 +9,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_distinct,
-    check_single_storey_quantity,
-    check_steady_state_device,
-    check_system,
     is_positive,
 )
 from ._model._system import PAPER_AMPLITUDES, PAPER_STROKE, TIDSystem
 from ._optimise._best_tunings import BestTunings, check_best, checked_best
-from ._optimise._building_robust import BuildingRobust, robust_building
+from ._optimise._design import scaled_hosts
 from ._optimise._design_evaluation import (
     Context,
     Evaluation,
@@ -254,11 +251,12 @@ class TuningPerformance(eqx.Module):
     converged: Bool[Array, "scales amps"]
 
 
-def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings, map_lanes):
-    """Host and inerter peaks (m; on the grid, refined by parabolas, as the robust design
-    judges them) and convergence `[tunings, scales, amps]` of each tuning (k, c) of
-    `tunings`, over `omegas` (rad/s) times each scale: every steady state in one batch,
-    one share per process of `map_lanes`."""
+def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings, map_lanes,
+                  quantity: Quantity = Quantity()):
+    """Host (a building's `quantity`) and inerter peaks (on the grid, refined by
+    parabolas, as the robust design judges them) and convergence `[tunings, scales, amps]`
+    of each tuning (k, c) of `tunings`, over `omegas` (rad/s) times each scale: every
+    steady state in one batch, one share per process of `map_lanes`."""
     tunings, scales, amplitudes = (np.asarray(a, dtype=float) for a in (tunings, scales,
                                                                         amplitudes))
     shape = (len(tunings), len(scales), len(amplitudes))
@@ -266,56 +264,62 @@ def _tuning_peaks(system, tunings, amplitudes, scales, omegas, settings, map_lan
         g.reshape(-1) for g in np.meshgrid(np.arange(len(tunings)), scales, amplitudes,
                                            indexing="ij"))
     lanes = eqx.tree_at(
-        lambda lane: (lane.host_stiffness, lane.tid_stiffness, lane.tid_damping),
-        batched(system, lane_tuning.size),
-        (float(system.host_stiffness) * lane_scale**2, tunings[lane_tuning, 0],
-         tunings[lane_tuning, 1]))
+        lambda lane: (lane.tid_stiffness, lane.tid_damping),
+        scaled_hosts(batched(system, lane_tuning.size), lane_scale),
+        (tunings[lane_tuning, 0], tunings[lane_tuning, 1]))
     grids = lane_scale[:, None] * np.asarray(omegas)[None]
-    x, y, ok = map_shares(map_lanes, _lane_peaks, (lanes, lane_amplitude, grids), settings)
+    x, y, ok = map_shares(map_lanes, _lane_peaks, (lanes, lane_amplitude, grids), settings,
+                          quantity)
     return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
 
 
-def _lane_peaks(lanes, amplitudes, grids, settings):
+def _lane_peaks(lanes, amplitudes, grids, settings, quantity):
     """The host and inerter peaks on the grid (refined by parabolas) of each lane's
     `lane_response`, and whether every steady state of it converged, as NumPy arrays: a
     task of `map_shares`."""
-    response = lane_response(lanes, amplitudes, grids, settings)
+    response = lane_response(lanes, amplitudes, grids, settings, quantity=quantity)
     return (np.asarray(lane_grid_peaks(response.x_max, grids)[0]),
             np.asarray(lane_grid_peaks(response.y_max, grids)[0]),
             np.all(np.asarray(response.converged), axis=-1))
 
 
-def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings, map_lanes):
+def _peaks_per_scale(system, k, c, amplitudes, scales, omegas, settings, map_lanes,
+                     quantity: Quantity = Quantity()):
     """`_tuning_peaks` of the one tuning (k, c): `[scales, amps]`."""
     return tuple(a[0] for a in _tuning_peaks(system, [(k, c)], amplitudes, scales, omegas,
-                                             settings, map_lanes))
+                                             settings, map_lanes, quantity))
 
 
 
 def tuning_performance(
-    system: TIDSystem, best: BestTunings, *, settings: SolverSettings = SolverSettings(),
+    system: TIDSystem | BuildingTID, best: BestTunings, *,
+    settings: SolverSettings = SolverSettings(),
     map_lanes: Callable = serial,
 ) -> TuningPerformance:
     """The system's tuning over the scenarios of `best` (same band, amplitudes and host
-    frequency scales): its host and inerter peaks (by `peaks`) and the ratio of its host
-    peak to the best achievable, with the worst case and where it occurs.
+    frequency scales): its host (a building's `best.quantity`) and inerter peaks (by
+    `peaks`) and the ratio of its host peak to the best achievable, with the worst case
+    and where it occurs.
 
     **Arguments:**
 
-    - `system`: the `TIDSystem` of `best` (rigid device), at the tuning to judge.
+    - `system`: the `TIDSystem` (rigid device) or `BuildingTID` of `best`, at the tuning
+      to judge.
     - `best`: a `BestTunings` (the scenarios, the band and the best peaks).
     - `settings`: `SolverSettings` of every steady state.
     - `map_lanes`: how shares of the steady states are mapped (see `retune`).
 
     **Returns:** a `TuningPerformance`.
     """
-    check_system(system)
-    check_steady_state_device(system, "tuning_performance")
+    if not isinstance(best, BestTunings):
+        raise ValueError(f"best must be a BestTunings, got {type(best).__name__}")
+    quantity = checked_quantity(system, best.quantity, "tuning_performance")
     check_best(best, system)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     amps = np.asarray(best.amplitudes)
     scales = np.asarray(best.host_frequency_scales)
-    x, y, ok = _peaks_per_scale(system, k, c, amps, scales, best.omegas, settings, map_lanes)
+    x, y, ok = _peaks_per_scale(system, k, c, amps, scales, best.omegas, settings, map_lanes,
+                                quantity)
     ratio = x / np.asarray(best.host_peak)
     i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     return TuningPerformance(
@@ -401,7 +405,7 @@ def _robust_start(system, best: BestTunings, target, settings,
     )
     scores = []
     xs, ys, _ = _tuning_peaks(system, candidates, np.asarray(best.amplitudes), scales,
-                              np.asarray(best.omegas)[::2], settings, map_lanes)
+                              np.asarray(best.omegas)[::2], settings, map_lanes, best.quantity)
     for x, y in zip(xs, ys, strict=True):
         worst = float(np.max(np.log(x / np.asarray(best.host_peak))))
         excess = float(np.log(np.max(y))) - target if target is not None else 0.0
@@ -421,17 +425,6 @@ def _check_options(max_steps, tol, retune_settings, robust_settings) -> None:
                          f"{type(robust_settings).__name__}")
 
 
-def _robust_building(system, amplitudes, host_frequency_scales, stroke_limit, omegas,
-                     quantity, settings, max_steps, tol, progress) -> BuildingRobust:
-    """`robust_tune` of a building (`robust_building`, stiffness times the scales squared)."""
-    return robust_building(
-        system, amplitudes, quantity,
-        stiffness_scales=np.square(np.asarray(host_frequency_scales, float)),
-        stroke_limit=stroke_limit, omegas=omegas, settings=settings,
-        rtol=1e-6 if tol is None else tol, max_steps=100 if max_steps is None else max_steps,
-        progress=progress)
-
-
 def robust_tune(
     system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike = PAPER_AMPLITUDES,
@@ -448,7 +441,7 @@ def robust_tune(
     robust_settings: RobustSettings = RobustSettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> RobustDesign | BuildingRobust:
+) -> RobustDesign:
     """One TID stiffness k and damping c for every scenario (forcing amplitude and host
     frequency scale): the minimiser of the worst case, over the scenarios, of the peak
     host displacement over the band divided by the best achievable in that scenario,
@@ -467,10 +460,9 @@ def robust_tune(
     `robust_settings.check_refinement` times finer; if it is over the limit there, the
     target is lowered by the excess and the design polished again.
 
-    A `BuildingTID` is designed for the whole structure by `robust_building` (the
-    retune's SLSQP on every scenario's two highest peaks of its `quantity`, default the
-    top floor's displacement; `max_steps` default 100, `tol` on the log peak default
-    1e-6), its stiffness matrix times s**2 for each scale s; a `BuildingRobust`.
+    A `BuildingTID` is designed for the whole structure in the same way: its peaks are its
+    `quantity`'s (default the top floor's displacement), a scale s multiplies its
+    stiffness matrix by s**2.
 
     **Arguments:**
 
@@ -494,30 +486,24 @@ def robust_tune(
     - `progress`: if given, called with one-line messages.
     - `map_lanes`: how independent lanes are mapped (see `retune`).
 
-    **Returns:** a `RobustDesign` (a `BuildingRobust` for a `BuildingTID`).
+    **Returns:** a `RobustDesign`.
     """
-    if isinstance(system, BuildingTID):
-        if best is not None or map_lanes is not serial:
-            raise ValueError("a BuildingTID's robust design takes neither best nor map_lanes")
-        return _robust_building(system, amplitudes, host_frequency_scales, stroke_limit,
-                                omegas, quantity, settings, max_steps, tol, progress)
-    check_single_storey_quantity(quantity)
+    quantity = checked_quantity(system, quantity, "robust_tune")
     settings, max_steps, tol = _defaults(settings, max_steps, tol)
-    check_system(system)
-    check_steady_state_device(system, "robust_tune")
     amps = check_distinct("amplitudes", amplitudes)
     scales = check_distinct("host_frequency_scales", host_frequency_scales)
     limit = np.inf if stroke_limit is None else _check_stroke_limit(stroke_limit)
     _check_options(max_steps, tol, retune_settings, robust_settings)
     say = progress if progress is not None else (lambda message: None)
     best = checked_best(system, amps, scales, best, omegas, settings, retune_settings,
-                         progress, map_lanes)
+                         progress, map_lanes, quantity)
     band = np.asarray(best.omegas)
     # The worst case over scenarios is of the peaks on the band's grid (refined by
     # parabolas), as its reference `best.objective` is; the stroke limit is then checked
     # on a finer grid.
     ctx = Context(system, band, settings, locate=False,
-                  stencil_step=robust_settings.stencil_step, map_lanes=map_lanes)
+                  stencil_step=robust_settings.stencil_step, map_lanes=map_lanes,
+                  quantity=quantity)
     scenarios = [
         Scenario(float(amplitude), float(scale), float(best.objective[i, j]))
         for i, scale in enumerate(scales)
@@ -536,7 +522,7 @@ def robust_tune(
     for round_ in range(robust_settings.stroke_rounds + 1):
         k, c = ctx.tuning(minimum.evaluation.u)
         _, check_y, check_ok = _peaks_per_scale(system, k, c, amps, scales, fine, settings,
-                                                map_lanes)
+                                                map_lanes, quantity)
         max_stroke = float(np.max(check_y))
         if max_stroke <= limit or round_ == robust_settings.stroke_rounds:
             break

@@ -8,18 +8,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._model._building import BuildingTID, Quantity
+from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_amplitude,
     check_distinct,
-    check_single_storey_quantity,
-    check_steady_state_device,
-    check_system,
     is_positive,
 )
 from ._model._system import TIDSystem
 from ._optimise._best_tunings import BestTunings, best_tunings, check_best
-from ._optimise._building_sensitivity import BuildingSensitivities, building_sensitivities
 from ._optimise._design_evaluation import (
     Context,
     Scenario,
@@ -135,9 +131,10 @@ class OptimumSensitivities(eqx.Module):
 
 
 class Sensitivities(eqx.Module):
-    """Derivatives of the peak host displacement and of the inerter stroke over the band with
-    respect to each parameter in `parameters` (the physical fields of `TIDSystem` and the
-    forcing `amplitude`; their units in `PARAMETER_UNITS`), at the given tuning and, in
+    """Derivatives of the peak host displacement (a building's quantity) and of the inerter
+    stroke over the band with respect to each parameter in `parameters` (`parameters_of`:
+    the physical fields of `TIDSystem`, or a building's device, floors and storeys, and
+    the `amplitude`; their units by `parameter_unit`), at the given tuning and, in
     `optimum` (None if not asked for), at the retuned optimum. SI units.
 
     - `values`: the parameters' values.
@@ -355,7 +352,7 @@ def sensitivities(
     tol: float = 1e-4,
     retune_settings: RetuneSettings = RetuneSettings(),
     sensitivity_settings: SensitivitySettings = SensitivitySettings(),
-) -> Sensitivities | BuildingSensitivities:
+) -> Sensitivities:
     """Sensitivities of the peak steady-state host displacement and inerter stroke over the
     band `omegas` (rad/s; default `default_omegas(system)`) at forcing amplitude `amplitude`
     (N) to every physical parameter and the amplitude: derivatives and elasticities, by
@@ -376,9 +373,10 @@ def sensitivities(
     rigid device has neither to vary). At zero backlash its derivative is the one-sided
     one (the free play opening) and its elasticity 0.
 
-    A `BuildingTID` gives the elasticities of its `quantity`'s peak (default the top
-    floor's displacement) in its device's and its floors' parameters
-    (`building_sensitivities`): a `BuildingSensitivities`.
+    A `BuildingTID`'s peak is its `quantity`'s (default the top floor's displacement),
+    its parameters its device's, every floor's mass and every storey's stiffness (the
+    damping matrix held) and the amplitude (`building_parameters`); its optimum is the
+    retune's, from the first mode's Den Hartog tuning.
 
     **Arguments:**
 
@@ -397,13 +395,10 @@ def sensitivities(
 
     **Returns:** a `Sensitivities` (parameters in the order `parameters_of(system)`).
     """
-    if isinstance(system, BuildingTID):
-        return building_sensitivities(system, [check_amplitude(amplitude)], quantity,
-                                      omegas=omegas, settings=settings, optimum=optimum)
-    check_single_storey_quantity(quantity)
     amplitude = check_amplitude(amplitude)
     return amplitude_sensitivities(
-        system, [amplitude], omegas=omegas, optimum=optimum, best=best, settings=settings,
+        system, [amplitude], omegas=omegas, quantity=quantity, optimum=optimum, best=best,
+        settings=settings,
         max_steps=max_steps, tol=tol, retune_settings=retune_settings,
         sensitivity_settings=sensitivity_settings)[0]
 
@@ -423,7 +418,7 @@ def amplitude_sensitivities(
     sensitivity_settings: SensitivitySettings = SensitivitySettings(),
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
-) -> list[Sensitivities] | BuildingSensitivities:
+) -> list[Sensitivities]:
     """`sensitivities` at each of the forcing `amplitudes` (N, distinct), the steady
     states of every amplitude solved in the same batches (and, with `optimum=True` and no
     `best`, the optimum of every amplitude found by one `best_tunings`). `progress`, if
@@ -431,16 +426,10 @@ def amplitude_sensitivities(
     runs, the given tuning's derivatives, the optima's); `map_lanes` maps the independent
     lanes (see `retune`). The other arguments are those of `sensitivities`.
 
-    **Returns:** a list of `Sensitivities`, one per amplitude, in their order (a
-    `BuildingSensitivities` of every amplitude for a `BuildingTID`).
+    **Returns:** a list of `Sensitivities`, one per amplitude, in their order.
     """
-    if isinstance(system, BuildingTID):
-        return building_sensitivities(system, amplitudes, quantity, omegas=omegas,
-                                      settings=settings, optimum=optimum)
-    check_single_storey_quantity(quantity)
+    quantity = checked_quantity(system, quantity, "sensitivities")
     settings = SolverSettings() if settings is None else settings
-    check_system(system)
-    check_steady_state_device(system, "sensitivities")
     amplitudes = check_distinct("amplitudes", amplitudes)
     band = _band(system, omegas)
     if not isinstance(optimum, bool):
@@ -450,11 +439,12 @@ def amplitude_sensitivities(
         raise ValueError("sensitivity_settings must be a SensitivitySettings, got "
                          f"{type(sensitivity_settings).__name__}")
     step = sensitivity_settings.stencil_step
-    ctx = Context(system, band, settings, locate=True, stencil_step=step, map_lanes=map_lanes)
+    ctx = Context(system, band, settings, locate=True, stencil_step=step, map_lanes=map_lanes,
+                  quantity=quantity)
     if optimum and best is None:
         best = best_tunings(system, amplitudes, omegas=band, settings=settings,
                             max_steps=max_steps, tol=tol, retune_settings=retune_settings,
-                            progress=progress, map_lanes=map_lanes)
+                            progress=progress, map_lanes=map_lanes, quantity=quantity)
     k, c = float(system.tid_stiffness), float(system.tid_damping)
     thetas = [ctx.theta(k, c, amplitude) for amplitude in amplitudes]
     given = ctx.evaluate([(theta, 1.0, None) for theta in thetas])
@@ -470,7 +460,8 @@ def amplitude_sensitivities(
         # Exact friction has no integration error to tighten: the context of the given
         # tuning serves (one compiled program, not two that compute the same).
         accurate = ctx if tight == given_settings else Context(
-            system, band, tight, locate=True, stencil_step=step, map_lanes=map_lanes)
+            system, band, tight, locate=True, stencil_step=step, map_lanes=map_lanes,
+            quantity=quantity)
         finals, models = _polished(accurate, starts, retune_settings.sharpness[-1],
                                    sensitivity_settings)
         optimal = [

@@ -357,13 +357,14 @@ PARAMETER_LABELS = {
 
 
 def plot_elasticities(
-    amplitudes, host, stroke, *, optimum_host=None, optimum_stroke=None, title=None
+    amplitudes, host, stroke, *, optimum_host=None, optimum_stroke=None, title=None,
+    xlabel="forcing amplitude A [N]", peak="host displacement",
 ):
-    """Elasticities d ln(peak) / d ln(p) of the peak host displacement (a) and of the peak
-    inerter stroke (b) against forcing amplitude (N), one colour per parameter. `host` and
-    `stroke` map parameter names to arrays over `amplitudes` at the given tuning (solid
-    lines); `optimum_host` and `optimum_stroke`, if given, the same at the tuning retuned
-    for each amplitude (dashed lines)."""
+    """Elasticities d ln(peak) / d ln(p) of the peak response (a; `peak` names it) and of
+    the peak inerter stroke (b) against amplitude (`xlabel`), one colour per parameter.
+    `host` and `stroke` map parameter names to arrays over `amplitudes` at the given
+    tuning (solid lines); `optimum_host` and `optimum_stroke`, if given, the same at the
+    tuning retuned for each amplitude (dashed lines)."""
     fig, (ax_x, ax_y) = plt.subplots(1, 2, figsize=(12, 4.8), layout="constrained")
     colours = plt.get_cmap("tab10")
     for ax, given, optimum in ((ax_x, host, optimum_host), (ax_y, stroke, optimum_stroke)):
@@ -374,10 +375,10 @@ def plot_elasticities(
             if optimum is not None and name in optimum:
                 ax.plot(amplitudes, optimum[name], color=colour, linestyle="--", marker=".")
         ax.axhline(0.0, color="black", linewidth=0.8)
-        ax.set(xscale="log", xlabel="forcing amplitude A [N]")
+        ax.set(xscale="log", xlabel=xlabel)
         _plain_log_axis(ax.xaxis)
         ax.grid(alpha=0.3, which="both")
-    ax_x.set(ylabel="elasticity  d ln x_peak / d ln p", title="(a) peak host displacement")
+    ax_x.set(ylabel="elasticity  d ln x_peak / d ln p", title=f"(a) peak {peak}")
     ax_y.set(ylabel="elasticity  d ln y_peak / d ln p", title="(b) peak inerter stroke")
     handles, labels = ax_x.get_legend_handles_labels()
     if optimum_host is not None:
@@ -469,25 +470,15 @@ def plot_building_response(frequencies_hz, amplitudes, response, uncontrolled, *
     return fig
 
 
-def plot_building_elasticities(amplitudes, names, elasticities, *, xlabel, title=None):
-    """Elasticities (amplitudes x parameters) of a building's peak: against amplitude,
-    one line per parameter, for several amplitudes; bars for one."""
-    elasticities = np.asarray(elasticities)
+def plot_elasticity_bars(names, elasticities, *, title=None):
+    """Elasticities of the peak at one amplitude, one bar per parameter of `names`."""
     fig, ax = plt.subplots(figsize=(8.5, max(4.6, 0.22 * len(names))), layout="constrained")
-    if len(amplitudes) > 1:
-        colours = plt.get_cmap("tab20")
-        for j, name in enumerate(names):
-            ax.plot(amplitudes, elasticities[:, j], marker="o", markersize=3, linewidth=1.0,
-                    color=colours(j % 20), label=name)
-        ax.set(xlabel=xlabel, ylabel="d ln peak / d ln p")
-        ax.legend(fontsize=7, ncol=2)
-        ax.axhline(0.0, color="0.5", linewidth=0.6)
-    else:
-        ax.barh(np.arange(len(names)), elasticities[0])
-        ax.set_yticks(np.arange(len(names)), names, fontsize=7)
-        ax.invert_yaxis()
-        ax.set(xlabel="d ln peak / d ln p")
-        ax.axvline(0.0, color="0.5", linewidth=0.6)
+    ax.barh(np.arange(len(names)), np.asarray(elasticities))
+    ax.set_yticks(np.arange(len(names)), [PARAMETER_LABELS.get(n, n) for n in names],
+                  fontsize=7)
+    ax.invert_yaxis()
+    ax.set(xlabel="d ln peak / d ln p")
+    ax.axvline(0.0, color="0.5", linewidth=0.6)
     ax.set_title(title or "elasticities of the peak")
     ax.grid(alpha=0.3)
     return fig

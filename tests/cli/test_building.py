@@ -178,18 +178,18 @@ def test_sensitivity_of_a_building_names_every_floor_and_storey(tmp_path):
                                     damping_ratio=0.02),
         275.0, 135.0, data["tid_stiffness_N_per_m"], data["tid_damping_N_s_per_m"],
         load="ground")
-    mine = tj.amplitude_sensitivities(system, [2.0], quantity=tj.Quantity("drift", 1),
-                                      optimum=False)
-    for j, name in enumerate(mine.names):
+    (mine,) = tj.amplitude_sensitivities(system, [2.0], quantity=tj.Quantity("drift", 1),
+                                         optimum=False)
+    for j, name in enumerate(mine.parameters):
         assert records[name]["elasticity"] == pytest.approx(
-            float(jnp.asarray(mine.elasticities)[0, j]), rel=1e-6, abs=1e-9)
+            float(jnp.asarray(mine.host_elasticity)[j]), rel=1e-6, abs=1e-9)
         record = records[name]
         if record["value"]:
             assert record["derivative_per_unit"] == pytest.approx(
                 record["elasticity"] * record["peak"] / record["value"])
     # and at the retuned optimum, which does not depend on the given tuning
-    optimum = data["optimum"][0]
-    assert optimum["converged"] and optimum["peak"] < records["amplitude"]["peak"]
+    optimum = records["amplitude"]
+    assert optimum["optimum_converged"] and optimum["optimum_peak"] < optimum["peak"]
     assert records["tid_stiffness"]["optimum_elasticity"] == 0.0
     assert all(math.isfinite(r["optimum_stiffness_elasticity"]) for r in records.values())
     for name in ("sensitivity.csv", "sensitivity.json", "sensitivity.png",
@@ -242,10 +242,11 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
     data = json.loads(stdout)
     robust, records = data["robust"], data["results"]
     # the default 0.07 m limit is active at 2 m/s2 and every scenario's stroke keeps it
-    assert robust["converged"] and robust["stroke_limited"] and robust["within_stroke_limit"]
-    assert robust["stroke_limit_m"] == 0.07
-    assert all(r["stroke_after_m"] <= 0.07 for r in records)
-    assert max(r["stroke_after_m"] for r in records) == pytest.approx(0.07, rel=3e-3)
+    # (aimed 0.5% inside it)
+    assert robust["converged"] and robust["stroke_limit_m"] == 0.07
+    assert robust["max_stroke_m"] == pytest.approx(0.07, rel=1e-2)
+    assert robust["max_stroke_m"] <= 0.07
+    assert all(r["stroke_after_m"] <= robust["max_stroke_m"] for r in records)
     assert [r["frequency_scale"] for r in records] == pytest.approx([0.95, 1.0, 1.05])
     ratios = [r["peak_after_over_best"] for r in records]
     assert min(ratios) >= 1 - 1e-6 and robust["worst_ratio"] == pytest.approx(max(ratios))
@@ -261,8 +262,7 @@ def test_robust_tuning_of_a_building_holds_for_stiffer_and_softer_structures(tmp
 
 def test_building_rows_say_the_result_s_outcome_as_host_rows_do(tmp_path):
     # frictionless, a band below the first mode (2 Hz): the retuned peak at its upper end,
-    # which an ever stiffer spring lowers (no optimum); a stroke limit of 0.1 mm that no
-    # robust design meets
+    # which an ever stiffer spring lowers (no optimum); a stroke limit of 0.1 mm
     text = CONFIG.replace("friction_force = 135.0", "friction_force = 0.0").replace(
         'amplitudes = ["0.1g", 2.0]', "amplitudes = [2.0]")
     edge = outcome_message(tj.Outcome, outcome_code(tj.Outcome.not_stationary))
@@ -279,6 +279,10 @@ def test_building_rows_say_the_result_s_outcome_as_host_rows_do(tmp_path):
         "--quiet"])
     assert status == 0, stderr
     data = json.loads(stdout)
-    assert not data["robust"]["converged"] and data["robust"]["status"] == over
-    assert all(not r["converged"] and r["status"].split("; ")[0] == over
+    # only a TID that braces the structure keeps it: the search ends without a stationary
+    # point (or with the stroke over the limit); every row says the design's outcome
+    stalled = outcome_message(tj.Outcome, outcome_code(tj.Outcome.not_stationary))
+    robust = data["robust"]
+    assert not robust["converged"] and robust["status"] in (over, stalled)
+    assert all(not r["converged"] and r["status"].split("; ")[0] == robust["status"]
                for r in data["results"])

@@ -156,3 +156,26 @@ class Structure(eqx.Module):
 
     def natural_frequencies_hz(self) -> np.ndarray:
         return self.modes()[0] / (2 * np.pi)
+
+
+def storey_stiffnesses(stiffness_matrix) -> Array:
+    """The storeys' stiffnesses of a structure (N/m; of a batch of stiffness matrices, one
+    row each): `-K[s, s - 1]` for the storey below floor s > 1, and the row sum
+    `K[0, 0] + K[0, 1]` for the first; a shear building's own."""
+    K = jnp.asarray(stiffness_matrix)
+    if K.shape[-1] == 1:
+        return K[..., 0, :]
+    above = jnp.diagonal(K, 1, axis1=-2, axis2=-1)
+    return jnp.concatenate([(K[..., 0, 0] + K[..., 0, 1])[..., None], -above], axis=-1)
+
+
+def storey_springs(floors: int) -> np.ndarray:
+    """`(d_s d_s^T)` for each storey s: the stiffness matrix of a unit spring from floor
+    s - 1 to floor s (floor 0, the ground, fixed)."""
+    springs = np.zeros((floors, floors, floors))
+    for s in range(floors):
+        springs[s, s, s] = 1.0
+        if s:
+            springs[s, s - 1, s - 1] = 1.0
+            springs[s, s, s - 1] = springs[s, s - 1, s] = -1.0
+    return springs

@@ -11,8 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._model._checks import check_distinct, check_steady_state_device, check_system, is_positive
-from .._model._system import FIELD_NAMES, TIDSystem
+from .._model._building import BuildingTID, Quantity, checked_quantity
+from .._model._checks import check_distinct, is_positive
+from .._model._system import TIDSystem
 from .._orbit._sampled_peaks import lane_grid_peaks, smooth_log_peak
 from .._orbit._settings import SolverSettings
 from .._peaks import _band
@@ -20,6 +21,7 @@ from .._response import batched
 from .._retune import RetuneSettings, check_retune_options, optimal_tunings
 from .._runtime._outcomes import Outcome, outcome_code
 from .._runtime._parallel import serial
+from ._design import parameter_values, parameters_of, scaled_hosts
 
 
 class BestTunings(eqx.Module):
@@ -27,8 +29,9 @@ class BestTunings(eqx.Module):
     that `retune` finds (the minimiser of the smooth maximum over the band of the host
     displacement), and the peaks it achieves. Arrays are `[scales, amps]`; SI.
 
-    - `system`: the nominal system; a scale s multiplies its host stiffness by s**2 (host
-      frequency by s) and its band `omegas` (rad/s) by s.
+    - `system`: the nominal system; a scale s multiplies its host stiffness (a
+      building's stiffness matrix) by s**2 (host frequency by s) and its band `omegas`
+      (rad/s) by s; `quantity`: a building's measured response.
     - `tid_stiffness` (N/m), `tid_damping` (N s/m): the best tuning.
     - `host_peak`: peak |x| over the band's grid with it (refined by a parabola, as the
       robust design judges peaks), m; `stroke_peak`: peak |y|, m, on the check grid of
@@ -55,20 +58,18 @@ class BestTunings(eqx.Module):
     stationary: Bool[Array, "scales amps"]
     converged: Bool[Array, "scales amps"]
     damping_at_bound: Bool[Array, "scales amps"]
+    quantity: Quantity = Quantity()
 
 
-def _scaled_lanes(system: TIDSystem, scales) -> TIDSystem:
-    """One system per scale s (batched fields): host stiffness times s**2 and, keeping the
-    TID's frequency ratio and damping ratio (Den Hartog's k scales with K and c with
-    sqrt(k b)), TID stiffness times s**2 and damping times s."""
+def _scaled_lanes(system: TIDSystem | BuildingTID, scales) -> TIDSystem | BuildingTID:
+    """One system per scale s (batched fields): host stiffness (a building's stiffness
+    matrix) times s**2 and, keeping the TID's frequency ratio and damping ratio (Den
+    Hartog's k scales with K and c with sqrt(k b)), TID stiffness times s**2 and damping
+    times s."""
     scales = np.asarray(scales, float)
-    lanes = batched(system, scales.size)
-    return eqx.tree_at(
-        lambda s: (s.host_stiffness, s.tid_stiffness, s.tid_damping),
-        lanes,
-        (lanes.host_stiffness * scales**2, lanes.tid_stiffness * scales**2,
-         lanes.tid_damping * scales),
-    )
+    lanes = scaled_hosts(batched(system, scales.size), scales)
+    return eqx.tree_at(lambda s: (s.tid_stiffness, s.tid_damping), lanes,
+                       (lanes.tid_stiffness * scales**2, lanes.tid_damping * scales))
 
 
 @ft.partial(jax.jit, static_argnames="sharpness")
@@ -79,7 +80,7 @@ def _smooth_objective(values, omegas, sharpness: float):
 
 
 def best_tunings(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     amplitudes: ArrayLike,
     *,
     host_frequency_scales: ArrayLike = (1.0,),
@@ -91,6 +92,7 @@ def best_tunings(
     objective_sharpness: float = 1000.0,
     progress: Callable[[str], None] | None = None,
     map_lanes: Callable = serial,
+    quantity: Quantity | None = None,
 ) -> BestTunings:
     """The best achievable peak host displacement for each scenario (forcing amplitude and
     host frequency scale) over the band scaled with the host frequency. Every scenario
@@ -110,11 +112,12 @@ def best_tunings(
       last stage, `RobustSettings.sharpness`).
     - `progress`: if given, called with a line as each step of the retune ends.
     - `map_lanes`: how the independent scenarios are mapped (see `retune`).
+    - `quantity`: a building's measured response (`Quantity`, default the top floor's
+      displacement); a scale s multiplies its stiffness matrix by s**2.
 
     **Returns:** a `BestTunings` (arrays `[scales, amps]`).
     """
-    check_system(system)
-    check_steady_state_device(system, "best_tunings")
+    quantity = checked_quantity(system, quantity, "best_tunings")
     amps = check_distinct("amplitudes", amplitudes)
     scales = check_distinct("host_frequency_scales", host_frequency_scales)
     band = _band(system, omegas)
@@ -127,7 +130,7 @@ def best_tunings(
     result = optimal_tunings(
         _scaled_lanes(system, lane_scales), jnp.asarray(lane_amps), bands, settings=settings,
         max_steps=max_steps, tol=tol, retune_settings=retune_settings, progress=progress,
-        map_lanes=map_lanes,
+        map_lanes=map_lanes, quantity=quantity,
     )
     # The robust design's reference: the peaks on the band's grid (see `robust_tune`),
     # which the check grid holds at every `check_refinement`-th point.
@@ -150,23 +153,37 @@ def best_tunings(
                         != outcome_code(Outcome.not_stationary)),
         converged=grid(result.converged),
         damping_at_bound=grid(result.damping_at_bound),
+        quantity=quantity,
     )
 
 
-def _same(a: float | None, b: float | None) -> bool:
+def _fields(system) -> dict:
+    """The physical parameters of `system` (`parameters_of`) and its friction width, by
+    name: the tuning left out."""
+    values = dict(zip(parameters_of(system), parameter_values(system), strict=False))
+    values["friction_width"] = system.friction_width
+    return {name: value for name, value in values.items()
+            if name not in ("tid_stiffness", "tid_damping")}
+
+
+def _same(a, b) -> bool:
     """Two field values agree (`None`, the default friction width, only with itself)."""
     if a is None or b is None:
         return a is b
-    return bool(np.isclose(a, b, rtol=1e-12, atol=0.0))
+    return bool(np.isclose(float(a), float(b), rtol=1e-12, atol=0.0))
 
 
-def check_best(best, system: TIDSystem) -> None:
+def check_best(best, system: TIDSystem | BuildingTID) -> None:
     if not isinstance(best, BestTunings):
         raise ValueError(f"best must be a BestTunings, got {type(best).__name__}")
-    nominal = best.system.to_dict()
-    given = system.to_dict()
-    different = [name for name in FIELD_NAMES if name not in ("tid_stiffness", "tid_damping")
-                 and not _same(nominal[name], given[name])]
+    nominal, given = best.system, system
+    layout = lambda s: (type(s), s.compliant) + ((
+        s.floors, s.spring_floor, s.inerter_floor, s.load) if isinstance(s, BuildingTID) else ())
+    if layout(nominal) != layout(given):
+        raise ValueError("best was computed for another system: another kind of system, "
+                         "device or placement")
+    nominal, given = _fields(nominal), _fields(given)
+    different = [name for name in nominal if not _same(nominal[name], given[name])]
     if different:
         raise ValueError(
             f"best was computed for another system: {different[0]} is "
@@ -175,14 +192,17 @@ def check_best(best, system: TIDSystem) -> None:
 
 
 def checked_best(system, amps, scales, best, omegas, settings, retune_settings, progress,
-                 map_lanes):
-    """`best` after checking that it was computed for this system, these scenarios and
-    this band, or, if None, the best tunings found afresh."""
+                 map_lanes, quantity: Quantity = Quantity()):
+    """`best` after checking that it was computed for this system, quantity, these
+    scenarios and this band, or, if None, the best tunings found afresh."""
     if best is None:
         return best_tunings(system, amps, host_frequency_scales=scales, omegas=omegas,
                             settings=settings, retune_settings=retune_settings,
-                            progress=progress, map_lanes=map_lanes)
+                            progress=progress, map_lanes=map_lanes, quantity=quantity)
     check_best(best, system)
+    if best.quantity != quantity:
+        raise ValueError(f"best was computed for another quantity: {best.quantity} there, "
+                         f"{quantity} here")
     for name, given in (("amplitudes", amps), ("host_frequency_scales", scales)):
         stored = np.asarray(getattr(best, name))
         if stored.shape != given.shape or not np.allclose(stored, given, rtol=1e-12):

@@ -12,6 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._model._building import BuildingTID
+from .._model._structure import storey_springs, storey_stiffnesses
 from .._model._system import FIELD_NAMES, TIDSystem, compiler_options
 from .._orbit._sampled_peaks import interpolated, located_peak, parabola_vertices
 from .._peaks import sweep
@@ -20,9 +22,12 @@ from .._runtime._cache import compiled
 # The parameters that sensitivities are taken with respect to: the physical fields of a
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
 # forcing amplitude, last. A compliant device adds its series stiffness and backlash; a
-# rigid one has neither to vary (see `parameters_of`).
+# rigid one has neither to vary (see `parameters_of`). A `BuildingTID`'s host is its
+# floors' masses and its storeys' stiffnesses (`building_parameters`).
 RIGID_PARAMETERS = FIELD_NAMES[:7] + ("parasitic_damping", "terminal_mass", "amplitude")
 COMPLIANT_PARAMETERS = RIGID_PARAMETERS[:-1] + ("series_stiffness", "backlash", "amplitude")
+DEVICE_PARAMETERS = ("inertance", "friction_force", "tid_stiffness", "tid_damping",
+                     "parasitic_damping", "terminal_mass")
 PARAMETER_UNITS = {
     "host_mass": "kg",
     "host_stiffness": "N/m",
@@ -37,16 +42,49 @@ PARAMETER_UNITS = {
     "backlash": "m",
     "amplitude": "N",
 }
-_K, _C = RIGID_PARAMETERS.index("tid_stiffness"), RIGID_PARAMETERS.index("tid_damping")
 
-# The entries of the tuning (k, c) in a vector of parameters `theta`.
-K_INDEX = RIGID_PARAMETERS.index("tid_stiffness")
-C_INDEX = RIGID_PARAMETERS.index("tid_damping")
 
-def parameters_of(system: TIDSystem) -> tuple[str, ...]:
-    """The parameters of `system`'s sensitivities: `COMPLIANT_PARAMETERS` for a compliant
+def parameter_unit(name: str, system=None) -> str:
+    """The SI unit of the parameter `name` (of `parameters_of`): a floor's mass in kg, a
+    storey's stiffness in N/m, a building's ground acceleration amplitude in m/s2."""
+    if name.startswith("floor_mass_"):
+        return "kg"
+    if name.startswith("storey_stiffness_"):
+        return "N/m"
+    if name == "amplitude" and getattr(system, "load", "force") == "ground":
+        return "m/s2"
+    return PARAMETER_UNITS[name]
+
+
+def building_parameters(system: BuildingTID) -> tuple[str, ...]:
+    """The parameters of a building's sensitivities: the device's (a compliant one's series
+    stiffness and backlash too), every floor's mass `floor_mass_1..n`, every storey's
+    stiffness `storey_stiffness_1..n` and the amplitude, last."""
+    floors = range(1, system.floors + 1)
+    return (DEVICE_PARAMETERS + (("series_stiffness", "backlash") if system.compliant else ())
+            + tuple(f"floor_mass_{i}" for i in floors)
+            + tuple(f"storey_stiffness_{i}" for i in floors) + ("amplitude",))
+
+
+def parameters_of(system: TIDSystem | BuildingTID) -> tuple[str, ...]:
+    """The parameters of `system`'s sensitivities, the amplitude last:
+    `building_parameters` of a `BuildingTID`, `COMPLIANT_PARAMETERS` for a compliant
     device, else `RIGID_PARAMETERS`."""
+    if isinstance(system, BuildingTID):
+        return building_parameters(system)
     return COMPLIANT_PARAMETERS if system.compliant else RIGID_PARAMETERS
+
+
+def parameter_values(system: TIDSystem | BuildingTID) -> np.ndarray:
+    """The values of `parameters_of(system)` but the amplitude (SI)."""
+    if isinstance(system, BuildingTID):
+        s = system.structure
+        return np.concatenate([
+            [float(getattr(system, name)) for name in parameters_of(system)[:-1]
+             if not name.startswith(("floor_mass_", "storey_stiffness_"))],
+            np.diagonal(np.asarray(s.mass_matrix)),
+            np.asarray(storey_stiffnesses(s.stiffness_matrix))])
+    return np.array([float(getattr(system, name)) for name in parameters_of(system)[:-1]])
 
 
 CHUNK = 3  # points per kernel call (one compiled shape for every use)
@@ -81,12 +119,40 @@ def _log_candidates(values, omegas, true):
 
 def changed_system(system, theta, scale):
     """`system` with the parameters `theta` (order `parameters_of(system)`, amplitude last
-    and unused) and its host stiffness multiplied by `scale**2`; of a `batched` system,
-    `theta` holds a row per parameter and `scale` an entry per point."""
-    values = dict(zip(parameters_of(system)[:-1], theta, strict=False))
-    values["host_stiffness"] = values["host_stiffness"] * scale**2
-    return eqx.tree_at(lambda s: [getattr(s, name) for name in values], system,
-                       list(values.values()))
+    and unused) and its host stiffness (a building's stiffness matrix) multiplied by
+    `scale**2`; of a `batched` system, `theta` holds a row per parameter and `scale` an
+    entry per point. A building's floors' masses and storeys' stiffnesses change by
+    adding masses and storey springs (`storey_springs`), its damping matrix held."""
+    names = parameters_of(system)[:-1]
+    values = dict(zip(names, theta, strict=False))
+    if not isinstance(system, BuildingTID):
+        values["host_stiffness"] = values["host_stiffness"] * scale**2
+        return eqx.tree_at(lambda s: [getattr(s, name) for name in values], system,
+                           list(values.values()))
+    n = system.floors
+    device = [name for name in names if not name.startswith(("floor_mass_", "storey_"))]
+    floors = jnp.moveaxis(jnp.asarray(theta[len(device):len(device) + 2 * n]), 0, -1)
+    s = system.structure
+    masses = floors[..., :n] - jnp.diagonal(s.mass_matrix, axis1=-2, axis2=-1)
+    springs = floors[..., n:] - storey_stiffnesses(s.stiffness_matrix)
+    stiffness = s.stiffness_matrix + jnp.einsum("...s,sij->...ij", springs,
+                                                storey_springs(n))
+    structure = eqx.tree_at(
+        lambda x: (x.mass_matrix, x.stiffness_matrix), s,
+        (s.mass_matrix + masses[..., None] * jnp.eye(n),
+         stiffness * jnp.asarray(scale)[..., None, None] ** 2))
+    return eqx.tree_at(lambda x: [getattr(x, name) for name in device] + [x.structure],
+                       system, [values[name] for name in device] + [structure])
+
+
+def scaled_hosts(lanes, scales):
+    """Batched systems `lanes` with each lane's host stiffness (a building's stiffness
+    matrix) times its entry of `scales` squared: its host frequencies times the scale."""
+    scales = np.asarray(scales, float)
+    if isinstance(lanes, BuildingTID):
+        return eqx.tree_at(lambda s: s.structure.stiffness_matrix, lanes,
+                           lanes.structure.stiffness_matrix * scales[:, None, None] ** 2)
+    return eqx.tree_at(lambda s: s.host_stiffness, lanes, lanes.host_stiffness * scales**2)
 
 
 def _tangent_slots(values, omegas, located):
@@ -128,8 +194,8 @@ class _PointOutputs(NamedTuple):
     located: Array
 
 
-def _point_curves(system, theta, scale, omegas, settings, grid, located):
-    """Log refined peaks of |x| and |y| (m) over `omegas`, with the true peaks of |x| where
+def _point_curves(system, quantity, theta, scale, omegas, settings, grid, located):
+    """Log refined peaks of |x| (a building's `quantity`) and |y| (m) over `omegas`, with the true peaks of |x| where
     `located` holds them (see `_log_candidates`), for the parameters `theta` (order
     `parameters_of(system)`), with the host stiffness multiplied by `scale**2`, and which
     entries carry derivatives in `theta`. `grid = (xs, ys, converged, states)` is the
@@ -154,7 +220,7 @@ def _point_curves(system, theta, scale, omegas, settings, grid, located):
     xs_at, ys_at, ok_at, _ = sweep(
         changed_system(system, theta, scale), theta[-1],
         jnp.concatenate([omegas[slots], centre]), settings,
-        jnp.concatenate([states[slots], interpolated(states, omegas, centre)]))
+        jnp.concatenate([states[slots], interpolated(states, omegas, centre)]), quantity)
     n = slots.size
     true_x = (index, located_peak(estimate, jnp.where(ok_at[n:], xs_at[n:], jnp.nan)), valid)
     xs_at, ys_at, ok_at = xs_at[:n], ys_at[:n], ok_at[:n]
@@ -169,11 +235,11 @@ def _point_curves(system, theta, scale, omegas, settings, grid, located):
                                          tangent_x, tangent_y, converged, states, true_x[0])
 
 
-def _kernel_arguments(system, thetas, scales, ratio_grid, settings, grids, located):
+def _kernel_arguments(system, quantity, thetas, scales, band, settings, grids, located):
     """The arguments of `_evaluate_points` for one chunk (a task of `evaluate_chunk`), as
     NumPy arrays: placed on the device by the call (`_cache.compiled`), with no program
     of their own."""
-    return (system, np.asarray(thetas), np.asarray(scales), np.asarray(ratio_grid),
+    return (system, quantity, np.asarray(thetas), np.asarray(scales), np.asarray(band),
             settings.with_array_tolerances(system), tuple(np.asarray(a) for a in grids),
             tuple(np.asarray(a) for a in located))
 
@@ -185,26 +251,24 @@ def evaluate_chunk(*task):
 
 
 @compiled(options=compiler_options)
-def _evaluate_points(system, thetas, scales, ratio_grid, settings, grids, located):
+def _evaluate_points(system, quantity, thetas, scales, band, settings, grids, located):
     """`CHUNK` points, one after another, from their responses over the band `grids`
     and their located host peaks `located` (see `_point_curves`): for each, the log
     refined peaks, candidate masks and their Jacobians with respect to `theta` (forward
-    mode, implicit differentiation through the orbits). Each point's band is
-    `ratio_grid` times its host frequency.
+    mode, implicit differentiation through the orbits). Each point's band is `band`
+    times its host frequency scale.
 
     The points are mapped over (`jax.lax.map`), not batched: each point's solves stop
     when its own orbits converge rather than waiting for the other points', and tracing
     batches the solves' loops over a point's frequencies and derivative directions, not
     over the points too: the program traces and compiles in less time and runs faster on
     a CPU."""
-    host_frequency = jax.lax.stop_gradient(system.host_frequency)
-
     def one(point):
         theta, scale, grid, peaks = point
-        omegas = ratio_grid * host_frequency * scale
+        omegas = band * scale
 
         def curves(t):
-            return _point_curves(system, t, scale, omegas, settings, grid, peaks)
+            return _point_curves(system, quantity, t, scale, omegas, settings, grid, peaks)
 
         return jax.jacfwd(curves, has_aux=True)(theta)
 

@@ -6,23 +6,22 @@ smooth maxima in the design coordinates."""
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-import jax.numpy as jnp
 import numpy as np
 
-from .._model._linear import den_hartog_tuning
+from .._model._building import BuildingTID, Quantity
 from .._model._system import TIDSystem
 from .._orbit._sampled_peaks import REFINED_PEAKS
 from .._orbit._settings import SolverSettings
 from .._peaks import locate_peaks
-from .._response import batched, lane_response, scaled_states
+from .._response import batched, lane_response, scaled_states, static_units
+from .._retune import reference_tunings
 from .._runtime._parallel import map_shares, serial
 from ._design import (
-    C_INDEX,
     CHUNK,
-    K_INDEX,
     NO_PEAK,
     changed_system,
     evaluate_chunk,
+    parameter_values,
     parameters_of,
 )
 from ._design_variables import design_of_tuning, tuning_of_design
@@ -65,31 +64,38 @@ class _Curves(NamedTuple):
 
 
 class Context:
-    """What every evaluation shares: the system, the band as multiples of the host
-    frequency, the solver settings, whether the host's peaks are located in continuous
+    """What every evaluation shares: the system, the band (rad/s, scaled by each
+    scenario's host frequency scale), the solver settings, whether the host's peaks are located in continuous
     frequency (`locate`: as `retune` does, for the sensitivities of its optimum; else
     the grid's, refined by parabolas) and the reference tuning of the design variables
     u = (ln(k / k_ref), sqrt(c / c_ref)) (`design_of_tuning`, unscaled), the step in u of
     the stencils (`stencil_step`: the curvature of each refined peak from differences of
     its exact gradients over that step), and how independent lanes are mapped
-    (`map_lanes`, see `_parallel`)."""
+    (`map_lanes`, see `_parallel`). A building's response is its `quantity`'s; the
+    reference tuning is the retune's (`reference_tunings`: a building's first mode's Den
+    Hartog tuning)."""
 
-    def __init__(self, system: TIDSystem, omegas, settings: SolverSettings, *, locate: bool,
-                 stencil_step: float, map_lanes: Callable = serial):
+    def __init__(self, system: TIDSystem | BuildingTID, omegas, settings: SolverSettings, *,
+                 locate: bool, stencil_step: float, map_lanes: Callable = serial,
+                 quantity: Quantity = Quantity()):
         self.system = system
+        self.quantity = quantity
         self.stencil_step = stencil_step
         self.map_lanes = map_lanes
         self.locate = locate
         self.settings = settings
         self.omegas = np.asarray(omegas, dtype=float)
-        self.ratio_grid = jnp.asarray(self.omegas / float(system.host_frequency))
         self.parameters = parameters_of(system)
-        self.values = np.array([float(getattr(system, name)) for name in self.parameters[:-1]])
+        self.values = parameter_values(system)
+        # The entries of the tuning (k, c) in a vector of parameters `theta`.
+        self.k_index = self.parameters.index("tid_stiffness")
+        self.c_index = self.parameters.index("tid_damping")
         # Parameters other than the design (k, c), in the order of the optimiser's
         # coordinates (u0, u1, *other): u0 = ln(k / k_ref), u1 = sqrt(c / c_ref).
-        self.other = [i for i in range(len(self.parameters)) if i not in (K_INDEX, C_INDEX)]
-        k_ref, c_ref = den_hartog_tuning(system.host_mass, system.host_stiffness, system.inertance)
-        self.k_ref, self.c_ref = float(k_ref), float(c_ref)
+        self.other = [i for i in range(len(self.parameters))
+                      if i not in (self.k_index, self.c_index)]
+        k_ref, c_ref = reference_tunings(batched(system, 1))
+        self.k_ref, self.c_ref = float(k_ref[0]), float(c_ref[0])
 
     def tuning(self, u) -> tuple[float, float]:
         k, c = tuning_of_design(np.asarray(u, dtype=float), self.k_ref, self.c_ref, UNSCALED,
@@ -102,7 +108,7 @@ class Context:
 
     def theta(self, k, c, amplitude) -> np.ndarray:
         theta = np.append(self.values, float(amplitude))
-        theta[K_INDEX], theta[C_INDEX] = k, c
+        theta[self.k_index], theta[self.c_index] = k, c
         return theta
 
     def evaluate(self, points: Sequence[tuple]) -> list[_Curves]:
@@ -129,7 +135,8 @@ class Context:
         cold = all(z is None for z in z_inits)
         lanes = (np.stack(thetas), np.stack(scales)) + (() if cold else (np.stack(z_inits),))
         fields = map_shares(self.map_lanes, _solve_cold_grids if cold else _solve_grids,
-                            lanes, self.system, self.omegas, settings, self.locate)
+                            lanes, self.system, self.omegas, settings, self.locate,
+                            self.quantity)
         return [_Grid(*(field[i] for field in fields)) for i in range(len(points))]
 
     def _tasks(self, points: Sequence[tuple], grids: Sequence["_Grid"],
@@ -137,7 +144,7 @@ class Context:
         """The tasks of `evaluate_chunk` for `points` (`(theta, scale, ...)`) and their
         `grids`, `CHUNK` points each (the last padded with copies of its last point), and
         how many points each holds."""
-        tasks, sizes, ratio_grid = [], [], np.asarray(self.ratio_grid)
+        tasks, sizes = [], []
         for start in range(0, len(points), CHUNK):
             chunk = [(point[0], point[1], grid)
                      for point, grid in zip(points[start : start + CHUNK],
@@ -147,7 +154,8 @@ class Context:
             thetas, scales = (np.stack([point[i] for point in chunk]) for i in range(2))
             fields = [np.stack(field) for field in zip(*(point[2] for point in chunk),
                                                        strict=True)]
-            tasks.append((self.system, thetas, np.asarray(scales, dtype=float), ratio_grid,
+            tasks.append((self.system, self.quantity, thetas, np.asarray(scales, dtype=float),
+                          self.omegas,
                           settings, tuple(fields[:4]), tuple(fields[4:])))
         return tasks, sizes
 
@@ -181,7 +189,8 @@ class Context:
         thetas = np.stack([self.theta(k_i, c_i, amplitude)
                            for k_i, c_i, amplitude in zip(k, c, amplitudes, strict=True)])
         return map_shares(self.map_lanes, _solve_cold_grids, (thetas, np.asarray(scale)),
-                          self.system, self.omegas, self.settings, False).states
+                          self.system, self.omegas, self.settings, False,
+                          self.quantity).states
 
 
 class _Grid(NamedTuple):
@@ -201,20 +210,24 @@ class _Grid(NamedTuple):
     valid: np.ndarray
 
 
-def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
+def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate,
+                 quantity=Quantity()):
     """The `_Grid` of points (a leading axis of points) at the parameters `thetas` (a row
     per point, order `parameters_of(system)`) with the host stiffness multiplied by
     `scales**2`, over the band `omegas` times `scales`, each point shot from its scaled
     states `z_init` (None: from the equivalent linear steady state after a transient):
     every point in one batch (`lane_response`) and, where `locate`, the
-    host's peaks located in continuous frequency (`locate_peaks`)."""
+    host's peaks located in continuous frequency (`locate_peaks`). A building's
+    response is its `quantity`'s."""
     lanes = changed_system(batched(system, len(thetas)), thetas.T, scales)
-    response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init)
-    states = scaled_states(response, 1 / lanes.host_stiffness, xp=np)
+    response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init,
+                             quantity)
+    states = scaled_states(response, static_units(lanes),
+                           not isinstance(system, BuildingTID), xp=np)
     xs, ys, converged = (np.asarray(a) for a in (response.x_max, response.y_max,
                                                  response.converged))
     if locate:
-        found = locate_peaks(lanes, response, settings)
+        found = locate_peaks(lanes, response, settings, quantity)
         located = (found.index.astype(int), found.estimate, found.centre, found.valid)
         converged = converged & found.converged[:, None]
     else:
@@ -225,9 +238,9 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate):
     return _Grid(xs, ys, converged, states, *located)
 
 
-def _solve_cold_grids(thetas, scales, system, omegas, settings, locate):
+def _solve_cold_grids(thetas, scales, system, omegas, settings, locate, quantity=Quantity()):
     """`_solve_grids` from the linear steady state (a task of `map_shares`)."""
-    return _solve_grids(thetas, scales, None, system, omegas, settings, locate)
+    return _solve_grids(thetas, scales, None, system, omegas, settings, locate, quantity)
 
 
 class Scenario(NamedTuple):
@@ -261,7 +274,8 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
     k, _ = ctx.tuning(u)
     jac = [getattr(curves, f"jac_{response}") for curves in stencil]
     centre = jac[0]
-    grad = np.concatenate([k * centre[:, [K_INDEX]], 2 * ctx.c_ref * u[1] * centre[:, [C_INDEX]],
+    ki, ci = ctx.k_index, ctx.c_index
+    grad = np.concatenate([k * centre[:, [ki]], 2 * ctx.c_ref * u[1] * centre[:, [ci]],
                            centre[:, ctx.other]], axis=1)
     dgrad = np.full(grad.shape[:1] + (2,) + grad.shape[1:], np.nan)
     for i in range(2 if len(stencil) > 1 else 0):
@@ -269,9 +283,8 @@ def coordinates(ctx: Context, u, stencil: list[_Curves], response: str) -> Terms
             d_jac = (jac[1 + 2 * i] - jac[2 + 2 * i]) / (2 * ctx.stencil_step)
         else:
             d_jac = (jac[1 + i] - centre) / ctx.stencil_step
-        dgrad[:, i, 0] = k * d_jac[:, K_INDEX] + (k * centre[:, K_INDEX] if i == 0 else 0.0)
-        dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, C_INDEX]
-                                          + (centre[:, C_INDEX] if i == 1 else 0.0))
+        dgrad[:, i, 0] = k * d_jac[:, ki] + (k * centre[:, ki] if i == 0 else 0.0)
+        dgrad[:, i, 1] = 2 * ctx.c_ref * (u[1] * d_jac[:, ci] + (centre[:, ci] if i == 1 else 0.0))
         dgrad[:, i, 2:] = d_jac[:, ctx.other]
     if len(stencil) > 1:
         # An entry whose derivatives a neighbour did not take (`_point_curves`): its

@@ -28,8 +28,9 @@ from .._model._building import (
     quantity_amplitude,
     selection,
 )
-from .._orbit._building_orbit import solve_orbits
 from .._orbit._settings import SolverSettings
+from .._orbit._steady_state import one_by_one
+from .._response import point_response
 from ._rtds_loop import Plan, Point, first_harmonic_phase
 
 
@@ -155,7 +156,10 @@ def building_reference(system: BuildingTID, quantity: Quantity, omegas, amplitud
     """The whole building's steady states at the pairs `(omegas, amplitudes)` (the
     device's model of `frequency_response`): peaks of the quantity and the stroke, their
     first harmonics' phases and whether each was found."""
-    orbits = solve_orbits(system, quantity, amplitudes, omegas, settings)
-    return (orbits.response_max, orbits.stroke_max,
-            first_harmonic_phase(orbits.quantity_samples),
-            first_harmonic_phase(orbits.stroke_samples), orbits.converged)
+    def one(omega, amplitude):
+        orbit, x_max, y_max = point_response(system, omega, amplitude, settings,
+                                             quantity=quantity)
+        return (x_max, y_max, first_harmonic_phase(orbit.x_samples),
+                first_harmonic_phase(orbit.y_samples), orbit.converged)
+
+    return one_by_one(one)(omegas, amplitudes)

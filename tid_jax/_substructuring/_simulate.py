@@ -21,7 +21,6 @@ from .._model._building import BuildingTID, Quantity
 from .._model._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from .._model._linear import host_receptance
 from .._model._system import TIDSystem
-from .._orbit._building_orbit import building_settings
 from .._orbit._settings import SolverSettings
 from .._response import point_response
 from .._runtime._cache import compiled
@@ -394,7 +393,7 @@ def simulate_substructuring(
     fields["stable"] = ~fields["diverged"] & (fields["growth"] <= 1 + growth_tolerance)
     if reference and building:
         whole = building_reference(system, quantity, points.omega, points.amplitude,
-                                   building_settings(system, settings))
+                                   SolverSettings() if settings is None else settings)
         fields.update(_errors(fields, jax.tree.map(lambda v: jnp.reshape(v, shape),
                                                    _Whole(*whole))))
     elif reference:

@@ -4,17 +4,16 @@ and their tables, CSV, JSON and PNG files."""
 
 import math
 import textwrap
+from typing import NamedTuple
 
 import numpy as np
 
 from .. import plot
 from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
 from .._model._structure import Structure
-from .._optimise._building_design import BUILDING_BAND, search_grid
-from .._optimise._building_robust import robust_building, scaled_structure
-from .._optimise._building_sensitivity import building_sensitivities, storey_stiffnesses
+from .._model._system import TIDSystem
 from .._orbit._settings import SolverSettings
-from .._peaks import DEFAULT_FREQUENCIES, peaks
+from .._peaks import BUILDING_BAND, DEFAULT_FREQUENCIES
 from .._response import _on_host, frequency_response
 from .._retune import RetuneSettings, retune
 from .._runtime._io import write_json, write_toml
@@ -25,22 +24,20 @@ from ._common import (
     CLIError,
     _config_comment,
     _config_data,
+    _describe,
     _Output,
+    _start,
 )
 from ._schema import (
     FRF_COLUMNS,
     FRF_TABLE,
     RETUNE_COLUMNS,
     RETUNE_TABLE,
-    ROBUST_COLUMNS,
-    ROBUST_TABLE,
-    SENSITIVITY_COLUMNS,
     amplitude_unit,
     finite,
     frf_summary,
     ratio,
     row,
-    sensitivity_table,
     status,
     stroke_problem,
 )
@@ -113,6 +110,15 @@ def band(inputs: dict, system: BuildingTID) -> tuple[np.ndarray, np.ndarray]:
     return hz, 2 * math.pi * hz
 
 
+def design_band(omegas) -> tuple[np.ndarray, np.ndarray]:
+    """A design's band (Hz, rad/s): `omegas`, or `DEFAULT_FREQUENCIES` frequencies over
+    their range where they are fewer (a coarser design grid can miss or merge a
+    building's peaks)."""
+    if omegas.size < DEFAULT_FREQUENCIES:
+        omegas = np.linspace(omegas[0], omegas[-1], DEFAULT_FREQUENCIES)
+    return omegas / (2 * math.pi), omegas
+
+
 def describe(system: BuildingTID, quantity: Quantity) -> str:
     floors = system.floors
     first = system.structure.natural_frequencies_hz()[0]
@@ -139,17 +145,6 @@ def uncontrolled_peak(system: BuildingTID, quantity: Quantity, omegas) -> float:
     fine = np.concatenate([np.linspace(low, high, 2001),
                            natural[(natural >= low) & (natural <= high)]])
     return float(np.max(np.asarray(uncontrolled_amplitude(system, quantity, fine))))
-
-
-def strokes(system: BuildingTID, quantity: Quantity, amplitudes, omegas,
-            settings: SolverSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The largest stroke (m) over the band of `omegas` at each amplitude with the
-    system's tuning, whether every steady state there was found, and the response's
-    peaks over a period (amplitudes x frequencies, SI)."""
-    response = frequency_response(system, omegas, amplitudes, quantity=quantity,
-                                  settings=settings)
-    ok = np.all(np.asarray(response.converged), axis=1)
-    return (np.nanmax(np.asarray(response.y_max), axis=1), ok, np.asarray(response.x_max))
 
 
 def amplitude_label(system: BuildingTID) -> str:
@@ -192,7 +187,7 @@ def save_config(inputs, output, command):
     write_toml(output.path(f"{command}_config.toml"), data, comment=_config_comment(command))
 
 
-def _begin(args, inputs: dict, doing: str):
+def begin(args, inputs: dict, doing: str):
     """A command's system, quantity, amplitudes, band (Hz, rad/s) and output folder, and
     its first message: `doing` (with {amplitudes} and {frequencies}) and the system."""
     system, quantity, amplitudes = building_inputs(inputs)
@@ -203,8 +198,50 @@ def _begin(args, inputs: dict, doing: str):
     return system, quantity, amplitudes, frequencies_hz, omegas, output
 
 
+class DesignStart(NamedTuple):
+    """What a design command (`robust`, `sensitivity`) starts from, on the paper's host or
+    a [structure]: its `quantity` None on the host."""
+
+    inputs: dict
+    system: TIDSystem | BuildingTID
+    quantity: Quantity | None
+    settings: SolverSettings
+    frequencies_hz: np.ndarray
+    omegas: np.ndarray
+    amplitudes: np.ndarray
+    output: _Output
+    described: str
+
+
+def design_start(args, inputs: dict, doing: str) -> DesignStart:
+    """A design command's start (`doing` as in `begin`): a building's band at least
+    `DEFAULT_FREQUENCIES` frequencies (`design_band`)."""
+    if "structure" in inputs:
+        system, quantity, amplitudes, frequencies_hz, omegas, output = begin(args, inputs,
+                                                                             doing)
+        frequencies_hz, omegas = design_band(omegas)
+        return DesignStart(inputs, system, quantity, SolverSettings(**inputs[SOLVER_TABLE]),
+                           frequencies_hz, omegas, amplitudes, output,
+                           describe(system, quantity))
+    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = _start(args)
+    described = _describe(system)
+    output.say(doing.format(amplitudes=amplitudes.size, frequencies=omegas.size)
+               + f"; {described}")
+    return DesignStart(inputs, system, None, settings, frequencies_hz, omegas, amplitudes,
+                       output, described)
+
+
+def design_document(start: DesignStart, command: str, **results) -> dict:
+    """The JSON record of a design command's run, the host's or a building's."""
+    if start.quantity is None:
+        return start.output.document(command, start.inputs, start.system, start.settings,
+                                     start.frequencies_hz, **results)
+    return document(command, start.inputs, start.system, start.quantity,
+                    start.frequencies_hz, start.output, **results)
+
+
 def run_frf(args, inputs: dict) -> int:
-    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+    system, quantity, amplitudes, frequencies_hz, omegas, output = begin(
         args, inputs, "frequency response at {amplitudes} amplitude(s) x {frequencies} "
         "frequencies")
     response = frequency_response(system, omegas, amplitudes, quantity=quantity,
@@ -249,13 +286,10 @@ def run_frf(args, inputs: dict) -> int:
 
 
 def run_retune(args, inputs: dict) -> int:
-    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
+    system, quantity, amplitudes, frequencies_hz, omegas, output = begin(
         args, inputs, "retuning {amplitudes} amplitude(s) over {frequencies} frequencies")
     settings = SolverSettings(**inputs[SOLVER_TABLE])
-    # (a coarser design grid can miss or merge a building's peaks)
-    if omegas.size < DEFAULT_FREQUENCIES:
-        omegas = np.linspace(omegas[0], omegas[-1], DEFAULT_FREQUENCIES)
-        frequencies_hz = omegas / (2 * math.pi)
+    frequencies_hz, omegas = design_band(omegas)
     with output.steps(RetuneSettings().progress_steps()) as step:
         result = retune(system, amplitudes, omegas=omegas, quantity=quantity,
                         settings=settings, progress=step, map_lanes=args.map_lanes)
@@ -301,13 +335,6 @@ def _save_retune_plots(output, system, quantity, records, result, limit) -> None
         "the TID"), output.path("retune_frequency_response.png"))
 
 
-def _peaks_over(system, quantity, amplitudes, omegas, settings) -> np.ndarray:
-    """The peaks of `quantity` over the band of `omegas` (None: the first mode's; at
-    least `BAND_POINTS` frequencies, as the designs search it) at each amplitude."""
-    return np.asarray(peaks(system, search_grid(system, omegas), amplitudes,
-                            quantity=quantity, settings=settings).x_peak)
-
-
 def _retune_records(system, quantity, result, limit, omegas) -> list[dict]:
     """One record per amplitude of a `RetuneResult`, keyed by `RETUNE_COLUMNS`: the design,
     its peak before (the given tuning's) and after, their ratios and the strokes."""
@@ -336,181 +363,3 @@ def _retune_records(system, quantity, result, limit, omegas) -> list[dict]:
             converged=ok, status=status(ok, stroke_problem(stroke_after, limit),
                                         base=messages[i])))
     return records
-
-
-def _parameters(system: BuildingTID, amplitude_unit: str) -> dict:
-    """Each parameter of `building_sensitivities`: its value and unit."""
-    s = system.structure
-    values = {"tid_stiffness": (float(system.tid_stiffness), "N/m"),
-              "tid_damping": (float(system.tid_damping), "N s/m"),
-              "inertance": (float(system.inertance), "kg"),
-              "friction_force": (float(system.friction_force), "N"),
-              "parasitic_damping": (float(system.parasitic_damping), "N s/m"),
-              "terminal_mass": (float(system.terminal_mass), "kg"),
-              "amplitude": (None, amplitude_unit)}
-    if system.compliant:
-        values["series_stiffness"] = (float(system.series_stiffness), "N/m")
-        values["backlash"] = (float(system.backlash), "m")
-    for i, mass in enumerate(np.diagonal(np.asarray(s.mass_matrix))):
-        values[f"floor_mass_{i + 1}"] = (float(mass), "kg")
-    for i, spring in enumerate(np.asarray(storey_stiffnesses(s.stiffness_matrix))):
-        values[f"storey_stiffness_{i + 1}"] = (float(spring), "N/m")
-    return values
-
-
-def _optimum_fields(result, j: int) -> dict:
-    """A parameter's elasticities at the retuned optimum (NaN where not found)."""
-    o = result.optimum
-    if o is None:
-        return {}
-    return {"optimum_k_N_per_m": float(o.tid_stiffness[0]),
-            "optimum_c_N_s_per_m": float(o.tid_damping[0]),
-            "optimum_peak": finite(o.peak[0]),
-            "optimum_elasticity": finite(o.peak_elasticities[0, j]),
-            "optimum_stiffness_elasticity": finite(o.stiffness_elasticities[0, j]),
-            "optimum_damping_elasticity": finite(o.damping_elasticities[0, j]),
-            "optimum_converged": bool(o.converged[0])}
-
-
-def run_sensitivity(args, inputs: dict) -> int:
-    optimum = not args.no_optimum
-    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
-        args, inputs, "sensitivities at {amplitudes} amplitude(s) over {frequencies} "
-        "frequencies, at the given tuning" + (" and at the optimum" if optimum else ""))
-    unit = amplitude_unit(system.load)
-    parameters = _parameters(system, unit)
-    settings = SolverSettings(**inputs[SOLVER_TABLE])
-    with output.steps(amplitudes.size + 1) as step:
-        results = []
-        for i, amplitude in enumerate(amplitudes):
-            results.append(building_sensitivities(
-                system, [amplitude], quantity, omegas=omegas, settings=settings,
-                optimum=optimum))
-            step(f"amplitude {i + 1}/{amplitudes.size}")
-        stroke = strokes(system, quantity, amplitudes, omegas, settings)[0]
-        step("strokes over the band")
-    records = []
-    for i, (amplitude, result) in enumerate(zip(amplitudes, results, strict=True)):
-        peak = float(result.peak[0])
-        base = None if bool(result.converged[0]) else result.status_messages()[0]
-        for j, name in enumerate(result.names):
-            value, parameter_unit = parameters[name]
-            value = float(amplitude) if value is None else value
-            elasticity = float(result.elasticities[0, j])
-            fields = _optimum_fields(result, j)
-            ok = bool(result.converged[0]) and fields.get("optimum_converged", True)
-            records.append(row(
-                SENSITIVITY_COLUMNS, amplitude=float(amplitude), amplitude_unit=unit,
-                parameter=name, value=value, unit=parameter_unit,
-                k_N_per_m=float(system.tid_stiffness), c_N_s_per_m=float(system.tid_damping),
-                peak_unit=quantity.unit, peak=finite(peak), elasticity=finite(elasticity),
-                derivative_per_unit=finite(elasticity * peak / value) if value else 0.0,
-                stroke_m=finite(stroke[i]), converged=bool(result.converged[0]),
-                status=status(ok, base=base), **fields))
-    save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
-    save_config(inputs, output, "sensitivity")
-    elasticities = np.asarray([result.elasticities[0] for result in results])
-    plot.save_figure(plot.plot_building_elasticities(
-        amplitudes, results[0].names, elasticities, xlabel=amplitude_label(system),
-        title=f"elasticities d ln peak / d ln p of the peak {quantity.describe(system.floors)}"),
-        output.path("sensitivity.png"))
-    optima = [{"amplitude": float(a), "k_N_per_m": float(r.optimum.tid_stiffness[0]),
-               "c_N_s_per_m": float(r.optimum.tid_damping[0]),
-               "peak": float(r.optimum.peak[0]), "active_peaks": int(r.optimum.active[0]),
-               "converged": bool(r.optimum.converged[0])}
-              for a, r in zip(amplitudes, results, strict=True) if r.optimum is not None]
-    data = document("sensitivity", inputs, system, quantity, frequencies_hz, output,
-                    tid_stiffness_N_per_m=float(system.tid_stiffness),
-                    tid_damping_N_s_per_m=float(system.tid_damping), results=records,
-                    optimum=optima or None)
-    write_json(output.path("sensitivity.json"), data)
-    columns = sensitivity_table(optimum)
-    ranked = sorted(records, key=lambda r: (r["amplitude"], -abs(r["elasticity"] or 0.0)))
-    title = (f"Elasticities of the peak (d ln peak / d ln p; damping matrix held), at "
-             f"k = {float(system.tid_stiffness):.5g} N/m, c = "
-             f"{float(system.tid_damping):.5g} N s/m: {describe(system, quantity)}")
-    return output.finish(data, title + "\n" + table(columns, ranked))
-
-
-def run_robust(args, inputs: dict, tolerance: float) -> int:
-    """One tuning for every amplitude and, with `tolerance` f, the structure's natural
-    frequencies (1 +- f) times the nominal (its stiffness (1 +- f)^2 times)."""
-    scales = [1.0] if tolerance == 0 else [(1 - tolerance) ** 2, 1.0, (1 + tolerance) ** 2]
-    stroke_limit = None if args.no_stroke_limit else inputs["stroke_limit"]
-    limited = "not limited" if stroke_limit is None else f"within {stroke_limit:g} m"
-    system, quantity, amplitudes, frequencies_hz, omegas, output = _begin(
-        args, inputs, "robust tuning over {amplitudes} amplitude(s) x "
-        f"{len(scales)} structure frequencies, the stroke {limited}")
-    band = omegas if "band_hz" in inputs else None
-    settings = SolverSettings(**inputs[SOLVER_TABLE])
-    with output.steps(len(scales) + 3) as step:
-        result = robust_building(system, amplitudes, quantity, stiffness_scales=scales,
-                                 omegas=band, stroke_limit=stroke_limit,
-                                 settings=settings, progress=step)
-        robust = tuned(system, result.tid_stiffness, result.tid_damping)
-        given = np.stack([_peaks_over(scaled(system, scale), quantity, amplitudes, band,
-                                      settings) for scale in scales], axis=1)
-        stroke = {name: np.stack([strokes(scaled(s, scale), quantity, amplitudes, omegas,
-                                          settings)[0] for scale in scales], axis=1)
-                  for name, s in (("before", system), ("after", robust))}
-        step("the given tuning's peaks, and the strokes over the band")
-    limit = stroke_limit
-    base = result.status_messages()[0]
-    records = [row(ROBUST_COLUMNS, frequency_scale=math.sqrt(scale), amplitude=float(a),
-                   amplitude_unit=amplitude_unit(system.load),
-                   k_N_per_m=float(result.tid_stiffness), c_N_s_per_m=float(result.tid_damping),
-                   peak_unit=quantity.unit, peak_best=finite(result.best[i, j]),
-                   peak_before=finite(given[i, j]), peak_after=finite(result.peak[i, j]),
-                   peak_before_over_best=ratio(given[i, j], result.best[i, j]),
-                   peak_after_over_best=finite(result.ratio[i, j]),
-                   stroke_before_m=finite(stroke["before"][i, j]),
-                   stroke_after_m=finite(result.stroke_peak[i, j]), stroke_limit_m=limit,
-                   within_stroke_limit=None if limit is None else bool(
-                       result.stroke_peak[i, j] <= limit),
-                   converged=bool(result.converged),
-                   status=status(bool(result.converged),
-                                 stroke_problem(result.stroke_peak[i, j], limit), base=base))
-               for j, scale in enumerate(scales) for i, a in enumerate(amplitudes)]
-    save_records(output, "robust.csv", ROBUST_COLUMNS, records)
-    save_config(inputs, output, "robust")
-    nominal = scales.index(1.0)
-    given_ratio = given / np.asarray(result.best)
-    plot.save_figure(plot.plot_robust_comparison(
-        amplitudes,
-        [(f"given tuning: worst {float(np.max(given_ratio)):.3f}", given_ratio[:, nominal],
-          stroke["before"][:, nominal], dict(color="tab:red", linestyle="--", marker=".")),
-         (f"robust: worst {float(result.worst_ratio):.3f}",
-          np.asarray(result.ratio)[:, nominal], stroke["after"][:, nominal],
-          dict(color="tab:blue", linewidth=2.0, marker="."))],
-        stroke_limit=limit, amplitude_label=amplitude_label(system),
-        ratio_label=f"peak {quantity.describe(system.floors)} / best achievable",
-        title="Robust TID tuning" + (" (nominal structure)" if len(scales) > 1 else "")),
-        output.path("robust.png"))
-    summary = {"k_N_per_m": float(result.tid_stiffness),
-               "c_N_s_per_m": float(result.tid_damping),
-               "worst_ratio": float(result.worst_ratio), "converged": bool(result.converged),
-               "given_k_N_per_m": float(system.tid_stiffness),
-               "given_c_N_s_per_m": float(system.tid_damping),
-               "given_worst_ratio": float(np.max(given_ratio)),
-               "stroke_limited": bool(result.stroke_limited), "stroke_limit_m": stroke_limit,
-               "within_stroke_limit": bool(result.within_stroke_limit),
-               "max_stroke_m": finite(np.nanmax(stroke["after"])),
-               "status": base}
-    data = document("robust", inputs, system, quantity, frequencies_hz, output,
-                     frequency_scales=[math.sqrt(s) for s in scales],
-                     robust=summary, results=records)
-    write_json(output.path("robust.json"), data)
-    title = (f"Robust tuning k = {summary['k_N_per_m']:.5g} N/m, c = "
-             f"{summary['c_N_s_per_m']:.5g} N s/m: worst {summary['worst_ratio']:.4f} of "
-             f"the best (given tuning: {summary['given_worst_ratio']:.4f}), the stroke "
-             f"{limited}; {summary['status']}; {describe(system, quantity)}")
-    return output.finish(data, title + "\n" + table(ROBUST_TABLE, records))
-
-
-def scaled(system: BuildingTID, scale: float) -> BuildingTID:
-    """The system on its structure with the stiffness `scale` times."""
-    return system.replace(structure=scaled_structure(system.structure, scale))
-
-
-def tuned(system: BuildingTID, k, c) -> BuildingTID:
-    return system.replace(tid_stiffness=float(k), tid_damping=float(c))

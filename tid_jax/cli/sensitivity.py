@@ -1,14 +1,14 @@
 """`tid-jax sensitivity`: sensitivities of the peaks, at the tuning and the optimum."""
 
 from .. import plot
-from .._optimise._design import PARAMETER_UNITS
+from .._optimise._design import parameter_unit
 from .._response import _on_host
 from .._retune import RetuneSettings
-from .._runtime._io import write_json, write_toml
+from .._runtime._io import write_json
 from .._sensitivity import amplitude_sensitivities, elasticity_series
 from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
-from ._common import _config_comment, _config_data, _describe, _inputs, _start
+from ._common import _inputs
 from ._schema import SENSITIVITY_COLUMNS, finite, row, sensitivity_table, status
 from ._tables import save_records, table
 
@@ -39,41 +39,37 @@ def _add_sensitivity_parser(subparsers) -> None:
 
 
 def _run_sensitivity(args) -> int:
-    inputs = _inputs(args)
-    if "structure" in inputs:
-        return _building.run_sensitivity(args, inputs)
-    start = _start(args)
-    inputs, system, settings, frequencies_hz, omegas, amplitudes, output = start
     optimum = not args.no_optimum
-    output.say(
-        f"sensitivities at {amplitudes.size} amplitude(s) over {omegas.size} frequencies"
-        f"{', with the retuned optimum' if optimum else ''}; {_describe(system)}"
-    )
+    start = _building.design_start(
+        args, _inputs(args), "sensitivities at {amplitudes} amplitude(s) over {frequencies} "
+        "frequencies" + (", with the retuned optimum" if optimum else ""))
+    system, quantity, amplitudes, output = (start.system, start.quantity, start.amplitudes,
+                                            start.output)
     retune_steps = RetuneSettings().progress_steps() if optimum else 0
     with output.steps(retune_steps + (2 if optimum else 1)) as step:
         if optimum:
             output.say(f"retuning at {amplitudes.size} amplitude(s), all in one batch")
-        results = amplitude_sensitivities(system, amplitudes, omegas=omegas, optimum=optimum,
-                                          settings=settings, progress=step,
+        results = amplitude_sensitivities(system, amplitudes, omegas=start.omegas,
+                                          quantity=quantity, optimum=optimum,
+                                          settings=start.settings, progress=step,
                                           map_lanes=args.map_lanes)
     results = _on_host(results)  # read entry by entry below: no array operation each
+    peak_unit = "m" if quantity is None else quantity.unit
     records = [record for amplitude, result in zip(amplitudes, results, strict=True)
-               for record in _records(amplitude, result, system)]
+               for record in _records(amplitude, result, system, peak_unit)]
     save_records(output, "sensitivity.csv", SENSITIVITY_COLUMNS, records)
-    write_toml(
-        output.path("sensitivity_config.toml"),
-        _config_data(inputs),
-        comment=_config_comment("sensitivity"),
-    )
-    if amplitudes.size > 1:
-        _save_plot(output, amplitudes, results)
-    json_path = output.path("sensitivity.json")
-    data = output.document("sensitivity", inputs, system, settings, frequencies_hz, results=records)
-    write_json(json_path, data)
-    return output.finish(data, _table(records, results, amplitudes, system, optimum))
+    _building.save_config(start.inputs, output, "sensitivity")
+    _save_plot(output, amplitudes, results, system, quantity)
+    extra = {} if quantity is None else dict(
+        tid_stiffness_N_per_m=float(system.tid_stiffness),
+        tid_damping_N_s_per_m=float(system.tid_damping))
+    data = _building.design_document(start, "sensitivity", **extra, results=records)
+    write_json(output.path("sensitivity.json"), data)
+    return output.finish(data, _table(records, results, amplitudes, system, optimum,
+                                      start.described))
 
 
-def _records(amplitude, result, system) -> list[dict]:
+def _records(amplitude, result, system, peak_unit: str) -> list[dict]:
     """One record per parameter at one amplitude, keyed by `SENSITIVITY_COLUMNS`."""
     optimum = result.optimum
     at_bound = optimum is not None and bool(optimum.damping_at_bound)
@@ -92,10 +88,11 @@ def _records(amplitude, result, system) -> list[dict]:
                                         else finite(optimum.damping_elasticity[i])),
             optimum_damping_at_bound=at_bound, optimum_converged=bool(optimum.converged))
         records.append(row(
-            SENSITIVITY_COLUMNS, amplitude=float(amplitude), amplitude_unit="N",
-            parameter=name, value=float(result.values[i]), unit=PARAMETER_UNITS[name],
+            SENSITIVITY_COLUMNS, amplitude=float(amplitude),
+            amplitude_unit=parameter_unit("amplitude", system),
+            parameter=name, value=float(result.values[i]), unit=parameter_unit(name, system),
             k_N_per_m=float(system.tid_stiffness), c_N_s_per_m=float(system.tid_damping),
-            peak_unit="m", peak=finite(result.host_peak),
+            peak_unit=peak_unit, peak=finite(result.host_peak),
             derivative_per_unit=finite(result.host_derivative[i]),
             elasticity=finite(result.host_elasticity[i]), stroke_m=finite(result.stroke_peak),
             stroke_derivative_m_per_unit=finite(result.stroke_derivative[i]),
@@ -104,17 +101,24 @@ def _records(amplitude, result, system) -> list[dict]:
     return records
 
 
-def _save_plot(output, amplitudes, results) -> None:
-    """The elasticities against amplitude."""
+def _save_plot(output, amplitudes, results, system, quantity) -> None:
+    """The elasticities against amplitude; for one amplitude, as bars."""
     host, stroke, optimum_host, optimum_stroke = elasticity_series(results)
-    plot.save_figure(
-        plot.plot_elasticities(amplitudes, host, stroke, optimum_host=optimum_host,
-                               optimum_stroke=optimum_stroke),
-        output.path("sensitivity.png"),
-    )
+    peak = ("host displacement" if quantity is None
+            else quantity.describe(system.floors))
+    if amplitudes.size == 1:
+        figure = plot.plot_elasticity_bars(
+            results[0].parameters, [host[name][0] for name in results[0].parameters],
+            title=f"elasticities d ln peak / d ln p of the peak {peak}")
+    else:
+        figure = plot.plot_elasticities(
+            amplitudes, host, stroke, optimum_host=optimum_host, optimum_stroke=optimum_stroke,
+            xlabel=("forcing amplitude A [N]" if quantity is None
+                    else _building.amplitude_label(system)), peak=peak)
+    plot.save_figure(figure, output.path("sensitivity.png"))
 
 
-def _table(records, results, amplitudes, system, optimum: bool) -> str:
+def _table(records, results, amplitudes, system, optimum: bool, described: str) -> str:
     """The printed table, ranked by |e| per amplitude, with its title."""
     columns = sensitivity_table(optimum)
     ranked = [
@@ -124,13 +128,13 @@ def _table(records, results, amplitudes, system, optimum: bool) -> str:
                         key=lambda r: -abs(r["elasticity"] or 0.0))
     ]
     unconverged = [
-        f"{a:g} N"
+        f"{a:g} {parameter_unit('amplitude', system)}"
         for a, r in zip(amplitudes, results, strict=True)
         if not bool(r.converged) or (r.optimum is not None and not bool(r.optimum.converged))
     ]
     title = (
-        f"Sensitivities of the peak responses ({_describe(system)}); e, e_stroke: elasticities "
-        f"d ln(peak) / d ln(p) of the host peak and the inerter stroke; 'retuned': at the "
+        f"Sensitivities of the peak responses ({described}); e, e_stroke: elasticities "
+        f"d ln(peak) / d ln(p) of the peak and the inerter stroke; 'retuned': at the "
         f"tuning retuned for that amplitude, e_k*, e_c*: of its k and c ('c* at 0': the "
         f"optimal damping is at its bound 0, where it stays); ranked by |e|"
         + (f"\nnot converged at {', '.join(unconverged)}" if unconverged else "")
