@@ -3,7 +3,6 @@ config with a [structure] table (and [tid], [load], [response]) to a `BuildingTI
 and their tables, CSV, JSON and PNG files."""
 
 import math
-import textwrap
 from typing import NamedTuple
 
 import numpy as np
@@ -14,8 +13,7 @@ from .._model._structure import Structure
 from .._model._system import TIDSystem
 from .._orbit._settings import SolverSettings
 from .._peaks import BUILDING_BAND, DEFAULT_FREQUENCIES
-from .._response import _on_host, frequency_response
-from .._retune import RetuneSettings, retune
+from .._response import frequency_response
 from .._runtime._io import write_json, write_toml
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
@@ -24,6 +22,7 @@ from ._common import (
     CLIError,
     _config_comment,
     _config_data,
+    _den_hartog,
     _describe,
     _Output,
     _start,
@@ -31,15 +30,12 @@ from ._common import (
 from ._schema import (
     FRF_COLUMNS,
     FRF_TABLE,
-    RETUNE_COLUMNS,
-    RETUNE_TABLE,
     amplitude_unit,
     finite,
     frf_summary,
     ratio,
     row,
     status,
-    stroke_problem,
 )
 from ._tables import save_records, table
 
@@ -135,6 +131,13 @@ def _compliance(system: BuildingTID) -> str:
         return ""
     return (f", series stiffness {float(system.series_stiffness):g} N/m, backlash "
             f"{float(system.backlash):g} m")
+
+
+def reference_tuning(system: TIDSystem | BuildingTID) -> tuple[float, float]:
+    """Den Hartog's tuning (k, c) of the paper's host, or of a building's first mode."""
+    if isinstance(system, BuildingTID):
+        return first_mode_tunings(system)["den_hartog"]
+    return _den_hartog(system)
 
 
 def uncontrolled_peak(system: BuildingTID, quantity: Quantity, omegas) -> float:
@@ -283,83 +286,3 @@ def run_frf(args, inputs: dict) -> int:
     title = f"Frequency response: {describe(system, quantity)}"
     return output.finish(data, title + "\n" + table(FRF_TABLE, summary,
                                                     limit_cm=100 * inputs["stroke_limit"]))
-
-
-def run_retune(args, inputs: dict) -> int:
-    system, quantity, amplitudes, frequencies_hz, omegas, output = begin(
-        args, inputs, "retuning {amplitudes} amplitude(s) over {frequencies} frequencies")
-    settings = SolverSettings(**inputs[SOLVER_TABLE])
-    frequencies_hz, omegas = design_band(omegas)
-    with output.steps(RetuneSettings().progress_steps()) as step:
-        result = retune(system, amplitudes, omegas=omegas, quantity=quantity,
-                        settings=settings, progress=step, map_lanes=args.map_lanes)
-    result = _on_host(result)  # read entry by entry below: no array operation each
-    records = _retune_records(system, quantity, result, inputs["stroke_limit"], omegas)
-    save_records(output, "retune.csv", RETUNE_COLUMNS, records)
-    save_config(inputs, output, "retune")
-    _save_retune_plots(output, system, quantity, records, result, inputs["stroke_limit"])
-    tunings = first_mode_tunings(system)
-    data = document("retune", inputs, system, quantity, frequencies_hz, output,
-                     first_mode_tunings={name: {"k_N_per_m": k, "c_N_s_per_m": c}
-                                         for name, (k, c) in tunings.items()},
-                     results=records)
-    write_json(output.path("retune.json"), data)
-    title = (f"Retuned per amplitude: {describe(system, quantity)}; k_DH, c_DH: the first "
-             f"mode's Den Hartog tuning")
-    return output.finish(data, title + "\n" + table(
-        RETUNE_TABLE, records, limit_cm=100 * inputs["stroke_limit"]))
-
-
-def _save_retune_plots(output, system, quantity, records, result, limit) -> None:
-    """The paper's Figures 7 (k and c, peaks and strokes against amplitude) and 6 (the
-    response over the band before and after retuning, on the retune's check grid) for
-    the building."""
-    amplitudes = np.asarray(result.amplitudes)
-    k_ratio = [r["k_over_k_den_hartog"] for r in records]
-    c_ratio = [r["c_over_c_den_hartog"] for r in records]
-    peak_label = f"peak {quantity.describe(system.floors)} [{quantity.unit}]"
-    described = textwrap.fill(describe(system, quantity), 110)
-    plot.save_figure(plot.plot_retune_summary(
-        amplitudes, k_ratio, c_ratio, np.asarray(result.x_peak_initial),
-        np.asarray(result.x_peak), np.asarray(result.y_peak_initial),
-        np.asarray(result.y_peak), stroke_limit=limit, converged=np.asarray(result.converged),
-        amplitude_label=amplitude_label(system), peak_label=peak_label,
-        reference="first-mode Den Hartog",
-        title=f"TID retuned for each amplitude\n{described}"),
-        output.path("retune_summary.png"))
-    plot.save_figure(plot.plot_retune_responses(
-        np.asarray(result.check_omegas) / (2 * math.pi), amplitudes,
-        np.asarray(result.x_response_initial), np.asarray(result.x_response), k_ratio,
-        c_ratio, ylabel=peak_label, amplitude_unit=amplitude_unit(system.load),
-        title=f"{quantity.describe(system.floors).capitalize()} before and after retuning "
-        "the TID"), output.path("retune_frequency_response.png"))
-
-
-def _retune_records(system, quantity, result, limit, omegas) -> list[dict]:
-    """One record per amplitude of a `RetuneResult`, keyed by `RETUNE_COLUMNS`: the design,
-    its peak before (the given tuning's) and after, their ratios and the strokes."""
-    k_dh, c_dh = first_mode_tunings(system)["den_hartog"]
-    # the given tuning is Den Hartog's (the default): its peak is the "before"
-    given_is_den_hartog = np.allclose([float(system.tid_stiffness), float(system.tid_damping)],
-                                      [k_dh, c_dh], rtol=1e-12)
-    bare = uncontrolled_peak(system, quantity, omegas)
-    messages = result.status_messages()
-    records = []
-    for i, amplitude in enumerate(np.asarray(result.amplitudes)):
-        k, c = float(result.tid_stiffness[i]), float(result.tid_damping[i])
-        before, after = float(result.x_peak_initial[i]), float(result.x_peak[i])
-        stroke_after, ok = float(result.y_peak[i]), bool(result.converged[i])
-        records.append(row(
-            RETUNE_COLUMNS, amplitude=float(amplitude), amplitude_unit=amplitude_unit(
-                system.load), k_N_per_m=k, c_N_s_per_m=c, k_over_k_den_hartog=k / k_dh,
-            c_over_c_den_hartog=c / c_dh, peak_unit=quantity.unit,
-            peak_before=finite(before), peak_after=finite(after),
-            peak_frequency_after_Hz=finite(float(result.omega_peak[i]) / (2 * math.pi)),
-            peak_after_over_before=ratio(after, before),
-            peak_after_over_den_hartog=ratio(after, before) if given_is_den_hartog else None,
-            peak_after_over_uncontrolled=ratio(after, amplitude * bare),
-            stroke_before_m=finite(result.y_peak_initial[i]), stroke_after_m=finite(
-                stroke_after), stroke_limit_m=limit, within_stroke_limit=stroke_after <= limit,
-            converged=ok, status=status(ok, stroke_problem(stroke_after, limit),
-                                        base=messages[i])))
-    return records

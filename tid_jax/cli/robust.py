@@ -5,7 +5,6 @@ import math
 import numpy as np
 
 from .. import plot
-from .._model._building import BuildingTID, first_mode_tunings
 from .._optimise._design import parameter_unit
 from .._response import _on_host
 from .._retune import RetuneSettings
@@ -15,7 +14,6 @@ from . import _building
 from ._arguments import _add_output_arguments, _add_system_arguments
 from ._common import (
     CLIError,
-    _den_hartog,
     _inputs,
 )
 from ._schema import ROBUST_COLUMNS, ROBUST_TABLE, finite, row, status, stroke_problem
@@ -148,7 +146,7 @@ def _save_plot(output, result, given, amplitudes, nominal, stroke_limit, *, nomi
 
 def _summary(result, given, system, stroke_limit) -> dict:
     """The robust design and the given tuning's worst case, for the JSON and the title."""
-    k_dh, c_dh = _reference_tuning(system)
+    k_dh, c_dh = _building.reference_tuning(system)
     k, c = float(result.tid_stiffness), float(result.tid_damping)
     return {
         "k_N_per_m": k,
@@ -168,16 +166,9 @@ def _summary(result, given, system, stroke_limit) -> dict:
     }
 
 
-def _reference_tuning(system) -> tuple[float, float]:
-    """Den Hartog's tuning of the host, or of a building's first mode."""
-    if isinstance(system, BuildingTID):
-        return first_mode_tunings(system)["den_hartog"]
-    return _den_hartog(system)
-
-
 def _table(records, summary, system, stroke_limit, tolerance, described, unit) -> str:
     """The printed table of the scenarios, with its title."""
-    k_dh, c_dh = _reference_tuning(system)
+    k_dh, c_dh = _building.reference_tuning(system)
     k, c = summary["k_N_per_m"], summary["c_N_s_per_m"]
     limit_text = (
         "no stroke limit"
