@@ -1,20 +1,19 @@
-"""`tid-jax frf`, `retune`, `sensitivity` and `robust` on a multi-storey structure: a
-config with a [structure] table (and [tid], [load], [response]) to a `BuildingTID` and a `Quantity`,
-and their tables, CSV, JSON and PNG files."""
+"""A multi-storey structure on the command line: a config with a [structure] table (and
+[tid], [load], [response]) to a `BuildingTID` and a `Quantity`, its band, description and
+JSON record; and where `frf`, `retune`, `sensitivity` and `robust` start, on the paper's
+host or a structure (`design_start`, `design_document`)."""
 
 import math
 from typing import NamedTuple
 
 import numpy as np
 
-from .. import plot
 from .._model._building import BuildingTID, Quantity, first_mode_tunings, uncontrolled_amplitude
 from .._model._structure import Structure
 from .._model._system import TIDSystem
 from .._orbit._settings import SolverSettings
 from .._peaks import BUILDING_BAND, DEFAULT_FREQUENCIES
-from .._response import frequency_response
-from .._runtime._io import write_json, write_toml
+from .._runtime._io import write_toml
 from ._building_config import BUILDING_TABLES, amplitude_value
 from ._common import (
     PROG,
@@ -28,16 +27,8 @@ from ._common import (
     _start,
 )
 from ._schema import (
-    FRF_COLUMNS,
-    FRF_TABLE,
     amplitude_unit,
-    finite,
-    frf_summary,
-    ratio,
-    row,
-    status,
 )
-from ._tables import save_records, table
 
 
 def _structure(table: dict) -> Structure:
@@ -202,8 +193,8 @@ def begin(args, inputs: dict, doing: str):
 
 
 class DesignStart(NamedTuple):
-    """What a design command (`robust`, `sensitivity`) starts from, on the paper's host or
-    a [structure]: its `quantity` None on the host."""
+    """What a command (`frf`, `retune`, `robust`, `sensitivity`) starts from, on the
+    paper's host or a [structure]: its `quantity` None on the host."""
 
     inputs: dict
     system: TIDSystem | BuildingTID
@@ -216,13 +207,14 @@ class DesignStart(NamedTuple):
     described: str
 
 
-def design_start(args, inputs: dict, doing: str) -> DesignStart:
-    """A design command's start (`doing` as in `begin`): a building's band at least
+def design_start(args, inputs: dict, doing: str, design: bool = True) -> DesignStart:
+    """A command's start (`doing` as in `begin`): with `design`, a building's band at least
     `DEFAULT_FREQUENCIES` frequencies (`design_band`)."""
     if "structure" in inputs:
         system, quantity, amplitudes, frequencies_hz, omegas, output = begin(args, inputs,
                                                                              doing)
-        frequencies_hz, omegas = design_band(omegas)
+        if design:
+            frequencies_hz, omegas = design_band(omegas)
         return DesignStart(inputs, system, quantity, SolverSettings(**inputs[SOLVER_TABLE]),
                            frequencies_hz, omegas, amplitudes, output,
                            describe(system, quantity))
@@ -235,54 +227,9 @@ def design_start(args, inputs: dict, doing: str) -> DesignStart:
 
 
 def design_document(start: DesignStart, command: str, **results) -> dict:
-    """The JSON record of a design command's run, the host's or a building's."""
+    """The JSON record of a command's run, the host's or a building's."""
     if start.quantity is None:
         return start.output.document(command, start.inputs, start.system, start.settings,
                                      start.frequencies_hz, **results)
     return document(command, start.inputs, start.system, start.quantity,
                     start.frequencies_hz, start.output, **results)
-
-
-def run_frf(args, inputs: dict) -> int:
-    system, quantity, amplitudes, frequencies_hz, omegas, output = begin(
-        args, inputs, "frequency response at {amplitudes} amplitude(s) x {frequencies} "
-        "frequencies")
-    response = frequency_response(system, omegas, amplitudes, quantity=quantity,
-                                  settings=SolverSettings(**inputs[SOLVER_TABLE]))
-    peak, stroke = np.asarray(response.x_max), np.asarray(response.y_max)
-    stable = np.asarray(response.converged & response.stable)
-    uncontrolled = amplitudes[:, None] * np.asarray(
-        uncontrolled_amplitude(system, quantity, omegas))[None, :]
-    bare = amplitudes * uncontrolled_peak(system, quantity, omegas)
-    unit = amplitude_unit(system.load)
-    k, c = float(system.tid_stiffness), float(system.tid_damping)
-    records = [row(FRF_COLUMNS, amplitude=float(a), amplitude_unit=unit,
-                   frequency_Hz=float(f), k_N_per_m=k, c_N_s_per_m=c, peak_unit=quantity.unit,
-                   peak=finite(peak[i, j]), uncontrolled_peak=float(uncontrolled[i, j]),
-                   peak_over_uncontrolled=ratio(peak[i, j], bare[i]),
-                   stroke_m=finite(stroke[i, j]),
-                   transitions=int(response.transitions[i, j]),
-                   stable=bool(stable[i, j]),
-                   converged=bool(response.converged[i, j]),
-                   status=status(bool(response.converged[i, j]),
-                                 "" if stable[i, j] else "unstable"))
-               for i, a in enumerate(amplitudes) for j, f in enumerate(frequencies_hz)]
-    save_records(output, "frf.csv", FRF_COLUMNS, records)
-    save_config(inputs, output, "frf")
-    plot.save_figure(plot.plot_building_response(
-        frequencies_hz, amplitudes, peak, uncontrolled,
-        ylabel=f"{quantity.describe(system.floors)} [{quantity.unit}]",
-        amplitude_unit=unit), output.path("frf.png"))
-    summary = frf_summary(records, amplitudes, omegas.size)
-    data = document("frf", inputs, system, quantity, frequencies_hz, output,
-                     amplitudes=amplitudes.tolist(),
-                     response_max=peak.tolist(), uncontrolled=uncontrolled.tolist(),
-                     y_max_m=stroke.tolist(),
-                     converged=np.asarray(response.converged).tolist(),
-                     stable=stable.tolist(),
-                     transitions=np.asarray(response.transitions).tolist(), summary=summary,
-                     results=records)
-    write_json(output.path("frf.json"), data)
-    title = f"Frequency response: {describe(system, quantity)}"
-    return output.finish(data, title + "\n" + table(FRF_TABLE, summary,
-                                                    limit_cm=100 * inputs["stroke_limit"]))
