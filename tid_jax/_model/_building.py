@@ -51,6 +51,7 @@ LOADS = ("force", "ground")
 QUANTITIES = ("displacement", "drift", "acceleration")
 # what each quantity is measured in
 QUANTITY_UNITS = {"displacement": "m", "drift": "m", "acceleration": "m/s2"}
+LOAD_UNITS = {"force": "N", "ground": "m/s2"}  # of each load's amplitude
 G = 9.80665  # m/s2, the standard acceleration of gravity
 
 

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from .._model._building import BuildingTID
+from .._model._building import LOAD_UNITS, BuildingTID
 from .._model._structure import storey_springs, storey_stiffnesses
 from .._model._system import FIELD_NAMES, TIDSystem, compiler_options
 from .._orbit._sampled_peaks import interpolated, located_peak, parabola_vertices
@@ -51,8 +51,8 @@ def parameter_unit(name: str, system=None) -> str:
         return "kg"
     if name.startswith("storey_stiffness_"):
         return "N/m"
-    if name == "amplitude" and getattr(system, "load", "force") == "ground":
-        return "m/s2"
+    if name == "amplitude" and isinstance(system, BuildingTID):
+        return LOAD_UNITS[system.load]
     return PARAMETER_UNITS[name]
 
 

@@ -11,6 +11,7 @@ did not) and adds the problems found, such as a stroke over its limit, after "; 
 
 from collections.abc import Sequence
 
+from .._model._building import LOAD_UNITS
 from ._tables import Shown, shown
 
 OK = "ok"
@@ -72,7 +73,7 @@ RECORDS_COLUMNS = (
 
 def amplitude_unit(load: str) -> str:
     """The unit of a harmonic load's amplitude: N for a force, m/s2 for the ground's."""
-    return "m/s2" if load == "ground" else "N"
+    return LOAD_UNITS[load]
 
 
 def row(columns: Sequence[str], **values) -> dict:

@@ -26,6 +26,7 @@ from ._common import (
     _settings,
     _system,
 )
+from ._schema import amplitude_unit
 from ._tables import Shown, save_records, shown, table
 
 RTDS_COLUMNS = (
@@ -243,7 +244,7 @@ def _run_building_rtds(args, inputs: dict, amplitude: float) -> int:
     system, quantity, _ = _building.building_inputs(inputs)
     frequencies_hz, omegas = _test_frequencies(args, inputs, _building.band(inputs, system))
     test = _test_options(args, system, amplitude)
-    unit = "m/s2" if system.load == "ground" else "N"
+    unit = amplitude_unit(system.load)
     test["amplitude"] = test.pop("amplitude_N")  # in the JSON's "amplitude_unit"
     output = _Output(args)
     options = (f"({args.scheme}, delay {1e3 * test['delay_s']:g} ms, b_g = "
