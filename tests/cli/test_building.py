@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tid_jax as tj
-from tests.cli.test_main import run
+from tests.cli.test_main import FRF_ARRAYS, run
 from tests.reference import building_linear
 from tid_jax._runtime._outcomes import outcome_code, outcome_message
 
@@ -56,6 +56,9 @@ def test_frf_of_a_building_writes_its_files_and_json(tmp_path):
     assert data["response"] == {"kind": "drift", "floor": 1, "unit": "m",
                                 "describes": "storey 1 drift"}
     assert data["amplitudes"][0] == pytest.approx(0.980665)
+    assert data["amplitude_unit"] == "m/s2" and data["response_unit"] == "m"
+    # the arrays the paper's host writes too (`test_main`)
+    assert FRF_ARRAYS <= data.keys()
     # its rows: the same values, the unit of each, stroke and status
     rows = data["results"]
     assert len(rows) == 14 and {r["amplitude_unit"] for r in rows} == {"m/s2"}

@@ -33,6 +33,9 @@ RETUNE_FILES = (
 )
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
+FRF_ARRAYS = {"amplitudes", "amplitude_unit", "response_unit", "response_max", "uncontrolled",
+              "y_max_m", "converged", "stable", "stick_fraction", "transitions"}
+
 
 def run(argv):
     """`main(argv)` with stdout and stderr captured: `(exit status, stdout, stderr)`."""
@@ -162,7 +165,8 @@ def test_frf_json_on_stdout_is_the_saved_json_and_rebuilds_the_system(frf_run):
     # the saved peaks are the library's, for the saved system and frequencies
     omegas = 2 * np.pi * np.asarray(printed["frequencies_hz"])
     expected = tj.frequency_response(system, omegas, 600.0)
-    np.testing.assert_allclose(printed["x_max_m"][1], expected.x_max, rtol=1e-10)
+    np.testing.assert_allclose(printed["response_max"][1], expected.x_max, rtol=1e-10)
+    assert FRF_ARRAYS <= printed.keys() and printed["response_unit"] == "m"
     np.testing.assert_allclose(printed["y_max_m"][1], expected.y_max, rtol=1e-10)
 
 
@@ -229,7 +233,7 @@ def test_saved_config_reproduces_the_run(frf_run, tmp_path):
     )
     assert status == 0
     first, second = json.loads(stdout), json.loads(again)
-    for key in ("system", "solver", "frequencies_hz", "x_max_m", "y_max_m", "summary"):
+    for key in ("system", "solver", "frequencies_hz", "response_max", "y_max_m", "summary"):
         assert second[key] == first[key]
 
 
@@ -271,7 +275,7 @@ def test_flags_override_config_and_table_is_printed(frf_run, tmp_path):
     assert data["system"]["friction_force"] == 5.0  # config beats default
     assert data["system"]["tid_damping"] == 400.0
     assert data["system"]["tid_stiffness"] == pytest.approx(float(k_dh))  # default
-    assert data["amplitudes_N"] == [300.0, 700.0]
+    assert data["amplitudes"] == [300.0, 700.0] and data["amplitude_unit"] == "N"
     assert "host_frequency_hz" not in data["inputs"]
 
 
@@ -541,7 +545,7 @@ def test_console_script_runs_and_fails_cleanly(tmp_path):
     ]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout)["amplitudes_N"] == [200.0]
+    assert json.loads(done.stdout)["amplitudes"] == [200.0]
     assert all((tmp_path / name).exists() for name in FRF_FILES)
     bad = subprocess.run(
         [script, "retune", "--inertance", "-75"], capture_output=True, text=True, timeout=300

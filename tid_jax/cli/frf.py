@@ -65,23 +65,25 @@ def _run_frf(args) -> int:
     save_records(output, "frf.csv", FRF_COLUMNS, records)
     _building.save_config(start.inputs, output, "frf")
     summary = frf_summary(records, amplitudes, omegas.size)
+    # the same arrays for one storey and many: amplitudes x frequencies
+    extra = dict(amplitudes=amplitudes.tolist(),
+                 amplitude_unit=parameter_unit("amplitude", system),
+                 response_unit=(quantity or Quantity()).unit,
+                 response_max=grid.x_max.tolist(), uncontrolled=uncontrolled.tolist(),
+                 y_max_m=grid.y_max.tolist(), converged=grid.converged.tolist(),
+                 stable=(grid.converged & grid.stable).tolist(),
+                 stick_fraction=grid.stick_fraction.tolist(),
+                 transitions=grid.transitions.tolist())
     if quantity is None:
-        extra, breakaway = _host_outputs(output, system, grid, amplitudes, frequencies_hz,
-                                         omegas)
+        breakaway = _host_outputs(output, system, grid, amplitudes, frequencies_hz, omegas,
+                                  extra)
         text = (_table(summary, system, start.inputs["stroke_limit"]) + "\n"
                 + _breakaway_line(breakaway))
     else:
-        unit = parameter_unit("amplitude", system)
         plot.save_figure(plot.plot_building_response(
             frequencies_hz, amplitudes, grid.x_max, uncontrolled,
             ylabel=f"{quantity.describe(system.floors)} [{quantity.unit}]",
-            amplitude_unit=unit), output.path("frf.png"))
-        extra = dict(amplitudes=amplitudes.tolist(), response_max=grid.x_max.tolist(),
-                     uncontrolled=uncontrolled.tolist(), y_max_m=grid.y_max.tolist(),
-                     converged=grid.converged.tolist(),
-                     stable=(grid.converged & grid.stable).tolist(),
-                     stick_fraction=grid.stick_fraction.tolist(),
-                     transitions=grid.transitions.tolist())
+            amplitude_unit=extra["amplitude_unit"]), output.path("frf.png"))
         text = f"Frequency response: {start.described}\n" + table(
             FRF_TABLE, summary, limit_cm=100 * start.inputs["stroke_limit"])
     data = _building.design_document(start, "frf", **extra, summary=summary, results=records)
@@ -89,9 +91,10 @@ def _run_frf(args) -> int:
     return output.finish(data, text)
 
 
-def _host_outputs(output, system, grid, amplitudes, frequencies_hz, omegas):
-    """The paper's host's figure (normalised by A/K, with the linear and stuck curves)
-    and its JSON's arrays, and the breakaway amplitude over the band."""
+def _host_outputs(output, system, grid, amplitudes, frequencies_hz, omegas, arrays):
+    """The paper's host's figure (normalised by A/K, with the linear and stuck curves),
+    its curves and breakaway amplitudes added to the JSON's `arrays`; the breakaway
+    amplitude over the band."""
     static = (amplitudes / float(system.host_stiffness))[:, None]
     x_linear, y_linear = _linear_normalised(system, frequencies_hz)
     breakaway = host_breakaway(system, omegas)
@@ -104,20 +107,14 @@ def _host_outputs(output, system, grid, amplitudes, frequencies_hz, omegas):
         ),
         output.path("frf.png"),
     )
-    return dict(
-        amplitudes_N=[float(a) for a in amplitudes],
-        x_max_m=grid.x_max.tolist(),
-        y_max_m=grid.y_max.tolist(),
-        converged=grid.converged.tolist(),
-        stable=grid.stable.tolist(),
-        stick_fraction=grid.stick_fraction.tolist(),
-        transitions=grid.transitions.tolist(),
+    arrays.update(
         x_linear_over_A_K=x_linear.tolist(),
         y_linear_over_A_K=y_linear.tolist(),
         breakaway_amplitude_N=np.asarray(breakaway.amplitude).tolist(),
         breakaway_minimum_N=float(breakaway.minimum),
         breakaway_minimum_frequency_Hz=float(breakaway.omega_minimum) / (2 * math.pi),
-    ), breakaway
+    )
+    return breakaway
 
 
 def _solve(system, quantity, omegas, amplitudes, settings, output) -> _Grid:
