@@ -102,3 +102,34 @@ def test_derivatives_of_the_paper_system_and_its_one_storey_building_agree():
         theirs, building_peak = _peak_derivatives(building, omega, AMPLITUDE, NAMES)
         assert building_peak == pytest.approx(peak, rel=1e-9)
         np.testing.assert_allclose(theirs, ours, rtol=1e-6, atol=1e-9 * np.max(np.abs(ours)))
+
+
+@pytest.mark.parametrize("index", [28, 31])  # of the default band: sticks twice a period
+def test_a_building_s_stroke_derivative_through_stick_slip_matches_differences(index):
+    # The stroke's peak reads the stroke at the stick-slip transitions, where a stuck
+    # interval begins and ends at the same position: its forward derivative by the TID's
+    # stiffness against central differences of orbits solved afresh.
+    import jax
+    import jax.numpy as jnp
+
+    from tid_jax._response import point_response
+
+    structure = tj.Structure.shear_building([2000.0, 2000.0, 1500.0],
+                                            [1.5e6, 1.25e6, 1.0e6], damping_ratio=0.02)
+    # (a robust design's tuning, the stroke limit active)
+    system = tj.BuildingTID(structure, 275.0, 135.0, 28603.673621271577, 747.3393444255601,
+                            load="ground")
+    quantity, settings = tj.Quantity("drift", 1), tj.SolverSettings()
+    omega = float(tj.default_omegas(system)[index])
+
+    @jax.jit
+    def peaks(k):
+        _, x_max, y_max = point_response(system.replace(tid_stiffness=k), omega, 2.0,
+                                         settings, quantity=quantity)
+        return jnp.stack([x_max, y_max])
+
+    k = jnp.asarray(28603.673621271577)
+    derivative = np.asarray(jax.jit(jax.jacfwd(peaks))(k))
+    step = 1e-5 * float(k)
+    difference = np.asarray(peaks(k + step) - peaks(k - step)) / (2 * step)
+    np.testing.assert_allclose(derivative, difference, rtol=1e-4)
