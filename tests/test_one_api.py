@@ -12,7 +12,7 @@ import tid_jax as tj
 
 # The verbs, each once, in the order (system, frequencies, amplitudes) where they take
 # both positionally.
-VERBS = ("frequency_response", "peaks", "retune", "robust_tune", "sensitivities",
+VERBS = ("frequency_response", "peaks", "peak_response", "retune", "robust_tune", "sensitivities",
          "amplitude_sensitivities", "breakaway_amplitude", "linear_receptance",
          "default_omegas")
 # Words that name one kind of structure in a public function's name.

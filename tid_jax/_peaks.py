@@ -15,7 +15,6 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_grid,
-    check_system,
 )
 from ._model._system import TIDSystem, compiler_options
 from ._orbit._sampled_peaks import (
@@ -314,36 +313,39 @@ def peaks(
 
 
 def peak_response(
-    system: TIDSystem,
+    system: TIDSystem | BuildingTID,
     omegas: ArrayLike | None,
     amplitude: ArrayLike,
     *,
     response: str | Sequence[str] = "host",
+    quantity: Quantity | None = None,
     settings: SolverSettings = SolverSettings(),
 ) -> Float[Array, ""] | Float[Array, " responses"]:
-    """Peak steady-state displacement over a frequency band at one forcing amplitude, of
-    the host (max |x|), of the inerter terminal (max |y|, the stroke) or both. Differentiable
-    with respect to every field of `system` and `amplitude` (implicit differentiation
-    through the periodic orbits; envelope theorem at the peak). The host's peak is the
-    maximum in continuous frequency, the inerter's the grid's refined by a parabola (see
-    `response_peaks`).
+    """Peak steady-state response over a frequency band at one load amplitude: of the
+    host's displacement (a building's `quantity`; max |x|), of the inerter (its stroke,
+    max |y|) or both. Differentiable, in forward and reverse mode, with respect to every
+    field of `system` and `amplitude` (implicit differentiation through the periodic
+    orbits; envelope theorem at the peak). The host's peak is the maximum in continuous
+    frequency, the inerter's the grid's refined by a parabola (see `response_peaks`).
 
     **Arguments:**
 
-    - `system`: the `TIDSystem`.
+    - `system`: a `TIDSystem` or a `BuildingTID`.
     - `omegas`: the band's grid, rad/s, increasing; None: `default_omegas(system)`.
-    - `amplitude`: forcing amplitude A of `A sin(omega t)`, N (scalar; may be traced).
-    - `response`: `"host"` or `"inerter"`, or a tuple (or list) of them: their peaks from
-      one sweep of the band (the steady states and their derivatives shared).
+    - `amplitude`: load amplitude A of `A sin(omega t)`, N (a building's ground
+      acceleration: m/s2; scalar; may be traced).
+    - `response`: `"host"` (the host's displacement, a building's `quantity`) or
+      `"inerter"` (the stroke), or a tuple (or list) of them: their peaks from one sweep
+      of the band (the steady states and their derivatives shared).
+    - `quantity`: a building's measured response (`Quantity`; default the top floor's
+      displacement).
     - `settings`: `SolverSettings` of the steady states.
 
-    **Returns:** the peak, m (for a tuple of responses, an array of their peaks in its
-    order); NaN where a steady state in the band did not converge.
+    **Returns:** the peak, in the quantity's unit (m for the stroke; for a tuple of
+    responses, an array of their peaks in its order); NaN where a steady state in the
+    band did not converge.
     """
-    if isinstance(system, BuildingTID):
-        raise ValueError("peak_response takes a TIDSystem; a building's peaks come from "
-                         "tid_jax.peaks(system, omegas, amplitudes)")
-    check_system(system)
+    quantity = checked_quantity(system, quantity, "peak_response")
     responses = (response,) if isinstance(response, str) else (
         tuple(response) if isinstance(response, tuple | list) else ())
     if not (responses and all(name in ("host", "inerter") for name in responses)):
@@ -360,14 +362,15 @@ def peak_response(
     # (its tolerances too: one program for any of their values)
     return _peak_response(system, amplitude, band,
                           response if isinstance(response, str) else responses,
-                          settings.with_array_tolerances(system))
+                          settings.with_array_tolerances(system), quantity)
 
 
 @compiled(options=compiler_options)
-def _peak_response(system, amplitude, omegas, response: str | tuple[str, ...], settings):
+def _peak_response(system, amplitude, omegas, response: str | tuple[str, ...], settings,
+                   quantity: Quantity):
     """The peak of `response` (a scalar), or of each of a tuple of them (an array)."""
     responses = (response,) if isinstance(response, str) else response
-    xs, ys, converged, states = sweep(system, amplitude, omegas, settings)
+    xs, ys, converged, states = sweep(system, amplitude, omegas, settings, quantity=quantity)
     peaks = {}
     if "host" in responses:
         def solve(at, last):
@@ -376,7 +379,7 @@ def _peak_response(system, amplitude, omegas, response: str | tuple[str, ...], s
             # One sweep over every point of every peak (a sweep per peak would batch the
             # solves' loops twice over when traced).
             x, _, ok, _ = sweep(system, amplitude, at.reshape(-1), settings,
-                                z0.reshape((-1,) + z0.shape[2:]))
+                                z0.reshape((-1,) + z0.shape[2:]), quantity)
             return jnp.where(ok, x, jnp.nan).reshape(at.shape)
 
         selection = jnp.where(converged, jax.lax.stop_gradient(xs), 0.0)

@@ -13,6 +13,7 @@ from ._model._checks import (
 from ._model._dynamics import parameters
 from ._model._system import TIDSystem, compiler_options
 from ._orbit._eigen import eigenvalues
+from ._orbit._flow import PlantInputs
 from ._orbit._implicit import moving_part
 from ._orbit._period import point_model, state_units, transient
 from ._orbit._sampled_peaks import refined_peak
@@ -114,9 +115,10 @@ def point_response(
     differentiation through the orbit)."""
     settings = settings.for_system(system)
     if isinstance(system, BuildingTID):
-        p, linear, unit_q, unit = point_model(system, quantity, amplitude, omega)
+        plant, linear, unit_q, unit = point_model(system, quantity, amplitude, omega)
         if z_init is None:
-            z_init = transient(linear, jax.lax.stop_gradient(p), settings)
+            z_init = transient(linear, jax.lax.stop_gradient(plant), settings)
+        p = PlantInputs(system, amplitude, omega, quantity)
     else:
         p = parameters(system, amplitude, omega)
         unit_q = unit = amplitude / system.host_stiffness

@@ -81,6 +81,21 @@ def plant(system: BuildingTID, quantity: Quantity, amplitude, omega) -> Plant:
                         system.backlash, system.play_direction(), amplitude, omega)
 
 
+class PlantInputs(eqx.Module):
+    """What a structure's `Plant` is made from: the system (its fields by name), the
+    measured quantity, the load amplitude and the frequency. A periodic orbit is
+    differentiated with respect to these fields (`_implicit.with_field_derivatives`),
+    not the plant's many derived entries."""
+
+    system: BuildingTID
+    amplitude: Float[Array, ""]
+    omega: Float[Array, ""]
+    quantity: Quantity = eqx.field(static=True)
+
+    def plant(self) -> "Plant":
+        return plant(self.system, self.quantity, self.amplitude, self.omega)
+
+
 def parameter_plant(p: Float[Array, " 14"], compliant: bool = False) -> Plant:
     """The scaled model of the paper's system at the parameter vector `p` (order
     `_dynamics.PARAMETERS`): the one-storey case of `plant`, whose inerter joins the

@@ -1,17 +1,18 @@
 """The implicit derivatives of a periodic orbit z* = Phi_T(z*, p): the periodicity
 residual's Jacobian (`fixed_point_matrix`), the samples over a period with their
 Jacobians, and the identity on a converged orbit whose JVP is dz*/dp = (I - dPhi/dz)^{-1}
-dPhi/dp, for the paper's parameter vector or a structure's `Plant`."""
+dPhi/dp, for the paper's parameter vector or the fields of a structure (`PlantInputs`)."""
 
 import functools as ft
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float
 
-from ._flow import Plant
+from ._flow import Plant, PlantInputs
 from ._period import period_samples, samples_and_jacobian
 from ._settings import SolverSettings
 
@@ -93,9 +94,6 @@ def _orbit_jvp(static, directions, primals, tangents):
     _, _, *p_dot = tangents
     settings = eqx.combine(arrays, static)
     tangent_out = jax.tree.map(jnp.zeros_like, orbit)
-    if isinstance(p[0], Plant):
-        return orbit, eqx.tree_at(lambda o: (o.z, o.samples), tangent_out,
-                                  _plant_tangents(orbit, p[0], p_dot[0], settings))
     active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
     if not active:
         return orbit, tangent_out
@@ -119,21 +117,61 @@ def _orbit_jvp(static, directions, primals, tangents):
     return orbit, tangent_out
 
 
-def _plant_tangents(orbit: Periodic, plant: Plant, plant_dot: Plant,
-                    settings: SolverSettings):
-    """The tangents of a periodic `orbit`'s state and samples along the tangent
-    `plant_dot` of its `plant`: dz* = (I - dPhi/dz)^{-1} dPhi/dplant . plant_dot, the
-    last factor one integration of a period along `plant_dot` (linear in it)."""
-    plant_dot = jax.tree.map(
-        lambda t, x: jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t, plant_dot,
-        plant, is_leaf=lambda t: isinstance(t, SymbolicZero))
+_orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
+
+
+def with_field_derivatives(settings: SolverSettings, inputs: PlantInputs, orbit: Periodic,
+                           plant: Plant):
+    """Identity on a converged `orbit` of `plant`, the plant of `inputs` (as the shooting
+    used it, to the bit); its JVP is the implicit derivative of the orbit with respect to
+    the arrays of `inputs` (the system's fields, the amplitude, the frequency), each an
+    explicit Jacobian over the entries of the arrays with non-zero tangents (so that
+    reverse mode can transpose it). The period map is linearised at `plant` itself: a
+    plant computed again may differ in its last bits, and where a stuck interval's two
+    ends tie, that decides which transition the stroke's peak takes its derivative from."""
+    arrays, static = eqx.partition(settings, eqx.is_array)
+    leaves, treedef = jax.tree.flatten(inputs)
+    return _field_identity((static, treedef), (arrays, plant), orbit, *leaves)
+
+
+@ft.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _field_identity(statics, arrays, orbit, *leaves):
+    del statics, arrays, leaves
+    return orbit
+
+
+def _field_jvp(statics, primals, tangents):
+    static, treedef = statics
+    (arrays, plant), orbit, *leaves = primals
+    _, _, *dots = tangents
+    settings = eqx.combine(arrays, static)
+    tangent_out = jax.tree.map(jnp.zeros_like, orbit)
+    active = [i for i, t in enumerate(dots) if not isinstance(t, SymbolicZero)]
+    if not active:
+        return orbit, tangent_out
+    sizes = [jnp.size(leaves[i]) for i in active]
+
+    def plant_at(flat):
+        changed = list(leaves)
+        for i, part in zip(active, jnp.split(flat, np.cumsum(sizes)[:-1]), strict=True):
+            changed[i] = part.reshape(jnp.shape(leaves[i]))
+        return jax.tree.unflatten(treedef, changed).plant()
+
+    flat = jnp.concatenate([jnp.ravel(leaves[i]) for i in active])
+    flat_dot = jnp.concatenate([jnp.ravel(dots[i]) for i in active])
     of_state = orbit.state_jacobians
     if of_state is None:
         of_state = sample_jacobians(orbit.z, plant, settings, ())[1]
-    _, along = jax.jvp(lambda q: period_samples(orbit.z, q, settings), (plant,), (plant_dot,))
-    along = Samples(*along)
-    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), along.z_end)
-    return z_dot, jax.tree.map(lambda j, a: j @ z_dot + a, of_state, along)
+    # the plant's tangent along each active entry, then the period's along each of them
+    columns = jax.jacfwd(plant_at)(flat)
+    along = jax.vmap(lambda column: jax.jvp(lambda q: period_samples(orbit.z, q, settings),
+                                            (plant,), (column,))[1],
+                     in_axes=(jax.tree.map(lambda _: -1, plant),), out_axes=-1)(columns)
+    of_fields = Samples(*along)
+    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_fields.z_end @ flat_dot)
+    samples_dot = jax.tree.map(lambda j_state, j_fields: j_state @ z_dot + j_fields @ flat_dot,
+                               of_state, of_fields)
+    return orbit, eqx.tree_at(lambda o: (o.z, o.samples), tangent_out, (z_dot, samples_dot))
 
 
-_orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
+_field_identity.defjvp(_field_jvp, symbolic_zeros=True)

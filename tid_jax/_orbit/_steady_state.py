@@ -6,12 +6,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Complex, Float, Int
 
 from ._eigen import eigenvalues
-from ._flow import Plant
+from ._flow import Plant, PlantInputs
 from ._implicit import (
     Periodic,
     Samples,
     fixed_point_matrix,
     sample_jacobians,
+    with_field_derivatives,
     with_orbit_derivatives,
 )
 from ._period import (
@@ -433,10 +434,10 @@ def solve_orbit(
     the sequence of its scalars, which lets derivatives skip the parameters that do not
     depend on the differentiated inputs), by shooting from `z_init` (scaled state;
     default the equivalent linear steady state, `_period.initial_state`, followed by
-    `settings.transient_periods` periods); or at a structure's `Plant` (`_period.model`),
-    from a given `z_init`.
-    Differentiable with respect to `p` (implicit differentiation; a `Plant`'s arrays,
-    hence any structure's fields by name), not with respect to `z_init`.
+    `settings.transient_periods` periods); or at the plant of a structure's
+    `PlantInputs`, from a given `z_init`.
+    Differentiable with respect to `p` (implicit differentiation; a structure's fields
+    by name, in forward and reverse mode), not with respect to `z_init`.
 
     With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
     at slightly different parameters), chord iterations without tangents bring `z_init`
@@ -444,11 +445,12 @@ def solve_orbit(
     `directions`, reuse the Jacobians formed with the orbit's samples; the state's are
     returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at nearby
     parameters."""
-    if isinstance(p, Plant):
+    inputs = p if isinstance(p, PlantInputs) else None
+    if inputs is not None:
         if z_init is None or directions:
-            raise ValueError("a Plant's orbit is shot from a given z_init, and its "
-                             "derivatives come from its own tangents (no directions)")
-        scalars, p_const = [p], jax.lax.stop_gradient(p)
+            raise ValueError("a structure's orbit is shot from a given z_init, and its "
+                             "derivatives are by its fields (no directions)")
+        p_const = jax.lax.stop_gradient(inputs.plant())
     else:
         scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
         p_const = jax.lax.stop_gradient(jnp.stack(scalars))
@@ -459,7 +461,10 @@ def solve_orbit(
     if monodromy_init is not None:
         z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
     orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
-    orbit = with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
+    if inputs is not None:
+        orbit = with_field_derivatives(settings, inputs, orbit, p_const)
+    else:
+        orbit = with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit.samples.xs))
     monodromy = jax.lax.stop_gradient(orbit.monodromy)
     if directions:
