@@ -93,10 +93,9 @@ def _orbit_jvp(static, directions, primals, tangents):
     arrays, orbit, *p = primals
     _, _, *p_dot = tangents
     settings = eqx.combine(arrays, static)
-    tangent_out = jax.tree.map(jnp.zeros_like, orbit)
-    active = [i for i, t in enumerate(p_dot) if not isinstance(t, SymbolicZero)]
+    active = _active(p_dot)
     if not active:
-        return orbit, tangent_out
+        return orbit, _orbit_tangent(orbit)
 
     if orbit.parameter_jacobians is not None and set(active) <= set(directions):
         columns = jnp.asarray([directions.index(i) for i in active], dtype=int)
@@ -113,8 +112,21 @@ def _orbit_jvp(static, directions, primals, tangents):
         lambda j_state, j_parameters: j_state @ z_dot + j_parameters @ p_active_dot,
         of_state, of_parameters,
     )
-    tangent_out = eqx.tree_at(lambda o: (o.z, o.samples), tangent_out, (z_dot, samples_dot))
-    return orbit, tangent_out
+    return orbit, _orbit_tangent(orbit, z_dot, samples_dot)
+
+
+def _active(dots) -> list[int]:
+    """The inputs whose tangents are not symbolic zeros."""
+    return [i for i, t in enumerate(dots) if not isinstance(t, SymbolicZero)]
+
+
+def _orbit_tangent(orbit: Periodic, z_dot=None, samples_dot=None) -> Periodic:
+    """The tangent of a `Periodic`: `z_dot` and `samples_dot` (zero where not given), the
+    rest zero."""
+    zero = jax.tree.map(jnp.zeros_like, orbit)
+    if z_dot is None:
+        return zero
+    return eqx.tree_at(lambda o: (o.z, o.samples), zero, (z_dot, samples_dot))
 
 
 _orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
@@ -145,10 +157,9 @@ def _field_jvp(statics, primals, tangents):
     (arrays, plant), orbit, *leaves = primals
     _, _, *dots = tangents
     settings = eqx.combine(arrays, static)
-    tangent_out = jax.tree.map(jnp.zeros_like, orbit)
-    active = [i for i, t in enumerate(dots) if not isinstance(t, SymbolicZero)]
+    active = _active(dots)
     if not active:
-        return orbit, tangent_out
+        return orbit, _orbit_tangent(orbit)
     sizes = [jnp.size(leaves[i]) for i in active]
 
     def plant_at(flat):
@@ -171,7 +182,7 @@ def _field_jvp(statics, primals, tangents):
     z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_fields.z_end @ flat_dot)
     samples_dot = jax.tree.map(lambda j_state, j_fields: j_state @ z_dot + j_fields @ flat_dot,
                                of_state, of_fields)
-    return orbit, eqx.tree_at(lambda o: (o.z, o.samples), tangent_out, (z_dot, samples_dot))
+    return orbit, _orbit_tangent(orbit, z_dot, samples_dot)
 
 
 _field_identity.defjvp(_field_jvp, symbolic_zeros=True)
