@@ -86,6 +86,17 @@ def test_the_verbs_give_a_one_storey_building_the_paper_system_s_numbers(system)
         np.testing.assert_allclose(getattr(mine, name), getattr(paper, name), rtol=1e-6,
                                    err_msg=name)
     assert type(tj.frequency_response(building, omegas, 100.0)) is tj.FrequencyResponse
+    # sensitivities: the host's mass, stiffness and damping are the building's floor
+    # mass, storey stiffness and damping matrix (its factor)
+    mine, paper = (tj.sensitivities(s, 300.0, omegas=omegas, optimum=False)
+                   for s in (building, system))
+    names = {"floor_mass_1": "host_mass", "storey_stiffness_1": "host_stiffness",
+             "damping_scale": "host_damping"}
+    for name in mine.parameters:
+        j, i = mine.parameters.index(name), paper.parameters.index(names.get(name, name))
+        for field in ("host_elasticity", "stroke_elasticity"):
+            assert float(getattr(mine, field)[j]) == pytest.approx(
+                float(getattr(paper, field)[i]), rel=1e-6, abs=1e-9), (name, field)
     # the retune: the same optimiser, from the same reference tuning (Den Hartog's on the
     # one mode), to the same design and peaks
     mine, paper = (tj.retune(s, [600.0], omegas=omegas) for s in (building, system))

@@ -374,8 +374,8 @@ def sensitivities(
     one (the free play opening) and its elasticity 0.
 
     A `BuildingTID`'s peak is its `quantity`'s (default the top floor's displacement),
-    its parameters its device's, every floor's mass and every storey's stiffness (the
-    damping matrix held) and the amplitude (`building_parameters`); its optimum is the
+    its parameters its device's, every floor's mass, every storey's stiffness, a factor
+    on its damping matrix and the amplitude (`building_parameters`); its optimum is the
     retune's, from the first mode's Den Hartog tuning.
 
     **Arguments:**

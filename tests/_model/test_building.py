@@ -312,7 +312,7 @@ def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction
                             terminal_mass=20.0)
     quantity = tj.Quantity("drift", 1)
     (result,) = tj.amplitude_sensitivities(system, [1.0], quantity=quantity, optimum=False)
-    assert bool(result.converged) and len(result.parameters) == 7 + 2 * 3
+    assert bool(result.converged) and len(result.parameters) == 7 + 2 * 3 + 1
     M, K, C = _matrices(building)
     storeys = [K[0, 0] + K[0, 1], -K[1, 0], -K[2, 1]]
     step = 1e-3
@@ -333,11 +333,13 @@ def test_peak_elasticities_are_differences_of_relocated_peaks(building, friction
                 spring[s - 1] = -1.0
             stiffness = K + (factor - 1) * storeys[s] * np.outer(spring, spring)
             return system.replace(structure=tj.Structure(M, stiffness, C)), 1.0
+        if name == "damping_scale":
+            return system.replace(structure=tj.Structure(M, K, factor * C)), 1.0
         return system.replace(**{name: float(getattr(system, name)) * factor}), 1.0
 
     for name in ("tid_stiffness", "tid_damping", "inertance", "friction_force",
                  "terminal_mass", "amplitude", "floor_mass_2", "storey_stiffness_1",
-                 "storey_stiffness_3"):
+                 "storey_stiffness_3", "damping_scale"):
         peaks = []
         for h in (-step, step):
             changed_system, amplitude = changed(name, math.exp(h))

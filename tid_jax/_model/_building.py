@@ -300,13 +300,32 @@ def _coupled(block, corner, coupling, device):
 
 def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
     """The single-storey host of `system` (a `TIDSystem`) as a one-storey `BuildingTID`
-    (its device, friction model and tuning), under a force or a ground acceleration."""
-    host = Structure([[system.host_mass]], [[system.host_stiffness]], [[system.host_damping]])
-    return BuildingTID(host, system.inertance, system.friction_force, system.tid_stiffness,
-                       system.tid_damping, system.friction_width, load=load,
-                       parasitic_damping=system.parasitic_damping,
-                       terminal_mass=system.terminal_mass,
-                       series_stiffness=system.series_stiffness, backlash=system.backlash)
+    (its device, friction model and tuning), under a force or a ground acceleration.
+    Traceable, and for batched fields too: the fields (checked by `TIDSystem`) are
+    placed into a building of the same device and friction model."""
+    width = system.friction_width
+    with jax.ensure_compile_time_eval():
+        template = BuildingTID(
+            Structure([[1.0]], [[1.0]], [[0.0]]), 1.0, 0.0, 1.0, 0.0,
+            None if width is None else (0.0 if system.exact_friction else 1.0), load=load,
+            terminal_mass=1.0, series_stiffness=1.0 if system.compliant else math.inf)
+    matrix = lambda value: jnp.reshape(value, jnp.shape(value) + (1, 1))
+    names = ("inertance", "friction_force", "tid_stiffness", "tid_damping",
+             "parasitic_damping", "terminal_mass", "series_stiffness", "backlash")
+    values = [matrix(system.host_mass), matrix(system.host_stiffness),
+              matrix(system.host_damping)] + [getattr(system, name) for name in names]
+    where = lambda b: [b.structure.mass_matrix, b.structure.stiffness_matrix,
+                       b.structure.damping_matrix] + [getattr(b, name) for name in names]
+    if width is not None:
+        values.append(width)
+        where_fields = where
+        where = lambda b: where_fields(b) + [b.friction_width]
+    values = [jnp.asarray(value, dtype=float) for value in values]
+    if jnp.ndim(system.host_mass):  # batched: one force pattern per lane
+        values.append(jnp.ones(jnp.shape(system.host_mass) + (1,)))
+        where_values = where
+        where = lambda b: where_values(b) + [b.force_pattern]
+    return eqx.tree_at(where, template, values)
 
 
 def checked_quantity(system, quantity: "Quantity | None", purpose: str | None = None

@@ -23,7 +23,8 @@ from .._runtime._cache import compiled
 # `TIDSystem` in the steady-state model (not the numerical `friction_width`) and the
 # forcing amplitude, last. A compliant device adds its series stiffness and backlash; a
 # rigid one has neither to vary (see `parameters_of`). A `BuildingTID`'s host is its
-# floors' masses and its storeys' stiffnesses (`building_parameters`).
+# floors' masses, its storeys' stiffnesses and the scale of its damping matrix
+# (`building_parameters`).
 RIGID_PARAMETERS = FIELD_NAMES[:7] + ("parasitic_damping", "terminal_mass", "amplitude")
 COMPLIANT_PARAMETERS = RIGID_PARAMETERS[:-1] + ("series_stiffness", "backlash", "amplitude")
 DEVICE_PARAMETERS = ("inertance", "friction_force", "tid_stiffness", "tid_damping",
@@ -51,6 +52,8 @@ def parameter_unit(name: str, system=None) -> str:
         return "kg"
     if name.startswith("storey_stiffness_"):
         return "N/m"
+    if name == "damping_scale":
+        return "1"
     if name == "amplitude" and isinstance(system, BuildingTID):
         return LOAD_UNITS[system.load]
     return PARAMETER_UNITS[name]
@@ -59,11 +62,13 @@ def parameter_unit(name: str, system=None) -> str:
 def building_parameters(system: BuildingTID) -> tuple[str, ...]:
     """The parameters of a building's sensitivities: the device's (a compliant one's series
     stiffness and backlash too), every floor's mass `floor_mass_1..n`, every storey's
-    stiffness `storey_stiffness_1..n` and the amplitude, last."""
+    stiffness `storey_stiffness_1..n`, the factor `damping_scale` on the structure's
+    damping matrix (1 as given: its elasticity is that of the structure's damping) and
+    the amplitude, last."""
     floors = range(1, system.floors + 1)
     return (DEVICE_PARAMETERS + (("series_stiffness", "backlash") if system.compliant else ())
             + tuple(f"floor_mass_{i}" for i in floors)
-            + tuple(f"storey_stiffness_{i}" for i in floors) + ("amplitude",))
+            + tuple(f"storey_stiffness_{i}" for i in floors) + ("damping_scale", "amplitude"))
 
 
 def parameters_of(system: TIDSystem | BuildingTID) -> tuple[str, ...]:
@@ -80,10 +85,10 @@ def parameter_values(system: TIDSystem | BuildingTID) -> np.ndarray:
     if isinstance(system, BuildingTID):
         s = system.structure
         return np.concatenate([
-            [float(getattr(system, name)) for name in parameters_of(system)[:-1]
+            [float(getattr(system, name)) for name in parameters_of(system)[:-2]
              if not name.startswith(("floor_mass_", "storey_stiffness_"))],
             np.diagonal(np.asarray(s.mass_matrix)),
-            np.asarray(storey_stiffnesses(s.stiffness_matrix))])
+            np.asarray(storey_stiffnesses(s.stiffness_matrix)), [1.0]])
     return np.array([float(getattr(system, name)) for name in parameters_of(system)[:-1]])
 
 
@@ -122,7 +127,8 @@ def changed_system(system, theta, scale):
     and unused) and its host stiffness (a building's stiffness matrix) multiplied by
     `scale**2`; of a `batched` system, `theta` holds a row per parameter and `scale` an
     entry per point. A building's floors' masses and storeys' stiffnesses change by
-    adding masses and storey springs (`storey_springs`), its damping matrix held."""
+    adding masses and storey springs (`storey_springs`), its damping matrix by its
+    factor `damping_scale`."""
     names = parameters_of(system)[:-1]
     values = dict(zip(names, theta, strict=False))
     if not isinstance(system, BuildingTID):
@@ -130,17 +136,19 @@ def changed_system(system, theta, scale):
         return eqx.tree_at(lambda s: [getattr(s, name) for name in values], system,
                            list(values.values()))
     n = system.floors
-    device = [name for name in names if not name.startswith(("floor_mass_", "storey_"))]
+    device = [name for name in names
+              if not name.startswith(("floor_mass_", "storey_", "damping_scale"))]
     floors = jnp.moveaxis(jnp.asarray(theta[len(device):len(device) + 2 * n]), 0, -1)
     s = system.structure
+    damping = jnp.asarray(values["damping_scale"])[..., None, None] * s.damping_matrix
     masses = floors[..., :n] - jnp.diagonal(s.mass_matrix, axis1=-2, axis2=-1)
     springs = floors[..., n:] - storey_stiffnesses(s.stiffness_matrix)
     stiffness = s.stiffness_matrix + jnp.einsum("...s,sij->...ij", springs,
                                                 storey_springs(n))
     structure = eqx.tree_at(
-        lambda x: (x.mass_matrix, x.stiffness_matrix), s,
+        lambda x: (x.mass_matrix, x.stiffness_matrix, x.damping_matrix), s,
         (s.mass_matrix + masses[..., None] * jnp.eye(n),
-         stiffness * jnp.asarray(scale)[..., None, None] ** 2))
+         stiffness * jnp.asarray(scale)[..., None, None] ** 2, damping))
     return eqx.tree_at(lambda x: [getattr(x, name) for name in device] + [x.structure],
                        system, [values[name] for name in device] + [structure])
 

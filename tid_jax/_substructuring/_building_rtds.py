@@ -31,6 +31,7 @@ from .._model._building import (
 from .._orbit._settings import SolverSettings
 from .._orbit._steady_state import one_by_one
 from .._response import point_response
+from .._runtime._cache import compiled
 from ._rtds_loop import Plan, Point, first_harmonic_phase
 
 
@@ -150,7 +151,7 @@ def building_scale(system: BuildingTID, quantity: Quantity, omegas) -> np.ndarra
     return np.maximum(np.asarray(values), float(system.static_scale()))
 
 
-@eqx.filter_jit
+@compiled
 def building_reference(system: BuildingTID, quantity: Quantity, omegas, amplitudes,
                        settings: SolverSettings):
     """The whole building's steady states at the pairs `(omegas, amplitudes)` (the

@@ -12,8 +12,6 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from .._model._dynamics import dead_zone, smooth_sign
-from .._model._linear import host_receptance
-from .._model._system import TIDSystem
 from .._orbit._sampled_peaks import parabola_top
 from .._runtime._cache import compiled
 
@@ -53,56 +51,6 @@ class Point(eqx.Module):
 
 
 # Numerical substructure ------------------------------------------------------------------
-
-
-class HostModel(eqx.Module):
-    """The numerical substructure of the single-storey host: the host and the TID's spring
-    and damper (and b_g for error feedback); `system` is the emulated `TIDSystem`, whose
-    device terms are the physical device's. What the loop asks of a numerical model:
-    `field`, `interface_rate`, `interface`, `outputs` and `linear`."""
-
-    system: TIDSystem
-
-    def field(self, plan: Plan, point: Point, t, z, force):
-        """Time derivative of the numerical substructure with the fed-back `force` held.
-        Error feedback, eq. (16): z = (x, x', y, y'). Conventional, eqs. (13)-(14):
-        z = (x, x', y), y' solved from c (y' - x') + k (y - x) = -f_s."""
-        system = self.system
-        forcing = point.amplitude * jnp.sin(point.omega * t)
-        mass, stiffness, damping = system.host_mass, system.host_stiffness, system.host_damping
-        k, c = system.tid_stiffness, system.tid_damping
-        x, v, y = z[0], z[1], z[2]
-        if plan.scheme == "error_feedback":
-            w = z[3]
-            spring = c * (v - w) + k * (x - y)
-            dv = (forcing - damping * v - stiffness * x - spring) / mass
-            dw = (spring - force) / point.guessed_inertance  # b_g y'' + c(y'-x') + k(y-x) = -e
-            return jnp.stack([v, dv, w, dw])
-        w = v - (k * (y - x) + force) / c
-        dv = (forcing - damping * v - stiffness * x - force) / mass  # the host feels f_s
-        return jnp.stack([v, dv, w])
-
-    def interface(self, z):
-        """The interface's displacement y."""
-        return z[2]
-
-    def interface_rate(self, plan: Plan, point: Point, t, z, force):
-        return self.field(plan, point, t, z, force)[2]
-
-    def outputs(self, plan: Plan, point: Point, t, z, force):
-        """The measured pair: the host's x and the interface's y."""
-        return jnp.stack([z[0], z[2]])
-
-    def linear(self, plan: Plan, point: Point, times):
-        """The frictionless whole system's steady state at `times`: the numerical
-        substructure's states (rows) and the interface's y, y', y'' (rows)."""
-        receptance = host_receptance(self.system, point.omega)
-        jw = 1j * point.omega
-        phase = point.amplitude * jnp.exp(jw * times)
-        host, inerter = receptance.host * phase, receptance.inerter * phase
-        rows = jnp.stack([host.imag, (jw * host).imag, inerter.imag, (jw * inerter).imag,
-                          (jw**2 * inerter).imag])
-        return (rows[:4] if plan.scheme == "error_feedback" else rows[:3]), rows[2:]
 
 
 def _interface_kinematics(plan, model, point, t, z, force):
@@ -427,6 +375,6 @@ def _simulate_point(plan: Plan, controller: Controller, model, point: Point) -> 
 @compiled
 def simulate_batch(plan: Plan, controller: Controller, model, points: Point) -> _Measured:
     """The tests at every point of the batch `points`, as one vmapped loop, of the
-    numerical substructure `model` (`HostModel` or a building's) whose `system`'s device
-    is the physical one."""
+    numerical substructure `model` (`_building_rtds.BuildingModel`: the paper's host as its
+    one-storey building) whose `system`'s device is the physical one."""
     return jax.vmap(lambda point: _simulate_point(plan, controller, model, point))(points)

@@ -12,26 +12,20 @@ interface back into the numerical model, held over each sample.
 import math
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._model._building import BuildingTID, Quantity
+from .._model._building import BuildingTID, Quantity, as_building
 from .._model._checks import check_concrete_system, choice, integer, real_array, real_scalar
-from .._model._linear import host_receptance
 from .._model._system import TIDSystem
 from .._orbit._settings import SolverSettings
-from .._response import point_response
-from .._runtime._cache import compiled
 from ._building_rtds import BuildingModel, building_reference, building_scale, check_building_test
 from ._rtds_loop import (
     MAX_PREDICTION_ORDER,
     Controller,
-    HostModel,
     Plan,
     Point,
-    first_harmonic_phase,
     simulate_batch,
 )
 
@@ -104,31 +98,6 @@ class SubstructuringStability(eqx.Module):
     delay: Float[Array, " delays"]
     stable: Bool[Array, "guesses delays"]
     largest_stable_delay: Float[Array, " guesses"]
-
-
-class _Whole(eqx.Module):
-    """The whole system's steady state: peaks (m) and first-harmonic phases (rad)."""
-
-    x_max: Array
-    y_max: Array
-    x_phase: Array
-    y_phase: Array
-    converged: Array
-
-
-@compiled
-def _reference_batch(system: TIDSystem, omegas, amplitudes, settings: SolverSettings):
-    def one(omega, amplitude):
-        orbit, x_max, y_max = point_response(system, omega, amplitude, settings)
-        return _Whole(
-            x_max=x_max,
-            y_max=y_max,
-            x_phase=first_harmonic_phase(orbit.x_samples),
-            y_phase=first_harmonic_phase(orbit.y_samples),
-            converged=orbit.converged,
-        )
-
-    return jax.vmap(one)(omegas, amplitudes)
 
 
 # Public functions ------------------------------------------------------------------------
@@ -230,13 +199,6 @@ def _duration(arrays, rate, periods, prediction, prediction_horizon):
             f"({duration:g} s), got {prediction_horizon!r}"
         )
     return n_steps, np.asarray(horizon)
-
-
-def _host_scale(system: TIDSystem, omegas) -> np.ndarray:
-    """The larger of the frictionless |X|, |Y| per unit force and 1 / K."""
-    receptance = host_receptance(system, omegas)
-    linear = np.maximum(np.abs(np.asarray(receptance.host)), np.abs(np.asarray(receptance.inerter)))
-    return np.maximum(linear, 1 / float(system.host_stiffness))
 
 
 def _points(scale, shape, arrays, horizon, *, rate, lag, factor, measure_periods) -> Point:
@@ -352,30 +314,9 @@ def simulate_substructuring(
 
     **Returns:** a `Substructuring`.
     """
-    building = isinstance(system, BuildingTID)
-    if building:
-        quantity = Quantity() if quantity is None else quantity
-        quantity.floor_of(system.floors)
-        check_building_test(system, scheme)
-        model = BuildingModel(system, quantity)
-        scale = lambda omegas: building_scale(system, quantity, omegas)
-    else:
-        check_concrete_system(system)
-        if quantity is not None:
-            raise ValueError("quantity is for a BuildingTID; a TIDSystem measures x and y")
-        if system.exact_friction:
-            raise ValueError(
-                "simulate_substructuring integrates the test in real time with fixed steps "
-                "and needs smoothed friction: give system.friction_width > 0 or None, not 0 "
-                "(exact Coulomb friction)"
-            )
-        if scheme == "conventional" and not float(system.tid_damping) > 0:
-            raise ValueError(
-                "system.tid_damping must be positive for the conventional scheme (it solves "
-                f"y' from the damper), got {float(system.tid_damping)!r}"
-            )
-        model = HostModel(system)
-        scale = lambda omegas: _host_scale(system, omegas)
+    system, whole, quantity = _tested(system, quantity, scheme)
+    model = BuildingModel(system, quantity)
+    scale = lambda omegas: building_scale(system, quantity, omegas)
     if not isinstance(settings, SolverSettings):
         raise ValueError(f"settings must be a SolverSettings, got {type(settings).__name__}")
     plan, controller, points, shape, arrays, growth_tolerance = _planned_tests(
@@ -391,14 +332,8 @@ def simulate_substructuring(
     fields = {name: jnp.reshape(getattr(measured, name), shape)
               for name in ("x_max", "y_max", "x_phase", "y_phase", "diverged", "growth")}
     fields["stable"] = ~fields["diverged"] & (fields["growth"] <= 1 + growth_tolerance)
-    if reference and building:
-        whole = building_reference(system, quantity, points.omega, points.amplitude,
-                                   SolverSettings() if settings is None else settings)
-        fields.update(_errors(fields, jax.tree.map(lambda v: jnp.reshape(v, shape),
-                                                   _Whole(*whole))))
-    elif reference:
-        rigid = system.replace(series_stiffness=None, backlash=0.0)
-        fields.update(_against_whole(rigid, points, shape, fields, settings))
+    if reference:
+        fields.update(_against_whole(whole, quantity, points, shape, fields, settings))
     dtype = jnp.result_type(float)
     return Substructuring(
         **{name: jnp.asarray(np.broadcast_to(array, shape), dtype) for name, array in zip(
@@ -407,36 +342,59 @@ def simulate_substructuring(
     )
 
 
-def _against_whole(system, points: Point, shape, fields, settings) -> dict:
+def _tested(system, quantity: Quantity | None, scheme: str):
+    """The building whose test is simulated, the whole system it is compared with and
+    the measured quantity, checked: a `TIDSystem` as its one-storey building, compared
+    with its rigid counterpart (the design the test checks)."""
+    if isinstance(system, TIDSystem):
+        check_concrete_system(system)
+        if quantity is not None:
+            raise ValueError("quantity is for a BuildingTID; a TIDSystem measures x and y")
+        whole = system.replace(series_stiffness=None, backlash=0.0)
+        system = as_building(system)
+    elif not isinstance(system, BuildingTID):
+        raise ValueError("system must be a TIDSystem or a BuildingTID, got "
+                         f"{type(system).__name__}")
+    else:
+        whole = system
+    quantity = Quantity() if quantity is None else quantity
+    quantity.floor_of(system.floors)
+    check_building_test(system, scheme)
+    return system, whole, quantity
+
+
+def _against_whole(system, quantity: Quantity, points: Point, shape, fields,
+                   settings) -> dict:
     """The whole system's steady state at each test's (omega, amplitude) (each distinct
     pair solved once) and the test's amplitude and phase errors against it."""
     omegas, amplitudes = np.asarray(points.omega), np.asarray(points.amplitude)
     pairs, inverse = np.unique(np.stack([omegas, amplitudes], axis=1), axis=0,
                                return_inverse=True)
     dtype = jnp.result_type(float)
-    whole = _reference_batch(
-        system, jnp.asarray(pairs[:, 0], dtype), jnp.asarray(pairs[:, 1], dtype), settings
-    )
-    whole = jax.tree.map(lambda value: jnp.reshape(value[inverse.reshape(-1)], shape), whole)
+    whole = building_reference(system, quantity, jnp.asarray(pairs[:, 0], dtype),
+                               jnp.asarray(pairs[:, 1], dtype), settings)
+    whole = [jnp.reshape(value[inverse.reshape(-1)], shape) for value in whole]
     return _errors(fields, whole)
 
 
-def _errors(fields, whole: _Whole) -> dict:
-    """The whole system's values and the test's errors against them."""
+def _errors(fields, whole) -> dict:
+    """The whole system's values (peaks, phases, convergence) and the test's errors
+    against them."""
+    x_max, y_max, x_phase, y_phase, converged = whole
 
     def wrap(angle):
         return jnp.angle(jnp.exp(1j * angle))
 
     return dict(
-        reference_x_max=whole.x_max,
-        reference_y_max=whole.y_max,
-        reference_x_phase=whole.x_phase,
-        reference_y_phase=whole.y_phase,
-        x_amplitude_error=fields["x_max"] / whole.x_max - 1,
-        y_amplitude_error=fields["y_max"] / whole.y_max - 1,
-        x_phase_error=wrap(fields["x_phase"] - whole.x_phase),
-        y_phase_error=wrap(fields["y_phase"] - whole.y_phase),
-        reference_converged=whole.converged,
+        reference_x_max=x_max,
+        reference_y_max=y_max,
+        reference_x_phase=x_phase,
+        reference_y_phase=y_phase,
+        x_amplitude_error=fields["x_max"] / x_max - 1,
+        y_amplitude_error=fields["y_max"] / y_max - 1,
+        x_phase_error=wrap(fields["x_phase"] - x_phase),
+        y_phase_error=wrap(fields["y_phase"] - y_phase),
+        reference_converged=converged,
     )
 
 
