@@ -310,21 +310,18 @@ def as_building(system: TIDSystem, load: str = "force") -> BuildingTID:
             None if width is None else (0.0 if system.exact_friction else 1.0), load=load,
             terminal_mass=1.0, series_stiffness=1.0 if system.compliant else math.inf)
     matrix = lambda value: jnp.reshape(value, jnp.shape(value) + (1, 1))
-    names = ("inertance", "friction_force", "tid_stiffness", "tid_damping",
-             "parasitic_damping", "terminal_mass", "series_stiffness", "backlash")
-    values = [matrix(system.host_mass), matrix(system.host_stiffness),
-              matrix(system.host_damping)] + [getattr(system, name) for name in names]
-    where = lambda b: [b.structure.mass_matrix, b.structure.stiffness_matrix,
-                       b.structure.damping_matrix] + [getattr(b, name) for name in names]
+    fields = [(lambda b: b.structure.mass_matrix, matrix(system.host_mass)),
+              (lambda b: b.structure.stiffness_matrix, matrix(system.host_stiffness)),
+              (lambda b: b.structure.damping_matrix, matrix(system.host_damping))]
+    fields += [(lambda b, name=name: getattr(b, name), getattr(system, name)) for name in (
+        "inertance", "friction_force", "tid_stiffness", "tid_damping", "parasitic_damping",
+        "terminal_mass", "series_stiffness", "backlash")]
     if width is not None:
-        values.append(width)
-        where_fields = where
-        where = lambda b: where_fields(b) + [b.friction_width]
-    values = [jnp.asarray(value, dtype=float) for value in values]
+        fields.append((lambda b: b.friction_width, width))
     if jnp.ndim(system.host_mass):  # batched: one force pattern per lane
-        values.append(jnp.ones(jnp.shape(system.host_mass) + (1,)))
-        where_values = where
-        where = lambda b: where_values(b) + [b.force_pattern]
+        fields.append((lambda b: b.force_pattern, jnp.ones(jnp.shape(system.host_mass) + (1,))))
+    where = lambda b: [get(b) for get, _ in fields]
+    values = [jnp.asarray(value, dtype=float) for _, value in fields]
     return eqx.tree_at(where, template, values)
 
 

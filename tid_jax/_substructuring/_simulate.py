@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._model._building import BuildingTID, Quantity, as_building
+from .._model._building import BuildingTID, Quantity, building_of
 from .._model._checks import check_concrete_system, choice, integer, real_array, real_scalar
 from .._model._system import TIDSystem
 from .._orbit._settings import SolverSettings
@@ -346,17 +346,13 @@ def _tested(system, quantity: Quantity | None, scheme: str):
     """The building whose test is simulated, the whole system it is compared with and
     the measured quantity, checked: a `TIDSystem` as its one-storey building, compared
     with its rigid counterpart (the design the test checks)."""
+    whole = system
     if isinstance(system, TIDSystem):
         check_concrete_system(system)
         if quantity is not None:
             raise ValueError("quantity is for a BuildingTID; a TIDSystem measures x and y")
         whole = system.replace(series_stiffness=None, backlash=0.0)
-        system = as_building(system)
-    elif not isinstance(system, BuildingTID):
-        raise ValueError("system must be a TIDSystem or a BuildingTID, got "
-                         f"{type(system).__name__}")
-    else:
-        whole = system
+    system = building_of(system, "force")
     quantity = Quantity() if quantity is None else quantity
     quantity.floor_of(system.floors)
     check_building_test(system, scheme)
