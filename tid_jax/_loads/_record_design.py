@@ -8,7 +8,8 @@ stick-slip flow of `_record_flow` (events located), and only where that flow doe
 apply (smoothed friction, a compliant device) or where a `time_step` is given, with the
 friction held over substeps (Monte Carlo's scheme). The mean peak is continuous but not
 smooth in (k, c) (a peak moves from one instant to another), so optimistix's
-Nelder-Mead minimises it over (ln k, ln c). Bounds on (k, c) hold the objective at the
+Nelder-Mead minimises it over (ln k, ln c), restarted from where it stops until a
+restart no longer improves. Bounds on (k, c) hold the objective at the
 nearest point within them plus `BOUND_PENALTY` times the distance outside. A stroke
 limit enters as an exact penalty, `STROKE_PENALTY` times the excess of ln(largest
 stroke peak / limit): once the weight exceeds the constraint's multiplier (the decrease
@@ -47,6 +48,7 @@ BOUND_PENALTY = 1.0
 # The limit is aimed this fraction below the given one: the simplex stops within its
 # tolerance of the kink.
 STROKE_MARGIN = 1e-3
+MAX_RESTARTS = 8
 
 
 class RecordDesign(eqx.Module):
@@ -189,12 +191,35 @@ def _penalised(log_tuning, args):
 
 @eqx.filter_jit
 def _design(system, quantity, suite, box, log_limit, rtol, max_steps):
-    start = jnp.clip(log_tuning_of(system), box[:, 0], box[:, 1])
-    solution = optx.minimise(_objective, optx.NelderMead(rtol=rtol, atol=rtol), start,
-                             args=(system, quantity, suite, box, log_limit), throw=False,
-                             max_steps=max_steps)
-    return (jnp.clip(solution.value, box[:, 0], box[:, 1]),
-            solution.result == optx.RESULTS.successful, solution.stats["num_steps"])
+    """Nelder-Mead from the system's tuning, restarted from its end (a fresh simplex) while
+    a restart lowers the objective by more than `rtol` of it, at most `MAX_RESTARTS`
+    times: a simplex may collapse short of a minimum on a kink (a bound, the stroke
+    limit, a peak moving from one instant to another)."""
+    args = (system, quantity, suite, box, log_limit)
+    solver = optx.NelderMead(rtol=rtol, atol=rtol)
+
+    def minimise(log_tuning):
+        solution = optx.minimise(_objective, solver, log_tuning, args=args, throw=False,
+                                 max_steps=max_steps)
+        return (solution.value, _penalised(solution.value, args),
+                solution.result == optx.RESULTS.successful, solution.stats["num_steps"])
+
+    def improving(carry):
+        _, value, previous, _, _, restarts = carry
+        return (restarts < MAX_RESTARTS) & (value < previous - rtol * jnp.abs(previous))
+
+    def restart(carry):
+        log_tuning, value, _, _, steps, restarts = carry
+        found, found_value, converged, more = minimise(log_tuning)
+        better = found_value < value
+        return (jnp.where(better, found, log_tuning), jnp.minimum(found_value, value), value,
+                converged, steps + more, restarts + 1)
+
+    found, value, converged, steps = minimise(
+        jnp.clip(log_tuning_of(system), box[:, 0], box[:, 1]))
+    found, _, _, converged, steps, _ = jax.lax.while_loop(
+        improving, restart, restart((found, value, value, converged, steps, 0)))
+    return jnp.clip(found, box[:, 0], box[:, 1]), converged, steps
 
 
 @eqx.filter_jit
@@ -258,7 +283,8 @@ def design_for_records(system: BuildingTID | TIDSystem, motions,
                                    tol, max_steps)
     before = suite_statistics(system, quantity, suite)
     after = suite_statistics(log_tuned(system, design), quantity, suite)
-    k, c = jnp.exp(design)
+    # (within the bounds also after rounding: exp(ln 150) may be 149.99999999999997)
+    k, c = jnp.clip(jnp.exp(design), box[:, 0], box[:, 1])
     within = (jnp.asarray(True) if stroke_limit is None
               else jnp.max(after[2]) <= stroke_limit)
     return RecordDesign(names=tuple(m.name for m in motions), tid_stiffness=k, tid_damping=c,
