@@ -285,37 +285,49 @@ def test_a_near_miss_stalled_at_the_integration_error_converges():
     np.testing.assert_allclose(result.y_max, reference.y_max, rtol=1e-6)
 
 
-def _orbit_at(system, amplitude, omega, directions=()):
+def _orbit_at(system, amplitude, omega):
     """Jitted (k, c) -> the orbit of `system` tuned to (k, c), at one forcing point."""
     import jax
 
-    from tid_jax._model._dynamics import parameter_vector
+    from tid_jax._orbit._flow import PlantInputs
     from tid_jax._orbit._steady_state import SolverSettings, solve_orbit
 
     def orbit(k, c):
         tuned = system.replace(tid_stiffness=k, tid_damping=c)
-        return solve_orbit(parameter_vector(tuned, amplitude, omega), SolverSettings(),
-                           directions=directions)
+        return solve_orbit(PlantInputs(tuned, amplitude, omega, tj.Quantity()),
+                           SolverSettings().for_system(system))
 
     return jax.jit(orbit)
 
 
 def test_state_derivatives_match_finite_differences(system):
-    # The implicit derivatives of the orbit's state with respect to the tuning (k, c),
-    # against central differences of orbits solved afresh, at 200 N where the inerter
-    # sticks for part of the period.
-    from tid_jax._retune import DESIGN_PARAMETERS
+    # The implicit derivatives of the orbit's state with respect to the tuning (k, c) that
+    # retune's continuation predicts from, against central differences of orbits solved
+    # afresh, at 200 N where the inerter sticks for part of the period.
+    import jax
+
+    from tid_jax._orbit._flow import PlantInputs
+    from tid_jax._orbit._steady_state import solve_orbit
 
     omega, k, c = 0.95 * float(system.host_frequency), float(system.tid_stiffness), float(
         system.tid_damping)
-    orbit = _orbit_at(system, 200.0, omega, DESIGN_PARAMETERS)(k, c)
-    assert orbit.state_derivatives.shape == (4, 2)
     solve = _orbit_at(system, 200.0, omega)
+    settings = tj.SolverSettings().for_system(system)
+    derivatives = jax.jit(lambda z: solve_orbit(
+        PlantInputs(system, 200.0, omega, tj.Quantity()), settings, z,
+        fields=("tid_stiffness", "tid_damping")).field_derivatives)(solve(k, c).state)
+    assert derivatives.shape == (4, 2)
     for column, (dk, dc) in enumerate([(1e-4 * k, 0.0), (0.0, 1e-4 * c)]):
         plus, minus = solve(k + dk, c + dc).state, solve(k - dk, c - dc).state
         fd = np.asarray(plus - minus) / (2 * (dk + dc))
-        np.testing.assert_allclose(np.asarray(orbit.state_derivatives[:, column]), fd,
+        np.testing.assert_allclose(np.asarray(derivatives[:, column]), fd,
                                    rtol=1e-3, atol=1e-3 * np.max(np.abs(fd)))
+
+
+def _plant(system, amplitude, omega):
+    from tid_jax._orbit._period import point_model
+
+    return point_model(system, tj.Quantity(), amplitude, omega)[0]
 
 
 def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
@@ -323,7 +335,6 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
     # tangents reach the orbit that Newton's method finds from the linear guess.
     import jax
 
-    from tid_jax._model._dynamics import parameter_vector
     from tid_jax._orbit._sampled_peaks import refined_peak
     from tid_jax._orbit._steady_state import SolverSettings, settled_state
 
@@ -331,8 +342,9 @@ def test_chord_iterations_settle_on_the_orbit_from_a_nearby_one(system):
         system.tid_damping)
     solve = _orbit_at(system, 300.0, omega)
     near, exact = solve(1.02 * k, c), solve(k, c)
-    p = parameter_vector(system, 300.0, omega)
-    state, samples = jax.jit(lambda z, m: settled_state(z, p, SolverSettings(), m))(
+    p = _plant(system, 300.0, omega)
+    settings = SolverSettings().for_system(system)
+    state, samples = jax.jit(lambda z, m: settled_state(z, p, settings, m))(
         near.state, near.monodromy)
     np.testing.assert_allclose(np.asarray(state), np.asarray(exact.state), atol=1e-5)
     assert float(refined_peak(samples)) == pytest.approx(float(refined_peak(exact.x_samples)),
@@ -458,7 +470,7 @@ def _scaled_orbit(response, system, amplitude, omega):
     """The converged orbit's state at phase 0 of a one-point `response`, scaled."""
     assert bool(response.converged)
     static = amplitude / float(system.host_stiffness)
-    return np.asarray(response.state) / np.array([static, omega * static] * 2)
+    return np.asarray(response.state) / np.array([static] * 2 + [omega * static] * 2)
 
 
 @pytest.mark.parametrize(("amplitude", "ratio"), [(100.0, 0.95), (200.0, 1.0), (1000.0, 1.1)])
@@ -468,14 +480,13 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
     # the returned state, integrated at rtol 1e-12 (stick-slip at 100 and 200 N).
     import jax
 
-    from tid_jax._model._dynamics import parameter_vector
     from tid_jax._orbit._period import period_samples
 
     omega = ratio * float(system.host_frequency)
     response = tj.frequency_response(system, omega, amplitude)
     z = _scaled_orbit(response, system, amplitude, omega)
     tight = tj.SolverSettings(rtol=1e-12, atol=1e-12, max_steps=65536)
-    p = parameter_vector(system, amplitude, omega)
+    p = _plant(system, amplitude, omega)
     end = jax.jit(jax.vmap(lambda z0: period_samples(z0, p, tight)[3]))
     h = 1e-6 * max(1.0, np.max(np.abs(z)))
     steps = h * np.eye(4)
@@ -485,20 +496,17 @@ def test_monodromy_is_that_of_the_orbit_returned(system, amplitude, ratio):
 
 
 def _period_end(system, amplitude, omega, z, settings):
-    from tid_jax._model._dynamics import parameter_vector
     from tid_jax._orbit._period import period_samples
 
     settings = settings.for_system(system)
-    p = parameter_vector(system, amplitude, omega)
+    p = _plant(system, amplitude, omega)
     return np.asarray(period_samples(jnp.asarray(z), p, settings)[3])
 
 
 def _initial_state(system, amplitude, omega):
-    from tid_jax._model._dynamics import parameter_vector
-    from tid_jax._orbit._period import initial_state
+    from tid_jax._orbit._period import point_model
 
-    p = parameter_vector(system, amplitude, omega)
-    return np.asarray(initial_state(p, system.compliant))
+    return np.asarray(point_model(system, tj.Quantity(), amplitude, omega)[1])
 
 
 @pytest.mark.parametrize("series_stiffness", [math.inf, 2e5])
@@ -524,7 +532,7 @@ def test_initial_state_of_a_stuck_inerter_is_the_stuck_orbit(system):
                          75.0, 20.0, float(system.tid_stiffness), float(system.tid_damping), 0.0)
     omega = float(system.host_frequency)
     z = _initial_state(exact, 10.0, omega)
-    assert z[2] == 0.0 and z[3] == 0.0
+    assert z[1] == 0.0 and z[3] == 0.0  # (x, y, x', y'): the terminal still
     end = _period_end(exact, 10.0, omega, z, tj.SolverSettings())
     np.testing.assert_allclose(end, z, atol=1e-10)
 

@@ -97,7 +97,7 @@ def sweep(system: TIDSystem | BuildingTID, amplitude, omegas, settings: SolverSe
         return x_max, y_max, orbit.converged, orbit.state
 
     # (a building's LAPACK calls one frequency after another: `one_by_one`)
-    each = one_by_one if isinstance(system, BuildingTID) else jax.vmap
+    each = ft.partial(one_by_one, floors=system.floors)
     if z_init is None:
         return each(lambda omega: one(omega, None))(omegas)
     return each(one)(omegas, z_init)
@@ -144,7 +144,7 @@ def locate_peaks(systems: TIDSystem | BuildingTID, response: FrequencyResponse,
     orbits, interpolated. A building's response is that of `quantity`."""
     response = _lane_grids(response)
     omegas, states, converged, index, centre, valid, lower, upper, interior = _in_chunks(
-        _selection, response, static_units(systems), not isinstance(systems, BuildingTID))
+        _selection, response, static_units(systems))
     estimate = np.full(centre.shape, np.nan)
     for _ in range(PEAK_NEWTON_STEPS):
         at, warm = _in_chunks(_stencils, centre, interior, states, omegas, STENCIL_POINTS)
@@ -210,13 +210,13 @@ def response_peaks(systems: TIDSystem | BuildingTID, response: FrequencyResponse
 
 
 @compiled
-def _selection(response: FrequencyResponse, units, paper: bool):
+def _selection(response: FrequencyResponse, units):
     """The grid's part of `response_peaks`, one program: the lanes' frequencies and scaled
-    states (units `static_units`, in the paper's order where `paper`), whether every
+    states (units `static_units`), whether every
     steady state converged, and the `REFINED_PEAKS` highest local maxima of each lane
     with their brackets."""
     omegas = jnp.broadcast_to(response.omegas, response.x_max.shape)
-    states = scaled_states(response, units, paper)
+    states = scaled_states(response, units)
     converged = jnp.all(response.converged, axis=-1)
     # Selection only: an orbit that was not found makes the lane's peaks NaN below.
     grid = jnp.where(response.converged, response.x_max, 0.0)

@@ -1,4 +1,5 @@
 import dataclasses
+import functools as ft
 
 import equinox as eqx
 import jax
@@ -10,7 +11,6 @@ from ._model._building import BuildingTID, Quantity, checked_quantity
 from ._model._checks import (
     check_grid,
 )
-from ._model._dynamics import parameters
 from ._model._system import TIDSystem, compiler_options
 from ._orbit._eigen import eigenvalues
 from ._orbit._flow import PlantInputs
@@ -42,9 +42,9 @@ class FrequencyResponse(eqx.Module):
     - `stable`: all Floquet multipliers inside the unit circle (only meaningful if
       converged), but for the multiplier 1 of a terminal stuck for the whole period (exact
       friction), along whose position the orbits form a neutral family.
-    - `state`: (x, x', y, y') at phase 0 of the forcing on the periodic orbit, m and m/s,
-      and for a compliant device its mechanism's (q, q'); a building's: its coordinates
-      (floors, then the device's), then their velocities.
+    - `state`: the coordinates at phase 0 of the forcing on the periodic orbit, then their
+      velocities, m and m/s: the floors, the stroke and a compliant device's mechanism
+      (the paper's system: (x, y, x', y'), or (x, y, q, x', y', q')).
     - `residual`: periodicity residual, in units of the static displacement A / K.
     - `newton_steps`: shooting iterations used.
     - `floquet_multipliers`: eigenvalues of the monodromy matrix.
@@ -104,25 +104,19 @@ def point_response(
     settings: SolverSettings,
     z_init=None,
     monodromy_init=None,
-    directions: tuple[int, ...] = (),
     quantity: Quantity = Quantity(),
+    fields: tuple[str, ...] = (),
 ):
     """Single (omega, amplitude) point: the orbit (shooting from the scaled state `z_init`
-    if given, with chord iterations first if `monodromy_init` is given; see `solve_orbit`)
-    and its peaks |x|, |y| in SI (a building's: of `quantity`, and the stroke; its
-    `z_init` default the linear steady state after `settings.transient_periods`
-    periods). Differentiable with respect to the system's fields (implicit
+    if given, with chord iterations first if `monodromy_init` is given; default the
+    linear steady state after `settings.transient_periods` periods; see `solve_orbit`)
+    and its peaks in SI: of `quantity` (a `TIDSystem`'s: its host's displacement) and
+    of the stroke. Differentiable with respect to the system's fields (implicit
     differentiation through the orbit)."""
     settings = settings.for_system(system)
-    if isinstance(system, BuildingTID):
-        plant, linear, unit_q, unit = point_model(system, quantity, amplitude, omega)
-        if z_init is None:
-            z_init = transient(linear, jax.lax.stop_gradient(plant), settings)
-        p = PlantInputs(system, amplitude, omega, quantity)
-    else:
-        p = parameters(system, amplitude, omega)
-        unit_q = unit = amplitude / system.host_stiffness
-    orbit = solve_orbit(p, settings, z_init, monodromy_init, directions)
+    _, _, unit_q, unit = point_model(system, quantity, amplitude, omega)
+    orbit = solve_orbit(PlantInputs(system, amplitude, omega, quantity), settings, z_init,
+                        monodromy_init, fields)
     # A failed integration gives non-finite samples: report +inf (and `converged` False).
     peaks = (refined_peak(orbit.x_samples) * unit_q,
              y_peak(orbit.y_samples, orbit.y_events, settings) * unit)
@@ -149,8 +143,8 @@ def _points(systems, quantity, omegas, amplitudes, settings, warm, valid, use_wa
     states `warm`; the last Newton iteration samples each orbit and verifies its
     periodicity. Points where `valid` is False (padding) are skipped."""
     settings = settings.for_system(systems)
-    paper = not isinstance(systems, BuildingTID)
-    each = jax.vmap if paper else one_by_one
+    # (a building's matrices: one point after the other, see `one_by_one`)
+    each = ft.partial(one_by_one, floors=systems.floors)
     p, linear, unit_q, unit = each(lambda s, w, a: point_model(s, quantity, a, w))(
         systems, omegas, amplitudes)
 
@@ -186,7 +180,7 @@ def _points(systems, quantity, omegas, amplitudes, settings, warm, valid, use_wa
         converged=converged,
         stable=jnp.max(jnp.abs(each(lambda m: eigenvalues(moving_part(m)))(shots.monodromy)),
                        axis=-1) < 1,
-        state=shots.state * state_units(unit, omegas, warm.shape[-1], paper),
+        state=shots.state * state_units(unit, omegas, warm.shape[-1]),
         residual=residual,
         newton_steps=shots.newton_steps,
         floquet_multipliers=each(eigenvalues)(shots.monodromy),
@@ -270,14 +264,13 @@ def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=Non
     shot on from its own last state, integrated 100 times more accurately
     (`SolverSettings.more_accurate`), up to `CONTINUATIONS` times. Points that do not
     converge are solved again, from the equivalent linear steady state
-    (`_period.initial_state`), with each of the fallbacks of `settings` fitted to the
+    (`_period.building_start`), with each of the fallbacks of `settings` fitted to the
     systems (`SolverSettings.fallbacks`) in turn until they do (a point where no period
     could be integrated skips the explicit integrations); the best attempt is kept. Each
     block of the batch is sharded over all JAX devices (`sharded_batch`). The solutions are
     NumPy arrays."""
     batch = _on_host((omegas, amplitudes, systems))
     settings = for_points(settings, batch[2], batch[0], batch[1])
-    paper = not isinstance(batch[2], BuildingTID)
     out = _solve_blocks(settings, batch, None if warm is None else np.asarray(warm), quantity)
     # A near miss (a finite residual above the tolerance: its Newton iterations ran out
     # on an orbit that converges slowly, or stalled at the integration error of its
@@ -289,8 +282,7 @@ def solve_points(systems, omegas, amplitudes, settings: SolverSettings, warm=Non
         if not near.size:
             break
         part = jax.tree.map(lambda b, near=near: b[near], batch)
-        own = out.state[near] / state_units(out.unit[near], part[0], out.state.shape[-1],
-                                            paper, np)
+        own = out.state[near] / state_units(out.unit[near], part[0], out.state.shape[-1], np)
         out = _keep_better(out, _solve_blocks(settings.more_accurate(), part, own, quantity),
                            near)
     for fallback in settings.for_system(batch[2]).fallbacks():
@@ -355,16 +347,14 @@ def static_units(systems) -> np.ndarray:
     return 1 / np.asarray(systems.host_stiffness)
 
 
-def scaled_states(response: FrequencyResponse, units, paper: bool = True,
-                  xp=jnp) -> Float[Array, "amps freqs s"]:
+def scaled_states(response: FrequencyResponse, units, xp=jnp) -> Float[Array, "amps freqs s"]:
     """The orbits' states of a `response` over lanes (amplitudes) x frequencies in the
     scaled units of `solve_orbit` (displacements in A d, velocities in omega A d, d
-    `static_units`: one value or one per lane), in the paper's order of states or
-    (not `paper`, a building's) a plant's. With `xp=np`, computed on the host."""
+    `static_units`: one value or one per lane). With `xp=np`, computed on the host."""
     amplitudes, omegas, state = (xp.asarray(a) for a in (response.amplitudes,
                                                          response.omegas, response.state))
     unit = amplitudes[:, None] * xp.reshape(xp.asarray(units), (-1, 1))
-    return state / state_units(unit, omegas, state.shape[-1], paper, xp)
+    return state / state_units(unit, omegas, state.shape[-1], xp)
 def frequency_response(
     system: TIDSystem | BuildingTID,
     omegas: ArrayLike,

@@ -27,7 +27,7 @@ from ._model._checks import (
 )
 from ._model._linear import den_hartog_tuning, host_breakaway
 from ._model._system import TIDSystem
-from ._optimise._design_variables import DESIGN_PARAMETERS, design_of_tuning, tuning_of_design
+from ._optimise._design_variables import design_of_tuning, tuning_of_design
 from ._optimise._retune_stage import compile_stage, stage_lanes
 from ._orbit._settings import SolverSettings
 from ._peaks import Peaks, _band, response_peaks
@@ -370,7 +370,7 @@ def _placeholder_orbits(systems, k0, c0, bands):
     states = np.zeros(bands.shape + (size,), bands.dtype)
     return (np.stack([np.asarray(k0), np.asarray(c0)], axis=-1), states,
             np.zeros(states.shape + (size,), bands.dtype),
-            np.zeros(states.shape + (len(DESIGN_PARAMETERS),), bands.dtype))
+            np.zeros(states.shape + (2,), bands.dtype))
 
 
 def _stage_options(stage: int, sharpnesses, tol, settings, max_steps,
@@ -429,15 +429,14 @@ def _initial_design(systems, amplitudes, k_ref, c_ref):
 def _initial_orbits(start: FrequencyResponse, systems, k0, c0):
     """The first stage's warm start: the initial tuning, and per frequency its orbit's
     scaled state, monodromy matrix and (zero) state derivatives."""
-    return _orbits_of(start, static_units(systems), k0, c0,
-                      not isinstance(systems, BuildingTID))
+    return _orbits_of(start, static_units(systems), k0, c0)
 
 
 @eqx.filter_jit
-def _orbits_of(start: FrequencyResponse, units, k0, c0, paper: bool):
-    states = scaled_states(start, units, paper)
+def _orbits_of(start: FrequencyResponse, units, k0, c0):
+    states = scaled_states(start, units)
     return (jnp.stack([k0, c0], axis=-1), states, start.monodromy,
-            jnp.zeros(states.shape + (len(DESIGN_PARAMETERS),), states.dtype))
+            jnp.zeros(states.shape + (2,), states.dtype))
 
 
 @eqx.filter_jit

@@ -217,6 +217,11 @@ class TIDSystem(eqx.Module):
         return self.inertance / self.host_mass
 
     @property
+    def floors(self) -> int:
+        """One: the host is a one-storey building."""
+        return 1
+
+    @property
     def host_frequency(self) -> Float[Array, ""]:
         """Undamped host natural frequency sqrt(K / M), rad/s."""
         return jnp.sqrt(self.host_stiffness / self.host_mass)

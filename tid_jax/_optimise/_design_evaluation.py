@@ -222,8 +222,7 @@ def _solve_grids(thetas, scales, z_init, system, omegas, settings, locate,
     lanes = changed_system(batched(system, len(thetas)), thetas.T, scales)
     response = lane_response(lanes, thetas[:, -1], omegas * scales[:, None], settings, z_init,
                              quantity)
-    states = scaled_states(response, static_units(lanes),
-                           not isinstance(system, BuildingTID), xp=np)
+    states = scaled_states(response, static_units(lanes), xp=np)
     xs, ys, converged = (np.asarray(a) for a in (response.x_max, response.y_max,
                                                  response.converged))
     if locate:

@@ -3,8 +3,6 @@ sensitivities and the robust design move in."""
 
 import jax.numpy as jnp
 
-from .._model._dynamics import PARAMETERS
-
 # Scales of retune's design variables: they make the curvature of the log peak about one
 # in each, so that BFGS's first steps (from an identity Hessian) are about the right
 # length. (The robust design's trust-region steps are measured in unscaled ones.)
@@ -23,7 +21,3 @@ def design_of_tuning(k, c, k_ref, c_ref, scale=DESIGN_SCALE, xp=jnp):
     """The design variables of the tuning (k, c), the inverse of `tuning_of_design`."""
     return xp.stack([scale[0] * xp.log(k / k_ref), scale[1] * xp.sqrt(c / c_ref)], axis=-1)
 
-
-# The design variables' entries of the parameter vector (`_dynamics.PARAMETERS`): the
-# shooting iterations carry tangents along them for the implicit derivatives.
-DESIGN_PARAMETERS = (PARAMETERS.index("tid_stiffness"), PARAMETERS.index("tid_damping"))

@@ -13,6 +13,7 @@ import optimistix as optx
 
 from .._model._building import BuildingTID, Quantity
 from .._model._system import compiler_options
+from .._orbit._period import point_model
 from .._orbit._sampled_peaks import (
     REFINED_PEAKS,
     bracket,
@@ -25,13 +26,15 @@ from .._orbit._sampled_peaks import (
     top_peaks,
 )
 from .._orbit._settings import SolverSettings
-from .._orbit._period import point_model
 from .._orbit._steady_state import one_by_one, settled_state
 from .._response import point_response, with_tuning
 from .._runtime._cache import compiled
 from ._bfgs import CappedBFGS, CappedNewtonDescent, InterpolatingArmijo
-from ._design_variables import DESIGN_PARAMETERS, tuning_of_design
+from ._design_variables import tuning_of_design
 from ._stall import cut_within_tolerance
+
+# the fields the design moves: the shooting carries tangents along them
+TUNING_FIELDS = ("tid_stiffness", "tid_damping")
 
 
 @compiled(options=compiler_options)
@@ -100,21 +103,6 @@ def static_unit(system):
     return 1 / system.host_stiffness
 
 
-def _tuning_derivatives(system: BuildingTID, quantity: Quantity, omega, amplitude,
-                        settings: SolverSettings, z):
-    """The derivatives of a building's orbit through the scaled state `z` (converged) with
-    respect to its tuning (k, c): forward mode through its shooting (one Newton
-    iteration from the orbit, and the implicit derivative along each of k and c)."""
-    system, z = jax.lax.stop_gradient((system, z))
-
-    def state(tuning):
-        tuned = with_tuning(system, tuning[0], tuning[1])
-        return point_response(tuned, omega, amplitude, settings, z, quantity=quantity)[0].state
-
-    return jax.jacfwd(state)(jnp.stack([system.tid_stiffness, system.tid_damping]))
-
-
-
 def _design_sweep(system, quantity: Quantity, omegas, u, amplitude, reference, warm,
                   settings: SolverSettings):
     """Peaks (SI; the host's displacement, a building's `quantity`) at every frequency, the true maxima over frequency of the highest
@@ -130,19 +118,18 @@ def _design_sweep(system, quantity: Quantity, omegas, u, amplitude, reference, w
     (interpolated), which give its derivatives and renew the monodromy matrices at
     those grid points.
     Returns `(xs, (index, peaks))`, as `smooth_log_peak` takes them, and the orbits."""
-    paper = not isinstance(system, BuildingTID)
     k, c = tuning_of_design(u, reference[0], reference[1])
     tuned = with_tuning(system, k, c)
     warm_tuning, states, monodromies, derivatives = warm
     change = jax.lax.stop_gradient(jnp.stack([k, c]) - warm_tuning)
-    # (a building's matrices: one at a time, see `one_by_one`)
-    each = jax.vmap if paper else one_by_one
 
     def settle(omega, z0, monodromy):
         p, _, unit, _ = jax.lax.stop_gradient(point_model(tuned, quantity, amplitude, omega))
         z, x_samples = settled_state(z0, p, settings.for_system(tuned), monodromy)
         return z, jnp.nan_to_num(refined_peak(x_samples) * unit, nan=jnp.inf)
 
+    # (a building's matrices: one at a time, see `one_by_one`)
+    each = ft.partial(one_by_one, floors=system.floors)
     states, xs = each(settle)(omegas, states + derivatives @ change, monodromies)
     index, centre, _ = top_peaks(xs, omegas, REFINED_PEAKS)
     lower, upper, interior = bracket(index, omegas)
@@ -165,14 +152,9 @@ def _design_sweep(system, quantity: Quantity, omegas, u, amplitude, reference, w
     start = jax.vmap(interpolated)(stencil_states, at, centre[:, None])[:, 0]
 
     def full(omega, z0):
-        if paper:
-            orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
-                                              directions=DESIGN_PARAMETERS)
-            return x_max, (orbit.monodromy, orbit.state_derivatives)
         orbit, x_max, _ = point_response(tuned, omega, amplitude, settings, z0,
-                                          quantity=quantity)
-        return x_max, (orbit.monodromy, _tuning_derivatives(
-            tuned, quantity, omega, amplitude, settings, orbit.state))
+                                          quantity=quantity, fields=TUNING_FIELDS)
+        return x_max, (orbit.monodromy, orbit.field_derivatives)
 
     values, (m_new, d_new) = jax.vmap(full)(centre, start)
     peak = located_peak(estimate, values)

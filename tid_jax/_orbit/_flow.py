@@ -1,5 +1,6 @@
 """The stick-slip flow of exact Coulomb friction in closed form: one forcing period of a
-structure with its TID in scaled form, for one storey (the paper's system) and many.
+structure with its TID in scaled form, for any number of storeys (the paper's system is
+the one-storey building, `_building.as_building`).
 
 Scaled units: phase `theta = omega t`, coordinates in units of `D = A d` (d: the static
 scale, `BuildingTID.static_scale`; 1 / K for the paper's host), velocities in `omega D`.
@@ -37,7 +38,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Complex, Float, Int
 
-from .._model._building import BuildingTID, Quantity, selection
+from .._model._building import BuildingTID, Quantity, building_of, selection
+from .._model._system import TIDSystem
 from ._eigen import eigensystem
 
 MAX_SEGMENTS = 24  # segments per period; an orbit that needs more is reported as failed
@@ -87,40 +89,14 @@ class PlantInputs(eqx.Module):
     differentiated with respect to these fields (`_implicit.with_field_derivatives`),
     not the plant's many derived entries."""
 
-    system: BuildingTID
+    system: BuildingTID | TIDSystem  # a `TIDSystem` as its one-storey building
     amplitude: Float[Array, ""]
     omega: Float[Array, ""]
     quantity: Quantity = eqx.field(static=True)
 
     def plant(self) -> "Plant":
-        return plant(self.system, self.quantity, self.amplitude, self.omega)
-
-
-def parameter_plant(p: Float[Array, " 14"], compliant: bool = False) -> Plant:
-    """The scaled model of the paper's system at the parameter vector `p` (order
-    `_dynamics.PARAMETERS`): the one-storey case of `plant`, whose inerter joins the
-    terminal to the ground (the stroke r is the terminal's displacement y) and whose
-    quantity is the host's displacement x, in the scaled units of A / K. A `compliant`
-    device adds its mechanism q (the friction's coordinate), joined to the terminal (mass
-    mt) by the series stiffness ks with its backlash: coordinates (x, y, q)."""
-    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal, ks, backlash,
-     width, amplitude, omega) = p
-    zero = jnp.zeros_like(mass)
-    if compliant:
-        rows = (((mass, zero, zero), (zero, terminal, zero), (zero, zero, inertance)),
-                ((damping + c, -c, zero), (-c, c, zero), (zero, zero, parasitic)),
-                ((stiffness + k, -k, zero), (-k, k + ks, -ks), (zero, -ks, ks)))
-        play = jnp.stack([zero, ks, -ks])
-    else:
-        rows = (((mass, zero), (zero, inertance + terminal)),
-                ((damping + c, -c), (-c, c + parasitic)),
-                ((stiffness + k, -k), (-k, k)))
-        play, backlash = jnp.zeros(2, mass.dtype), zero
-    matrices = tuple(jnp.stack([jnp.stack(row) for row in matrix]) for matrix in rows)
-    m = matrices[0].shape[0]
-    load = jnp.zeros(m, mass.dtype).at[0].set(1.0)
-    return scaled_plant(matrices, load, 1 / stiffness, (np.eye(m)[0], np.zeros(m), 0.0), 1,
-                        friction, width, backlash, play, amplitude, omega)
+        return plant(building_of(self.system, "force"), self.quantity, self.amplitude,
+                     self.omega)
 
 
 def scaled_plant(matrices, load, scale, quantity, stroke: int, friction_force, width,

@@ -1,7 +1,7 @@
 """The implicit derivatives of a periodic orbit z* = Phi_T(z*, p): the periodicity
 residual's Jacobian (`fixed_point_matrix`), the samples over a period with their
 Jacobians, and the identity on a converged orbit whose JVP is dz*/dp = (I - dPhi/dz)^{-1}
-dPhi/dp, for the paper's parameter vector or the fields of a structure (`PlantInputs`)."""
+dPhi/dp, with respect to the fields of a structure (`PlantInputs`)."""
 
 import functools as ft
 
@@ -13,7 +13,7 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float
 
 from ._flow import Plant, PlantInputs
-from ._period import period_samples, samples_and_jacobian
+from ._period import samples_and_jacobian
 from ._settings import SolverSettings
 
 
@@ -52,67 +52,37 @@ class Samples(eqx.Module):
 
 
 class Periodic(eqx.Module):
-    """A periodic orbit as it passes through `with_orbit_derivatives`: the state, its
+    """A periodic orbit as it passes through `with_field_derivatives`: the state, its
     samples, the monodromy matrix and, where the shooting formed them, the samples'
-    Jacobians with respect to the state (`state_jacobians`) and to `p[directions]`
-    (`parameter_jacobians`), each a `Samples` of Jacobians."""
+    Jacobians with respect to the state (`state_jacobians`) and to named fields of the
+    system (`field_jacobians`, last axis one field each), each a `Samples` of
+    Jacobians."""
 
     z: Float[Array, " states"]
     samples: Samples
     monodromy: Float[Array, "states states"]
-    state_jacobians: Samples | None
-    parameter_jacobians: Samples | None
+    state_jacobians: Samples | None = None
+    field_jacobians: Samples | None = None
 
 
-def sample_jacobians(z, p, settings: SolverSettings, directions):
-    primal, of_state, of_parameters = samples_and_jacobian(z, p, settings, directions)
-    return Samples(*primal), Samples(*of_state), Samples(*of_parameters)
+def sample_jacobians(z, plant: Plant, settings: SolverSettings, columns=None):
+    """`period_samples` from `z` of `plant` and their Jacobians with respect to `z` and,
+    where given, along the plant's tangents `columns` (a `Plant` with a trailing axis;
+    else None), each a `Samples`."""
+    primal, of_state, of_columns = samples_and_jacobian(z, plant, settings, columns)
+    return (Samples(*primal), Samples(*of_state),
+            None if of_columns is None else Samples(*of_columns))
 
 
-def with_orbit_derivatives(settings: SolverSettings, directions, orbit, *p):
-    """Identity on a converged `orbit`; its JVP is the implicit derivative of the orbit
-    with respect to the parameters `p`, using the Jacobians that `_shoot` formed with
-    respect to `p[i]`, `i` in `directions`, where it can. The settings' arrays (their
-    tolerances in a compiled program that takes them as arguments:
-    `SolverSettings.with_array_tolerances`) pass as inputs, never differentiated."""
-    arrays, static = eqx.partition(settings, eqx.is_array)
-    return _orbit_identity(static, directions, arrays, orbit, *p)
+def field_columns(inputs: PlantInputs, fields: tuple[str, ...]):
+    """The tangents of the plant of `inputs` along each of the system's scalar `fields`
+    (a `Plant` with a trailing axis, one field each)."""
+    where = lambda i: [getattr(i.system, name) for name in fields]
 
+    def plant_of(values):
+        return eqx.tree_at(where, inputs, list(values)).plant()
 
-@ft.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _orbit_identity(static, directions, arrays, orbit, *p):
-    del static, directions, arrays, p
-    return orbit
-
-
-def _orbit_jvp(static, directions, primals, tangents):
-    # z* = Phi_T(z*, p) gives dz*/dp = (I - dPhi/dz)^{-1} dPhi/dp, and the samples follow by
-    # the chain rule. Only parameters with non-zero tangents are differentiated, and every
-    # Jacobian is formed from primals alone: the tangent map is an explicit matrix product,
-    # which reverse mode can transpose.
-    arrays, orbit, *p = primals
-    _, _, *p_dot = tangents
-    settings = eqx.combine(arrays, static)
-    active = _active(p_dot)
-    if not active:
-        return orbit, _orbit_tangent(orbit)
-
-    if orbit.parameter_jacobians is not None and set(active) <= set(directions):
-        columns = jnp.asarray([directions.index(i) for i in active], dtype=int)
-        of_state = orbit.state_jacobians
-        of_parameters = jax.tree.map(lambda j: j[..., columns], orbit.parameter_jacobians)
-    else:
-        _, of_state, of_parameters = sample_jacobians(
-            orbit.z, jnp.stack(p), settings, tuple(active)
-        )
-    p_active_dot = jnp.stack([p_dot[i] for i in active])
-    z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_parameters.z_end)
-    z_dot = z_dot @ p_active_dot
-    samples_dot = jax.tree.map(
-        lambda j_state, j_parameters: j_state @ z_dot + j_parameters @ p_active_dot,
-        of_state, of_parameters,
-    )
-    return orbit, _orbit_tangent(orbit, z_dot, samples_dot)
+    return jax.jacfwd(plant_of)(jnp.stack(where(inputs)))
 
 
 def _active(dots) -> list[int]:
@@ -129,21 +99,22 @@ def _orbit_tangent(orbit: Periodic, z_dot=None, samples_dot=None) -> Periodic:
     return eqx.tree_at(lambda o: (o.z, o.samples), zero, (z_dot, samples_dot))
 
 
-_orbit_identity.defjvp(_orbit_jvp, symbolic_zeros=True)
-
-
 def with_field_derivatives(settings: SolverSettings, inputs: PlantInputs, orbit: Periodic,
-                           plant: Plant):
+                           plant: Plant, fields: tuple[str, ...] = ()):
     """Identity on a converged `orbit` of `plant`, the plant of `inputs` (as the shooting
     used it, to the bit); its JVP is the implicit derivative of the orbit with respect to
     the arrays of `inputs` (the system's fields, the amplitude, the frequency), each an
     explicit Jacobian over the entries of the arrays with non-zero tangents (so that
     reverse mode can transpose it). The period map is linearised at `plant` itself: a
     plant computed again may differ in its last bits, and where a stuck interval's two
-    ends tie, that decides which transition the stroke's peak takes its derivative from."""
+    ends tie, that decides which transition the stroke's peak takes its derivative from.
+    Where only the system's scalar `fields` vary, the Jacobians the shooting formed along
+    them (`orbit.field_jacobians`) are used."""
     arrays, static = eqx.partition(settings, eqx.is_array)
     leaves, treedef = jax.tree.flatten(inputs)
-    return _field_identity((static, treedef), (arrays, plant), orbit, *leaves)
+    numbered = jax.tree.unflatten(treedef, list(range(len(leaves))))
+    indices = tuple(getattr(numbered.system, name) for name in fields)
+    return _field_identity((static, treedef, indices), (arrays, plant), orbit, *leaves)
 
 
 @ft.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -153,7 +124,7 @@ def _field_identity(statics, arrays, orbit, *leaves):
 
 
 def _field_jvp(statics, primals, tangents):
-    static, treedef = statics
+    static, treedef, indices = statics
     (arrays, plant), orbit, *leaves = primals
     _, _, *dots = tangents
     settings = eqx.combine(arrays, static)
@@ -170,15 +141,14 @@ def _field_jvp(statics, primals, tangents):
 
     flat = jnp.concatenate([jnp.ravel(leaves[i]) for i in active])
     flat_dot = jnp.concatenate([jnp.ravel(dots[i]) for i in active])
-    of_state = orbit.state_jacobians
-    if of_state is None:
-        of_state = sample_jacobians(orbit.z, plant, settings, ())[1]
-    # the plant's tangent along each active entry, then the period's along each of them
-    columns = jax.jacfwd(plant_at)(flat)
-    along = jax.vmap(lambda column: jax.jvp(lambda q: period_samples(orbit.z, q, settings),
-                                            (plant,), (column,))[1],
-                     in_axes=(jax.tree.map(lambda _: -1, plant),), out_axes=-1)(columns)
-    of_fields = Samples(*along)
+    if orbit.field_jacobians is not None and set(active) <= set(indices):
+        of_state = orbit.state_jacobians
+        of_fields = jax.tree.map(lambda j: j[..., [indices.index(i) for i in active]],
+                                 orbit.field_jacobians)
+    else:
+        # the plant's tangent along each active entry, then the period's along each
+        _, of_state, of_fields = sample_jacobians(orbit.z, plant, settings,
+                                                  jax.jacfwd(plant_at)(flat))
     z_dot = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), of_fields.z_end @ flat_dot)
     samples_dot = jax.tree.map(lambda j_state, j_fields: j_state @ z_dot + j_fields @ flat_dot,
                                of_state, of_fields)

@@ -2,9 +2,8 @@
 samples of the response over that period, its Jacobians (the monodromy matrix, by the
 variational equations or forward derivatives) and the transient before shooting; diffrax
 for smoothed friction, the closed-form stick-slip flow of `_flow` for exact friction. Each
-function takes the paper's parameter vector (its one-storey `Plant`,
-`_flow.parameter_plant`, with states in the paper's order) or any structure's `Plant`
-(`model`); `point_model` gives either, with its linear equivalent start, at a point."""
+function takes a structure's `Plant` (states: its coordinates, then their velocities);
+`point_model` gives it, with its linear equivalent start, at a point."""
 
 import diffrax as dfx
 import jax
@@ -13,8 +12,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._model._building import BuildingTID, Quantity, friction_influence
-from .._model._dynamics import dead_zone, parameters
+from .._model._building import BuildingTID, Quantity, building_of, friction_influence
+from .._model._dynamics import dead_zone
 from . import _flow
 from ._settings import SolverSettings
 
@@ -45,179 +44,76 @@ def integrate(field, y0, p, t1, settings: SolverSettings, saveat, max_steps):
     )
 
 
-def model(p, z) -> tuple[_flow.Plant, bool]:
-    """The `_flow.Plant` of the period map at `p` and whether states like `z` are in the
-    paper's order: `p` is a `Plant` (states in its own order, coordinates then their
-    velocities) or the paper's parameter vector (`_dynamics.PARAMETERS`; states (x, x', y,
-    y'[, q, q']), its one-storey plant `_flow.parameter_plant`)."""
-    if isinstance(p, _flow.Plant):
-        return p, False
-    return _flow.parameter_plant(p, compliant=z.shape[-1] == 6), True
-
-
-def flow(p, settings: SolverSettings) -> _flow.Flow | None:
-    """What every period at `p` (see `model`) shares, for the functions below (`modes=`),
-    computed once where many periods are integrated at the same `p`: with exact friction
+def flow(plant: _flow.Plant, settings: SolverSettings) -> _flow.Flow | None:
+    """What every period of `plant` shares, for the functions below (`modes=`),
+    computed once where many periods are integrated with it: with exact friction
     the modes of the stick-slip flow (`_flow.flow`); None for smoothed friction (its
     integrations share nothing)."""
     if not settings.exact_friction:
         return None
-    return _flow.flow(model(p, np.zeros(settings.states))[0], settings.samples)
+    return _flow.flow(plant, settings.samples)
 
 
-# The paper's state (x, x', y, y'), and (x, x', y, y', q, q') with a compliant device, in
-# the order of the one-storey plant's coordinates and their velocities: (x, y, x', y') (the
-# stroke r is y: the inerter joins the terminal to the ground), (x, y, q, x', y', q').
-_PLANT_ORDER = {4: np.array([0, 2, 1, 3]), 6: np.array([0, 2, 4, 1, 3, 5])}
+def _given_flow(plant, settings: SolverSettings, given):
+    return flow(plant, settings) if given is None else given
 
 
-def to_plant(z, paper: bool = True):
-    return z[..., _PLANT_ORDER[z.shape[-1]]] if paper else z
-
-
-def from_plant(z, paper: bool = True):
-    return z[..., np.argsort(_PLANT_ORDER[z.shape[-1]])] if paper else z
-
-
-def _exact_period(z0, modes: _flow.Flow, paper: bool, keep_samples: bool = True):
-    """`_flow.period` in the order of the states `z0` (`paper`: the paper's): samples of
-    the quantity, the stroke and the friction's velocity, the state after the period, the
-    transitions and the largest |stroke| at a transition."""
-    values, z_end, transitions, events = _flow.period(to_plant(z0, paper), modes,
-                                                      keep_samples)
-    return values, from_plant(z_end, paper), transitions, events
-
-
-def _given_flow(p, settings: SolverSettings, given):
-    return flow(p, settings) if given is None else given
-
-
-def period_samples(z0, p, settings: SolverSettings, modes=None):
-    """The quantity (the paper's x), the stroke (y) and the velocity of the friction's body
-    (y' of a rigid device, q' of a compliant one) sampled over one period from `z0` at `p`
-    (see `model`), the state after the period (not finite where the integration failed),
+def period_samples(z0, plant: _flow.Plant, settings: SolverSettings, modes=None):
+    """The quantity, the stroke and the velocity of the friction's coordinate (the stroke's
+    of a rigid device, the mechanism's of a compliant one) sampled over one period from
+    `z0` of `plant`, the state after the period (not finite where the integration failed),
     the largest |stroke| at a stick-slip transition and the number of transitions (exact
-    friction; else 0). `modes`: the flow at `p` (`flow(p, settings)`), if computed
+    friction; else 0). `modes`: the flow of `plant` (`flow(plant, settings)`), if computed
     already."""
-    plant, paper = model(p, z0)
     if settings.exact_friction:
-        values, z_end, transitions, events = _exact_period(
-            z0, _given_flow(p, settings, modes), paper)
+        values, z_end, transitions, events = _flow.period(
+            z0, _given_flow(plant, settings, modes), True)
     else:
-        values, z_end, transitions, events = smoothed_period(to_plant(z0, paper), plant,
-                                                             settings)
-        z_end = from_plant(z_end, paper)
+        values, z_end, transitions, events = smoothed_period(z0, plant, settings)
     return (values[:, 0], values[:, 1], values[:, 2], z_end, events,
             transitions.astype(z0.dtype))
 
 
-def period_tangents(z, p, settings: SolverSettings, modes=None):
-    """The state after one period from `z` at `p` (see `model`) and its Jacobian with
-    respect to `z` (the monodromy matrix), by the variational equations (their step sizes
-    follow the error of the state alone: accurate enough for Newton's iterations, whose
-    answer does not depend on them). With exact friction, the forward derivatives of the
-    hybrid period map. `modes`: the flow at `p` (`flow(p, settings)`), if computed
+def period_tangents(z, plant: _flow.Plant, settings: SolverSettings, modes=None):
+    """The state after one period from `z` of `plant` and its Jacobian with respect to `z`
+    (the monodromy matrix), by the variational equations (their step sizes follow the
+    error of the state alone: accurate enough for Newton's iterations, whose answer does
+    not depend on them). With exact friction, the forward derivatives of the hybrid
+    period map. `modes`: the flow of `plant` (`flow(plant, settings)`), if computed
     already."""
-    plant, paper = model(p, z)
     if settings.exact_friction:
-        modes = _given_flow(p, settings, modes)
-        end = lambda z0: _exact_period(z0, modes, paper, keep_samples=False)[1]
+        modes = _given_flow(plant, settings, modes)
+        end = lambda z0: _flow.period(z0, modes, False)[1]
         return jax.vmap(lambda t: jax.jvp(end, (z,), (t,)), out_axes=(None, 1))(
             jnp.eye(z.shape[0], dtype=z.dtype))
-    _, z_end, _, _, monodromy = smoothed_period(to_plant(z, paper), plant, settings,
-                                                keep_samples=False, tangents=True)
-    if paper:  # d z_end / d z in the paper's order: the rows and the columns permuted
-        back = np.argsort(_PLANT_ORDER[z.shape[-1]])
-        monodromy = monodromy[np.ix_(back, back)]
-    return from_plant(z_end, paper), monodromy
+    _, z_end, _, _, monodromy = smoothed_period(z, plant, settings, keep_samples=False,
+                                                tangents=True)
+    return z_end, monodromy
 
 
-def samples_and_jacobian(z, p, settings, directions=()):
+def samples_and_jacobian(z, plant: _flow.Plant, settings: SolverSettings, columns=None):
     """One integration of a period from `z` with tangents along the state directions
-    and the parameters `p[i]`, `i` in `directions` (the paper's parameter vector; a
-    `Plant` takes none), differentiating the integration itself (so that the derivatives
-    are those of the computed samples, to rounding): `(xs, ys, ws, z_end)`, their
-    Jacobians with respect to `z` (that of `z_end` is the monodromy matrix) and with
-    respect to those parameters (last axis of size `len(directions)`)."""
-    index = jnp.asarray(directions, dtype=int)
-    fn = lambda z0, q: period_samples(z0, p.at[index].set(q) if directions else p, settings)
+    and, where given, along the plant's tangents `columns` (a `Plant` of tangents with a
+    trailing axis), differentiating the integration itself (so that the derivatives are
+    those of the computed samples, to rounding): `period_samples`, their Jacobians with
+    respect to `z` (that of the state after the period is the monodromy matrix) and along
+    `columns` (None where not given)."""
     n = z.shape[0]
-    basis = jnp.eye(n + len(directions), dtype=z.dtype)
-    given = p[index] if directions else jnp.zeros(0, z.dtype)
-    primal, tangents = jax.vmap(
-        lambda t: jax.jvp(fn, (z, given), (t[:n], t[n:])), out_axes=(None, 0)
-    )(basis)
+    if columns is None:
+        fn = lambda z0: period_samples(z0, plant, settings)
+        primal, tangents = jax.vmap(lambda t: jax.jvp(fn, (z,), (t,)), out_axes=(None, 0))(
+            jnp.eye(n, dtype=z.dtype))
+        return primal, tuple(jnp.moveaxis(t, 0, -1) for t in tangents), None
+    m = jax.tree.leaves(columns)[0].shape[-1]
+    fn = lambda z0, q: period_samples(z0, q, settings)
+    of_z = jnp.eye(n + m, n, dtype=z.dtype)
+    of_plant = jax.tree.map(lambda a, column: jnp.concatenate(
+        [jnp.zeros((n,) + a.shape, a.dtype), jnp.moveaxis(column, -1, 0)]), plant, columns)
+    primal, tangents = jax.vmap(lambda dz, dq: jax.jvp(fn, (z, plant), (dz, dq)),
+                                out_axes=(None, 0))(of_z, of_plant)
     tangents = tuple(jnp.moveaxis(t, 0, -1) for t in tangents)
-    return primal, tuple(t[..., :n] for t in tangents), tuple(t[..., n:] for t in tangents)
-
-
-def initial_state(p, compliant: bool = False) -> Float[Array, " n"]:
-    """Scaled state at phase 0 of the equivalent linear steady state: the friction
-    ff sgn(v) replaced by the viscous damping that dissipates as much over a period at the
-    amplitude it lets the friction's body (the rigid device's terminal, a compliant
-    device's mechanism) reach, 4 ff / (pi omega |V|) for a velocity amplitude |V| (the
-    describing function of dry friction), that amplitude found by bisection; the stuck
-    linear steady state where the friction force exceeds the force needed to hold the
-    body still. Four states, or six for a `compliant` device (backlash left out)."""
-    (mass, stiffness, damping, inertance, friction, k, c, parasitic, terminal_mass, ks, _,
-     _, amplitude, omega) = p
-    jw = 1j * omega
-    spring = k + jw * c
-    scale = amplitude / stiffness  # displacements in units of A / K
-
-    def host(terminal):
-        """x of the host with the TID's terminal moving `terminal` times as far."""
-        return stiffness / (stiffness - mass * omega**2 + jw * damping + spring * (1 - terminal))
-
-    def response(friction_damping):
-        """Complex amplitudes (scaled) of x, y and the friction's body, with the friction
-        an extra viscous damping `friction_damping` on that body."""
-        body = jw * (parasitic + friction_damping)
-        if compliant:
-            mechanism = body - inertance * omega**2
-            device = ks * mechanism / (ks + mechanism)
-            terminal = spring / (spring + device - terminal_mass * omega**2)
-        else:
-            terminal = spring / (spring + body - (inertance + terminal_mass) * omega**2)
-        x = host(terminal)
-        y = x * terminal
-        q = y * ks / (ks + mechanism) if compliant else y
-        return x, y, q
-
-    def equivalent_damping(log_amplitude):
-        return 4 * friction / (jnp.pi * omega * scale * jnp.exp(log_amplitude))
-
-    def slips_further(log_amplitude):
-        # whether the body moves more than assumed: the amplitude lies above
-        _, _, q = response(equivalent_damping(log_amplitude))
-        return jnp.log(jnp.abs(q)) > log_amplitude
-
-    def bisect(_, bounds):
-        low, high = bounds
-        middle = 0.5 * (low + high)
-        further = slips_further(middle)
-        return jnp.where(further, middle, low), jnp.where(further, high, middle)
-
-    # Between the frictionless amplitude and e^-40 of it (where more damping would let
-    # the body move more, as near an antiresonance, the bisection ends at the top).
-    high = jnp.log(jnp.abs(response(0.0)[2]))
-    low, high = jax.lax.fori_loop(0, 64, bisect, (high - 40.0, high))
-    x, y, q = response(equivalent_damping(0.5 * (low + high)))
-    # Held still, the body feels the force of what joins it to the host.
-    if compliant:
-        stuck_terminal = spring / (spring + ks - terminal_mass * omega**2)
-        stuck_x = host(stuck_terminal)
-        stuck_y = stuck_x * stuck_terminal
-        holding_force = jnp.abs(ks * stuck_y) * scale
-    else:
-        stuck_x = host(0.0)
-        stuck_y = 0.0
-        holding_force = jnp.abs(spring * stuck_x) * scale
-    stuck = holding_force < friction
-    x, y = jnp.where(stuck, stuck_x, x), jnp.where(stuck, stuck_y, y)
-    # Forcing Im(A e^{i theta}); response Im(X e^{i theta}); velocity in units of omega A/K.
-    parts = [x, y] + ([jnp.where(stuck, 0.0, q)] if compliant else [])
-    return jnp.stack([part for z in parts for part in (z.imag, z.real)])
+    return (primal, tuple(t[..., :n] for t in tangents),
+            tuple(t[..., n:] for t in tangents))
 
 
 # bisections of the equivalent stroke's logarithm over a range of 40: 2e-6 apart at the
@@ -226,11 +122,13 @@ _BISECTIONS = 24
 
 
 def building_start(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
-    """`initial_state` of a `BuildingTID` at one point, in its plant's order (coordinates,
-    then their velocities), in units of its static scale: the friction
-    replaced by the viscous damping 4 ff / (pi omega |R|) that dissipates as much at the
-    stroke amplitude |R| it lets through (found by bisection), or the steady state with
-    the inerter stuck where the friction holds it."""
+    """The equivalent linear steady state of a `BuildingTID` at phase 0 at one point, in
+    its plant's order (coordinates, then their velocities), in units of its static scale:
+    the friction replaced by the viscous damping 4 ff / (pi omega |V|) that dissipates as
+    much at the velocity amplitude omega |V| it lets the friction's coordinate reach (the
+    describing function of dry friction; |V| found by bisection), or the steady state
+    with the inerter stuck where the friction holds it (a compliant device's backlash
+    left out)."""
     scale = system.static_scale()
     free, influence = friction_influence(system, omega)
     f = system.coordinates - 1  # the friction's coordinate
@@ -258,45 +156,37 @@ def building_start(system: BuildingTID, amplitude, omega) -> Float[Array, " s"]:
 
 
 def point_model(system, quantity: Quantity, amplitude, omega):
-    """The period map's model of `system` (a `TIDSystem` or a `BuildingTID`, measuring
-    `quantity`) at one point: `p` for the functions above (the paper's parameter vector,
-    or the building's `Plant`), the linear equivalent start in the order of its states
-    (`initial_state`, `building_start`), and the SI units of the scaled quantity and of
+    """The period map's model of `system` (a `BuildingTID`, measuring `quantity`, or a
+    `TIDSystem` as its one-storey building) at one point: its `Plant`, the linear
+    equivalent start (`building_start`), and the SI units of the scaled quantity and of
     the stroke, the unit D of the scaled displacements (velocities in omega D)."""
-    if isinstance(system, BuildingTID):
-        unit_q, unit = _flow.projection_units(system, quantity, amplitude, omega)
-        return (_flow.plant(system, quantity, amplitude, omega),
-                building_start(system, amplitude, omega), unit_q, unit)
-    p = jnp.stack(parameters(system, amplitude, omega))
-    unit = amplitude / system.host_stiffness
-    return p, initial_state(p, system.compliant), unit, unit
+    system = building_of(system, "force")
+    unit_q, unit = _flow.projection_units(system, quantity, amplitude, omega)
+    return (_flow.plant(system, quantity, amplitude, omega),
+            building_start(system, amplitude, omega), unit_q, unit)
 
 
-def state_units(unit, omega, states: int, paper: bool, xp=jnp):
-    """The SI units of scaled states at points of displacement unit `unit` and frequency
-    `omega` (broadcast together), `[..., states]`: in the paper's order (x, x', y, y'[,
-    q, q']) or a plant's (coordinates, then their velocities)."""
+def state_units(unit, omega, states: int, xp=jnp):
+    """The SI units of scaled states (coordinates, then their velocities) at points of
+    displacement unit `unit` and frequency `omega` (broadcast together), `[..., states]`."""
     m = states // 2
-    columns = [unit + 0 * omega, unit * omega]
-    return xp.stack(columns * m if paper else [columns[0]] * m + [columns[1]] * m, axis=-1)
+    return xp.stack([unit + 0 * omega] * m + [unit * omega] * m, axis=-1)
 
 
-def transient(z, p, settings: SolverSettings, periods=None):
+def transient(z, plant: _flow.Plant, settings: SolverSettings, periods=None):
     """Integrate `periods` (default `settings.transient_periods`, at most that; may be
-    traced) periods from `z` at `p` (see `model`); keeps `z` if that fails."""
+    traced) periods from `z` of `plant`; keeps `z` if that fails."""
     if settings.transient_periods == 0:
         return z
     count = settings.transient_periods if periods is None else periods
-    plant, paper = model(p, z)
     if settings.exact_friction:
-        modes = flow(p, settings)
+        modes = flow(plant, settings)
         end = jax.lax.fori_loop(
-            0, count, lambda _, z: _exact_period(z, modes, paper, keep_samples=False)[1], z)
+            0, count, lambda _, z: _flow.period(z, modes, False)[1], z)
     else:
-        sol = integrate(smoothed_field, to_plant(z, paper), plant, 2 * jnp.pi * count,
-                        settings, dfx.SaveAt(t1=True),
-                        settings.max_steps * settings.transient_periods)
-        end = from_plant(sol.ys[-1], paper)
+        sol = integrate(smoothed_field, z, plant, 2 * jnp.pi * count, settings,
+                        dfx.SaveAt(t1=True), settings.max_steps * settings.transient_periods)
+        end = sol.ys[-1]
     return jnp.where(jnp.all(jnp.isfinite(end)), end, z)
 
 

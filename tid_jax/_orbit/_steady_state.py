@@ -1,23 +1,22 @@
-from collections.abc import Sequence
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Complex, Float, Int
 
+from .._model._building import building_of
 from ._eigen import eigenvalues
 from ._flow import Plant, PlantInputs
 from ._implicit import (
     Periodic,
     Samples,
+    field_columns,
     fixed_point_matrix,
     sample_jacobians,
     with_field_derivatives,
-    with_orbit_derivatives,
 )
 from ._period import (
+    building_start,
     flow,
-    initial_state,
     period_samples,
     period_tangents,
     transient,
@@ -26,30 +25,34 @@ from ._sampled_peaks import refined_peak
 from ._settings import SolverSettings
 
 
-def one_by_one(function):
-    """`jax.vmap(function)` computed one entry after the other (`jax.lax.map`), for the
+def one_by_one(function, floors: int):
+    """`jax.vmap(function)` for the plants of a structure of `floors` storeys: batched for
+    one storey, and for more computed one entry after the other (`jax.lax.map`), for the
     LAPACK calls (inverses, eigenvalues) of a large batch of plants with a building's
     matrices: batched, XLA's CPU thread pool can be left waiting on itself (seen with
     blocks of 512 three-storey buildings on two cores)."""
+    if floors == 1:
+        return jax.vmap(function)
     return lambda *args: jax.lax.map(lambda xs: function(*xs), args)
 
 
 class Orbit(eqx.Module):
     """The periodic steady state at one (frequency, amplitude), scaled state units
-    (displacements in A / K, velocities in omega A / K) unless stated."""
+    (displacements in A d, velocities in omega A d; d the static scale, 1 / K for the
+    paper's host) unless stated."""
 
-    state: Float[Array, " states"]  # scaled (x, x', y, y'[, q, q']) at phase 0
-    x_samples: Float[Array, " samples"]  # scaled x over one period
-    y_samples: Float[Array, " samples"]
-    y_velocity_samples: Float[Array, " samples"]
+    state: Float[Array, " states"]  # scaled coordinates, then their velocities, at phase 0
+    x_samples: Float[Array, " samples"]  # the scaled quantity over one period
+    y_samples: Float[Array, " samples"]  # the scaled stroke
+    y_velocity_samples: Float[Array, " samples"]  # the friction's coordinate's velocity
     y_events: Float[Array, ""]  # max |y| at the stick-slip transitions (exact friction; else 0)
     monodromy: Float[Array, "states states"]  # dPhi_T/dz at `state`
-    # d state / d p[i] for i in the `directions` of `solve_orbit` (implicit derivatives)
-    state_derivatives: Float[Array, "4 directions"]
     floquet_multipliers: Complex[Array, " states"]
     residual: Float[Array, ""]  # max |Phi_T(z0) - z0|, scaled
     newton_steps: Int[Array, ""]
     converged: Bool[Array, ""]
+    # d state / d field, one column per field that `solve_orbit` was asked for (else None)
+    field_derivatives: Float[Array, "states fields"] | None = None
 
 
 _MAX_NEWTON_STEP = 2.0  # largest Newton update, relative to max(1, max |z|)
@@ -288,7 +291,7 @@ def _chord_phase(newton: _Newton, p, modes, settings: SolverSettings, order, cou
                        settings.max_newton_steps, out)
 
 
-def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points params"],
+def shoot_queue(z0: Float[Array, "points states"], p: Plant,
                 settings: SolverSettings, slots: int,
                 valid: Bool[Array, " points"] | None = None) -> Shots:
     """Periodic orbits at every point (`z0[i]`, `p[i]`), on `slots` lanes that work through
@@ -306,8 +309,7 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
     order = jnp.argsort(~valid, stable=True)
     count = jnp.sum(valid)
     # (the coarse settings integrate the same flows: they differ in tolerances alone)
-    each = one_by_one if isinstance(p, Plant) else jax.vmap
-    modes = each(lambda q: flow(q, settings))(p)
+    modes = one_by_one(lambda q: flow(q, settings), p.stroke)(p)
     # Newton's stages, one after the other, as the iterations of a loop over their
     # tolerances: a compiled program holds one copy of the variational integration.
     stages = [(settings.rtol, settings.atol, settings.chord_residual)]
@@ -331,7 +333,7 @@ def shoot_queue(z0: Float[Array, "points states"], p: Float[Array, "points param
                  newton_steps + chord_steps)
 
 
-def verified_samples(z: Float[Array, " states"], p: Float[Array, " params"],
+def verified_samples(z: Float[Array, " states"], p: Plant,
                      settings: SolverSettings, modes=None):
     """x, y, y' sampled over the period from `z`, and the residual |Phi_T(z) - z| of that
     integration (inf where it is not finite). `modes`: the flow at `p` (`_period.flow`),
@@ -344,31 +346,6 @@ def _residual(samples, z):
     finite = jnp.all(jnp.isfinite(samples.z_end)) & jnp.all(jnp.isfinite(samples.xs))
     finite = finite & jnp.all(jnp.isfinite(samples.ys))
     return jnp.where(finite, jnp.max(jnp.abs(samples.z_end - z)), jnp.inf)
-
-
-class _TangentNewton(eqx.Module):
-    z: Float[Array, " states"]
-    update: Float[Array, " states"]
-    residual: Float[Array, ""]
-    samples: Samples
-    of_state: Samples
-    of_parameters: Samples
-
-
-def _tangent_newton(z, p, settings: SolverSettings, directions) -> _TangentNewton:
-    samples, of_state, of_parameters = sample_jacobians(z, p, settings, directions)
-    residual = samples.z_end - z
-    update = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), residual)
-    finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(samples.xs))
-    finite = finite & jnp.all(jnp.isfinite(samples.ys))
-    return _TangentNewton(
-        z=z,
-        update=jnp.where(finite, update, 0.0),
-        residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
-        samples=samples,
-        of_state=of_state,
-        of_parameters=of_parameters,
-    )
 
 
 def _iterate(evaluate, z0, settings: SolverSettings):
@@ -395,84 +372,91 @@ def _iterate(evaluate, z0, settings: SolverSettings):
     return jax.lax.while_loop(cond, body, (unevaluated, jnp.array(0)))
 
 
-def _shoot(z0, p, settings: SolverSettings, directions=()):
+class _TangentNewton(eqx.Module):
+    z: Float[Array, " states"]
+    update: Float[Array, " states"]
+    residual: Float[Array, ""]
+    samples: Samples
+    of_state: Samples
+    of_fields: Samples
+
+
+def _tangent_newton(z, plant: Plant, settings: SolverSettings, columns) -> _TangentNewton:
+    samples, of_state, of_fields = sample_jacobians(z, plant, settings, columns)
+    residual = samples.z_end - z
+    update = jnp.linalg.solve(fixed_point_matrix(of_state.z_end), residual)
+    finite = jnp.all(jnp.isfinite(update)) & jnp.all(jnp.isfinite(samples.xs))
+    finite = finite & jnp.all(jnp.isfinite(samples.ys))
+    return _TangentNewton(z=z, update=jnp.where(finite, update, 0.0),
+                          residual=jnp.where(finite, jnp.max(jnp.abs(residual)), jnp.inf),
+                          samples=samples, of_state=of_state, of_fields=of_fields)
+
+
+def _shoot(z0, plant: Plant, settings: SolverSettings, columns=None):
     """Newton shooting for z* = Phi_T(z*), returning the orbit once the residual is within
     `settings.periodicity_tol`.
 
-    Without `directions`, each iteration integrates one period with the variational
+    Without `columns`, each iteration integrates one period with the variational
     equations (the residual Phi_T(z) - z and the monodromy matrix); the last iterate
     evaluated is then integrated once more to sample it over a period, and the residual
-    of that integration is the one returned, which decides convergence. With `directions`,
-    each iteration differentiates the integration along the state and `p[directions]`,
-    which gives the samples' Jacobians at once; the last update is applied to the samples
-    to first order (their error is then second order in the residual returned, the last
+    of that integration is the one returned, which decides convergence. With `columns`
+    (the plant's tangents along some of the system's fields, `field_columns`), each
+    iteration differentiates the integration along the state and those tangents, which
+    gives the samples' Jacobians at once; the last update is applied to the samples to
+    first order (their error is then second order in the residual returned, the last
     one evaluated)."""
-    if directions:
-        last, steps = _iterate(
-            lambda z: _tangent_newton(z, p, settings, directions), z0, settings
-        )
+    if columns is not None:
+        last, steps = _iterate(lambda z: _tangent_newton(z, plant, settings, columns), z0,
+                               settings)
         samples = jax.tree.map(lambda value, jacobian: value + jacobian @ last.update,
                                last.samples, last.of_state)
         orbit = Periodic(last.z + last.update, samples, last.of_state.z_end, last.of_state,
-                          last.of_parameters)
+                         last.of_fields)
         return orbit, last.residual, steps
-    modes = flow(p, settings)
-    last, steps = _iterate(lambda z: _newton(z, p, settings, modes), z0, settings)
+    modes = flow(plant, settings)
+    last, steps = _iterate(lambda z: _newton(z, plant, settings, modes), z0, settings)
     z = last.z  # as in `shoot_queue`: the last iterate evaluated, without its update
-    samples, residual = verified_samples(z, p, settings, modes)
-    return Periodic(z, samples, last.monodromy, None, None), residual, steps
+    samples, residual = verified_samples(z, plant, settings, modes)
+    return Periodic(z, samples, last.monodromy), residual, steps
 
 
 def solve_orbit(
-    p: Float[Array, " params"] | Sequence[Float[Array, ""]],
+    inputs: PlantInputs,
     settings: SolverSettings,
     z_init: Float[Array, " states"] | None = None,
     monodromy_init: Float[Array, "states states"] | None = None,
-    directions: tuple[int, ...] = (),
+    fields: tuple[str, ...] = (),
 ) -> Orbit:
-    """The periodic orbit at the parameter vector `p` (order `_dynamics.PARAMETERS`; or
-    the sequence of its scalars, which lets derivatives skip the parameters that do not
-    depend on the differentiated inputs), by shooting from `z_init` (scaled state;
-    default the equivalent linear steady state, `_period.initial_state`, followed by
-    `settings.transient_periods` periods); or at the plant of a structure's
-    `PlantInputs`, from a given `z_init`.
-    Differentiable with respect to `p` (implicit differentiation; a structure's fields
-    by name, in forward and reverse mode), not with respect to `z_init`.
+    """The periodic orbit of the plant of `inputs` (a structure, its load amplitude and
+    frequency) by shooting from `z_init` (scaled state; default the equivalent linear
+    steady state, `_period.building_start`, followed by `settings.transient_periods`
+    periods). Differentiable with respect to the fields of `inputs` (implicit
+    differentiation, in forward and reverse mode), not with respect to `z_init`.
 
     With `monodromy_init`, the monodromy matrix of a nearby orbit (e.g. that of `z_init`
     at slightly different parameters), chord iterations without tangents bring `z_init`
-    to the orbit before Newton's. Derivatives with respect to `p[i]`, `i` in
-    `directions`, reuse the Jacobians formed with the orbit's samples; the state's are
-    returned too (`Orbit.state_derivatives`), e.g. to predict the orbit at nearby
-    parameters."""
-    inputs = p if isinstance(p, PlantInputs) else None
-    if inputs is not None:
-        if z_init is None or directions:
-            raise ValueError("a structure's orbit is shot from a given z_init, and its "
-                             "derivatives are by its fields (no directions)")
-        p_const = jax.lax.stop_gradient(inputs.plant())
-    else:
-        scalars = list(p) if isinstance(p, (list, tuple)) else [p[i] for i in range(p.shape[0])]
-        p_const = jax.lax.stop_gradient(jnp.stack(scalars))
+    to the orbit before Newton's.
+
+    With `fields` (names of the system's scalar fields), the shooting's Newton iterations
+    carry tangents along them: the orbit's derivatives with respect to them come at once
+    (`Orbit.field_derivatives`, and the implicit derivatives use them)."""
+    plant = jax.lax.stop_gradient(inputs.plant())
     if z_init is None:
-        z_init = transient(initial_state(p_const, settings.compliant), p_const,
-                           settings)
+        system = jax.lax.stop_gradient(inputs.system)
+        z_init = transient(building_start(building_of(system, "force"), inputs.amplitude,
+                                          inputs.omega), plant, settings)
     z_init = jax.lax.stop_gradient(z_init)
     if monodromy_init is not None:
-        z_init, _ = _chord(z_init, p_const, settings, jax.lax.stop_gradient(monodromy_init))
-    orbit, residual, steps = _shoot(z_init, p_const, settings, tuple(directions))
-    if inputs is not None:
-        orbit = with_field_derivatives(settings, inputs, orbit, p_const)
-    else:
-        orbit = with_orbit_derivatives(settings, tuple(directions), orbit, *scalars)
+        z_init, _ = _chord(z_init, plant, settings, jax.lax.stop_gradient(monodromy_init))
+    columns = (jax.lax.stop_gradient(field_columns(inputs, fields)) if fields else None)
+    orbit, residual, steps = _shoot(z_init, plant, settings, columns)
+    derivatives = None
+    if fields:
+        derivatives = jax.lax.stop_gradient(jnp.linalg.solve(
+            fixed_point_matrix(orbit.monodromy), orbit.field_jacobians.z_end))
+    orbit = with_field_derivatives(settings, inputs, orbit, plant, fields)
     converged = (residual <= settings.periodicity_tol) & jnp.all(jnp.isfinite(orbit.samples.xs))
     monodromy = jax.lax.stop_gradient(orbit.monodromy)
-    if directions:
-        state_derivatives = jnp.linalg.solve(
-            fixed_point_matrix(monodromy), jax.lax.stop_gradient(orbit.parameter_jacobians.z_end)
-        )
-    else:
-        state_derivatives = jnp.zeros((monodromy.shape[0], 0), monodromy.dtype)
     return Orbit(
         state=orbit.z,
         x_samples=orbit.samples.xs,
@@ -480,11 +464,11 @@ def solve_orbit(
         y_velocity_samples=orbit.samples.ws,
         y_events=orbit.samples.y_events,
         monodromy=monodromy,
-        state_derivatives=state_derivatives,
         floquet_multipliers=eigenvalues(monodromy),
         residual=residual,
         newton_steps=steps,
         converged=converged,
+        field_derivatives=derivatives,
     )
 
 

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model._building import Quantity
-from ._period import model, point_model, smoothed_field, to_plant
+from ._period import point_model, smoothed_field
 from ._settings import SolverSettings
 
 # Tsit5's stability boundary along the negative real axis, in steps: fitted, see above.
@@ -47,10 +47,8 @@ def explicit_steps(field, z, args, width, stuck):
 @jax.jit
 def _steps(systems, omegas, amplitudes):
     def one(system, omega, amplitude):
-        p, z, _, _ = point_model(system, Quantity(), amplitude, omega)
-        plant, paper = model(p, z)  # (the friction's body's velocity last in either order)
-        return explicit_steps(smoothed_field, to_plant(z, paper), plant, plant.width,
-                              z[-1] == 0.0)
+        plant, z, _, _ = point_model(system, Quantity(), amplitude, omega)
+        return explicit_steps(smoothed_field, z, plant, plant.width, z[-1] == 0.0)
 
     return jax.vmap(one)(systems, omegas, amplitudes)
 

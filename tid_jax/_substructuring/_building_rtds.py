@@ -163,4 +163,4 @@ def building_reference(system: BuildingTID, quantity: Quantity, omegas, amplitud
         return (x_max, y_max, first_harmonic_phase(orbit.x_samples),
                 first_harmonic_phase(orbit.y_samples), orbit.converged)
 
-    return one_by_one(one)(omegas, amplitudes)
+    return one_by_one(one, system.floors)(omegas, amplitudes)
